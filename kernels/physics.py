@@ -1,0 +1,241 @@
+"""Per-interface and per-medium physics, written once as Warp functions.
+
+These functions are the single source of the BSDF formulas: the Fourier projection kernels
+(:mod:`layersim.kernels.projection`) and the Monte Carlo random walk call them, and the host
+solver only ever sees their values. All functions are generic over the scalar type (``float32``
+for the random walk, ``float64`` for projection); literals are cast with ``type(x)(...)``.
+
+Conventions (``CONVENTIONS.md``)
+--------------------------------
+* Local frame: ``z`` is the macro-surface normal pointing out of the top of the interface; the
+  roughness ``alpha_u`` acts along ``x`` and ``alpha_v`` along ``y`` (callers rotate directions into
+  the interface's tangent frame first).
+* ``wi`` and ``wo`` both point *away* from the surface. Reflection on the top side has
+  ``wi.z > 0, wo.z > 0``; top-to-bottom transmission ``wi.z > 0, wo.z < 0``.
+* ``eta`` is the index of the medium below the interface relative to the medium above it
+  (``eta + i k`` for a conductor, which is only ever lit from above).
+* BSDF values are in 1/sr, without the cosine factor, in the radiance convention: transmission
+  obeys ``f(wi, wo) / eta_o^2 == f(wo, wi) / eta_i^2``.
+
+Microfacet split
+----------------
+Both distributions are written as ``D(m) = P(h) * peak(q)`` with an unnormalised half vector
+``h``, the slope-space quadratic form ``q = (hx^2/au^2 + hy^2/av^2) / hz^2`` and the prefactor
+``P = |h|^4 / (pi au av hz^4)``; ``peak(q) = exp(-q)`` (Beckmann) or ``1 / (1 + q)^2`` (GGX).
+For a fixed pair of elevations, ``q`` is an affine function of ``cos(phi_o - phi_i)`` (isotropic
+case) or of the phasors of seed 000 eq. (22), so the peak factor has a closed-form Fourier series
+(Bessel functions for Beckmann, a geometric series for GGX); everything else, returned as the
+*smooth factor* by :func:`microfacet_smooth_q`, is low-frequency. The projection relies on this
+split; the random walk uses :func:`microfacet_eval`, which multiplies the two back together.
+
+References
+----------
+Walter, Marschner, Li, Torrance (2007), "Microfacet models for refraction through rough surfaces",
+eq. 19-21 (BSDF), 25-27 (Beckmann, Smith); Heitz (2014), "Understanding the masking-shadowing
+function", sec. 5 (anisotropic Smith Lambda). Seed 000 eq. (18)-(22).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import warp as wp
+
+#: Distribution codes shared by host and kernels.
+BECKMANN = wp.constant(0)
+GGX = wp.constant(1)
+DISTRIBUTION_CODES = {"beckmann": 0, "ggx": 1}
+
+# ---------------------------------------------------------------------------------------------
+# Fresnel
+# ---------------------------------------------------------------------------------------------
+
+
+@wp.func
+def fresnel_dielectric(cos_i: Any, eta: Any):
+    """Unpolarised Fresnel reflectance of a dielectric boundary.
+
+    ``cos_i`` is the cosine between the incident direction (pointing away) and the boundary
+    normal; ``eta`` the index on the far side (``cos_i < 0``: the light arrives from the ``eta``
+    side, and the relative index is inverted). Total internal reflection returns 1.
+    """
+    one = type(cos_i)(1.0)
+    c = cos_i
+    e = eta
+    if c < type(cos_i)(0.0):
+        c = -c
+        e = one / eta
+    sin2_t = (one - c * c) / (e * e)
+    if sin2_t >= one:
+        return one
+    cos_t = wp.sqrt(one - sin2_t)
+    rs = (c - e * cos_t) / (c + e * cos_t)
+    rp = (e * c - cos_t) / (e * c + cos_t)
+    return type(cos_i)(0.5) * (rs * rs + rp * rp)
+
+
+@wp.func
+def fresnel_conductor(cos_i: Any, eta: Any, k: Any):
+    """Unpolarised Fresnel reflectance of a conductor with relative index ``eta + i k``
+    (exact formula; ``cos_i`` in [0, 1])."""
+    one = type(cos_i)(1.0)
+    half = type(cos_i)(0.5)
+    two = type(cos_i)(2.0)
+    cos2 = cos_i * cos_i
+    sin2 = one - cos2
+    temp1 = eta * eta - k * k - sin2
+    a2pb2 = wp.sqrt(temp1 * temp1 + type(cos_i)(4.0) * k * k * eta * eta)
+    a = wp.sqrt(wp.max(half * (a2pb2 + temp1), type(cos_i)(0.0)))
+    term1 = a2pb2 + cos2
+    term2 = two * cos_i * a
+    rs = (term1 - term2) / (term1 + term2)
+    term3 = a2pb2 * cos2 + sin2 * sin2
+    term4 = term2 * sin2
+    rp = rs * (term3 - term4) / (term3 + term4)
+    return half * (rs + rp)
+
+
+# ---------------------------------------------------------------------------------------------
+# Microfacet distributions and Smith shadowing-masking
+# ---------------------------------------------------------------------------------------------
+
+
+@wp.func
+def ndf_peak(q: Any, dist: int):
+    """Peak factor of the NDF as a function of the slope-space form ``q`` (see module doc)."""
+    if dist == GGX:
+        s = type(q)(1.0) + q
+        return type(q)(1.0) / (s * s)
+    return wp.exp(-q)
+
+
+@wp.func
+def ndf(m: Any, au: Any, av: Any, dist: int):
+    """Microfacet normal distribution D(m) (1/sr) for a unit normal ``m`` in the tangent frame;
+    normalised so that the projected area integrates to one."""
+    zero = au * type(au)(0.0)
+    if m[2] <= zero:
+        return zero
+    z2 = m[2] * m[2]
+    q = (m[0] * m[0] / (au * au) + m[1] * m[1] / (av * av)) / z2
+    return ndf_peak(q, dist) / (type(au)(wp.pi) * au * av * z2 * z2)
+
+
+@wp.func
+def smith_lambda(w: Any, au: Any, av: Any, dist: int):
+    """Smith's Lambda for direction ``w`` (any hemisphere; uses |w.z|), anisotropic roughness."""
+    zero = au * type(au)(0.0)
+    one = type(au)(1.0)
+    s2 = w[0] * w[0] + w[1] * w[1]
+    if s2 <= zero:
+        return zero
+    # alpha along the projected direction (Heitz 2014, eq. 80) times tan(theta)
+    alpha_tan2 = (w[0] * w[0] * au * au + w[1] * w[1] * av * av) / (w[2] * w[2])
+    if dist == GGX:
+        return type(au)(0.5) * (wp.sqrt(one + alpha_tan2) - one)
+    a = one / wp.sqrt(alpha_tan2)
+    if a > type(au)(8.0):  # Lambda < 1e-29: avoid 0/0 in the tail
+        return zero
+    return type(au)(0.5) * (wp.erf(a) - one) + wp.exp(-a * a) / (
+        type(au)(2.0) * a * type(au)(1.7724538509055159))
+
+
+@wp.func
+def smith_g1(w: Any, m: Any, au: Any, av: Any, dist: int):
+    """Smith masking G1(w, m) with the side condition chi+((w.m) / (w.n))."""
+    zero = au * type(au)(0.0)
+    if wp.dot(w, m) * w[2] <= zero:
+        return zero
+    return type(au)(1.0) / (type(au)(1.0) + smith_lambda(w, au, av, dist))
+
+
+# ---------------------------------------------------------------------------------------------
+# Rough interfaces
+# ---------------------------------------------------------------------------------------------
+
+
+@wp.func
+def microfacet_smooth_q(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, dist: int):
+    """Split microfacet BSDF of an interface: returns ``(smooth, q)`` with
+    ``f(wi, wo) = smooth * ndf_peak(q, dist)``.
+
+    Dielectric when ``k == 0`` (reflection and transmission from both sides), conductor when
+    ``k > 0`` (reflection from the top only). Radiance convention for transmission.
+    Where the BSDF vanishes, ``smooth`` is 0; ``q`` is still the slope form of the half vector
+    whenever one exists (it is pure geometry, and the projection reads it at phi = 0 and pi).
+    """
+    zero = au * type(au)(0.0)
+    one = type(au)(1.0)
+    if wi[2] == zero or wo[2] == zero:
+        return zero, zero
+    reflect = wi[2] * wo[2] > zero
+    conductor = k > zero
+    if conductor and (not reflect or wi[2] < zero):
+        return zero, zero
+    eta_i = one
+    eta_o = one
+    if wi[2] < zero:
+        eta_i = eta
+    if wo[2] < zero:
+        eta_o = eta
+    h = wi + wo
+    if not reflect:
+        h = wi * eta_i + wo * eta_o
+    if h[2] < zero:
+        h = -h
+    hlen2 = wp.dot(h, h)
+    if hlen2 <= zero or h[2] <= zero:
+        return zero, zero
+    hz2 = h[2] * h[2]
+    q = (h[0] * h[0] / (au * au) + h[1] * h[1] / (av * av)) / hz2
+    m = h / wp.sqrt(hlen2)
+    g = smith_g1(wi, m, au, av, dist) * smith_g1(wo, m, au, av, dist)
+    if g <= zero:
+        return zero, q
+    prefactor = hlen2 * hlen2 / (type(au)(wp.pi) * au * av * hz2 * hz2)
+    ci = wp.dot(wi, m)
+    co = wp.dot(wo, m)
+    cos_io = wp.abs(wi[2] * wo[2])
+    if reflect:
+        fr = zero
+        if conductor:
+            fr = fresnel_conductor(wp.abs(ci), eta, k)
+        else:
+            fr = fresnel_dielectric(ci, eta)
+        return fr * g * prefactor / (type(au)(4.0) * cos_io), q
+    ft = one - fresnel_dielectric(ci, eta)
+    denom = eta_i * ci + eta_o * co
+    return (wp.abs(ci * co) * eta_o * eta_o * ft * g * prefactor / (cos_io * denom * denom)), q
+
+
+@wp.func
+def microfacet_eval(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, dist: int):
+    """Microfacet BSDF f(wi, wo) (1/sr, no cosine) of a rough dielectric (``k == 0``) or
+    conductor (``k > 0``) interface; see :func:`microfacet_smooth_q`."""
+    s, q = microfacet_smooth_q(wi, wo, eta, k, au, av, dist)
+    if s == au * type(au)(0.0):
+        return s
+    return s * ndf_peak(q, dist)
+
+
+# ---------------------------------------------------------------------------------------------
+# Diffuse and media
+# ---------------------------------------------------------------------------------------------
+
+
+@wp.func
+def lambert_eval(wi: Any, wo: Any, albedo: Any):
+    """Opaque Lambertian reflector lit from the top: albedo / pi for wi.z, wo.z > 0."""
+    zero = albedo * type(albedo)(0.0)
+    if wi[2] <= zero or wo[2] <= zero:
+        return zero
+    return albedo / type(albedo)(wp.pi)
+
+
+@wp.func
+def hg_eval(cos_theta: Any, g: Any):
+    """Henyey-Greenstein phase function (1/sr) for the cosine between the propagation
+    directions before and after scattering (``cos_theta = 1``: no deflection)."""
+    one = type(g)(1.0)
+    denom = one + g * g - type(g)(2.0) * g * cos_theta
+    return (one - g * g) / (type(g)(4.0 * wp.pi) * denom * wp.sqrt(denom))

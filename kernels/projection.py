@@ -1,0 +1,113 @@
+"""Kernels that sample interface BSDFs for Fourier projection.
+
+The host solver (``layersim.ingredients``) decides *where* to sample (ordinate pairs and azimuths);
+these kernels only evaluate the physics of :mod:`layersim.kernels.physics` there, in float64.
+
+Geometry of a sample: an ordinate pair is given in the solver's convention (``mu > 0`` travels
+deeper into the stack): incident ``mu_i``, outgoing ``mu_o`` and the azimuth difference ``phi``
+between the *propagation* directions. With the incident light propagating along azimuth 0, the
+outward-pointing directions of ``CONVENTIONS.md`` are::
+
+    wi = (-sqrt(1 - mu_i^2), 0, mu_i)                       (points back toward the source)
+    wo = (sqrt(1 - mu_o^2) cos phi, sqrt(1 - mu_o^2) sin phi, -mu_o)
+
+so that ``phi = 0`` is the forward (specular or straight-through) direction.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from . import physics
+from .runtime import device_for, ensure_init
+
+
+@wp.func
+def _pair_directions(mu_i: wp.float64, mu_o: wp.float64, phi: wp.float64):
+    zero = wp.float64(0.0)
+    one = wp.float64(1.0)
+    si = wp.sqrt(wp.max(one - mu_i * mu_i, zero))
+    so = wp.sqrt(wp.max(one - mu_o * mu_o, zero))
+    wi = wp.vec3d(-si, zero, mu_i)
+    wo = wp.vec3d(so * wp.cos(phi), so * wp.sin(phi), -mu_o)
+    return wi, wo
+
+
+@wp.kernel
+def _microfacet_split_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
+                             phi: wp.array2d(dtype=wp.float64), eta: wp.float64,
+                             k: wp.float64, au: wp.float64, av: wp.float64, dist: int,
+                             smooth: wp.array2d(dtype=wp.float64),
+                             q: wp.array2d(dtype=wp.float64)):
+    p, j = wp.tid()
+    wi, wo = _pair_directions(mu_i[p], mu_o[p], phi[p, j])
+    s, qq = physics.microfacet_smooth_q(wi, wo, eta, k, au, av, dist)
+    smooth[p, j] = s
+    q[p, j] = qq
+
+
+@wp.kernel
+def _microfacet_eval_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
+                            phi: wp.array2d(dtype=wp.float64), eta: wp.float64,
+                            k: wp.float64, au: wp.float64, av: wp.float64, dist: int,
+                            f: wp.array2d(dtype=wp.float64)):
+    p, j = wp.tid()
+    wi, wo = _pair_directions(mu_i[p], mu_o[p], phi[p, j])
+    f[p, j] = physics.microfacet_eval(wi, wo, eta, k, au, av, dist)
+
+
+def _launch_pairs(kernel, mu_i, mu_o, phi, params, n_out, device=None):
+    ensure_init()
+    device = device_for(device)
+    mu_i = np.ascontiguousarray(mu_i, dtype=np.float64)
+    mu_o = np.ascontiguousarray(mu_o, dtype=np.float64)
+    phi = np.ascontiguousarray(phi, dtype=np.float64)
+    if phi.ndim != 2 or phi.shape[0] != mu_i.shape[0] or mu_o.shape != mu_i.shape:
+        raise ValueError("expected mu_i, mu_o of shape (P,) and phi of shape (P, Q)")
+    if phi.size == 0:
+        return [np.zeros(phi.shape) for _ in range(n_out)]
+    a_mi = wp.array(mu_i, dtype=wp.float64, device=device)
+    a_mo = wp.array(mu_o, dtype=wp.float64, device=device)
+    a_phi = wp.array(phi, dtype=wp.float64, device=device)
+    outs = [wp.empty(phi.shape, dtype=wp.float64, device=device) for _ in range(n_out)]
+    wp.launch(kernel, dim=phi.shape, inputs=[a_mi, a_mo, a_phi, *params], outputs=outs,
+              device=device)
+    return [o.numpy() for o in outs]
+
+
+def _interface_params(eta: complex, au: float, av: float, distribution: str):
+    return [wp.float64(complex(eta).real), wp.float64(complex(eta).imag), wp.float64(au),
+            wp.float64(av), int(physics.DISTRIBUTION_CODES[distribution])]
+
+
+def microfacet_split(mu_i, mu_o, phi, eta, alpha_u, alpha_v, distribution="beckmann",
+                     device=None):
+    """Sample the split microfacet BSDF ``f = smooth * peak(q)`` of an interface.
+
+    Parameters
+    ----------
+    mu_i, mu_o : ndarray, shape (P,)
+        Signed ordinates of each pair (solver convention, see module doc).
+    phi : ndarray, shape (P, Q)
+        Azimuth differences (radians) at which to sample each pair.
+    eta : complex
+        Relative index below/above (``eta + i k`` for a conductor).
+    alpha_u, alpha_v : float
+        Roughness along the tangent axes (the isotropic path passes equal values).
+
+    Returns
+    -------
+    smooth, q : ndarray, shape (P, Q)
+        Smooth factor (1/sr) and slope-space form of :func:`physics.microfacet_smooth_q`.
+    """
+    return _launch_pairs(_microfacet_split_kernel, mu_i, mu_o, phi,
+                         _interface_params(eta, alpha_u, alpha_v, distribution), 2, device)
+
+
+def microfacet_values(mu_i, mu_o, phi, eta, alpha_u, alpha_v, distribution="beckmann",
+                      device=None):
+    """Full microfacet BSDF values f (1/sr) at the same sample layout as
+    :func:`microfacet_split`."""
+    return _launch_pairs(_microfacet_eval_kernel, mu_i, mu_o, phi,
+                         _interface_params(eta, alpha_u, alpha_v, distribution), 1, device)[0]

@@ -1,0 +1,12 @@
+"""layersim: reflectance of layered materials.
+
+Public entry points (see CONVENTIONS.md)::
+
+    scene = layersim.Scene.from_toml(path)
+    bsdf = layersim.solve(scene)
+    bsdf.eval(wi, wo); bsdf.albedo(wi); bsdf.bin_energies(wi, mu_edges, phi_edges)
+"""
+from .errors import LayersimError, SceneError, InfeasibleError, OperatorError
+from .scene import Scene, Dielectric, Conductor, Medium, Diffuse, Discretization
+
+__version__ = "0.1.0"

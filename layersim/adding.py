@@ -1,0 +1,185 @@
+"""The adding equations for isotropic operators, and adding-doubling.
+
+For a top layer 1 and a bottom layer 2 (seed 004 eq. (3); Grant & Hunt 1969)::
+
+    Rt  = Rt1 + Tbt1 (I - Rt2 Rb1)^-1 Rt2 Ttb1
+    Rb  = Rb2 + Ttb2 (I - Rb1 Rt2)^-1 Rb1 Tbt2
+    Ttb = Ttb2 (I - Rb1 Rt2)^-1 Ttb1
+    Tbt = Tbt1 (I - Rt2 Rb1)^-1 Tbt2
+
+With ``A = I - Rb1 Rt2`` and the push-through identities ``(I - Rt2 Rb1)^-1 Rt2 = Rt2 A^-1`` and
+``(I - Rt2 Rb1)^-1 = I + Rt2 A^-1 Rb1`` (seed 000 eq. (12)), all four outputs need solves with
+``A`` only, which is factorised once per Fourier order::
+
+    [Y1 | Y2] = A^-1 [Ttb1 | Rb1 Tbt2]
+    Ttb = Ttb2 Y1          Rt  = Rt1 + Tbt1 Rt2 Y1
+    Rb  = Rb2 + Ttb2 Y2    Tbt = Tbt1 Tbt2 + Tbt1 Rt2 Y2
+
+Below an opaque bottom layer only ``Rt`` is computed. Orders are independent and are solved in
+a thread pool (LAPACK and SuperLU release the GIL); each order uses dense LAPACK or sparse SuperLU
+(UMFPACK via scikit-umfpack when installed) depending on the density of its blocks.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sps
+import scipy.sparse.linalg as spla
+
+from .errors import OperatorError
+from .operator import IsoOperator, _prune
+
+try:  # optional, faster sparse LU
+    import scikits.umfpack as _umfpack  # noqa: F401
+    _HAVE_UMFPACK = True
+except ImportError:  # pragma: no cover - depends on the environment
+    _HAVE_UMFPACK = False
+
+#: Orders whose blocks hold fewer than this fraction of nonzeros use sparse LU.
+SPARSE_DENSITY = 0.08
+#: Worker threads for independent Fourier orders (default: CPU count, at most 8).
+THREADS = int(os.environ.get("LAYERSIM_THREADS", "0")) or min(8, os.cpu_count() or 1)
+
+
+def _check_pair(top: IsoOperator, bottom: IsoOperator) -> None:
+    if top.grid != bottom.grid:
+        raise OperatorError(f"cannot add operators on different grids ({top.grid.rule} n="
+                            f"{top.grid.n} over {bottom.grid.rule} n={bottom.grid.n}); "
+                            "build both from the same discretisation plan")
+    if top.opaque:
+        raise OperatorError("the top operator is opaque: nothing reaches a layer below it")
+    if abs(top.eta_bottom - bottom.eta_top) > 1e-9 * max(1.0, top.eta_bottom):
+        raise OperatorError(f"index mismatch: the top operator ends in a medium of index "
+                            f"{top.eta_bottom:g} but the bottom one starts in {bottom.eta_top:g}")
+
+
+def add(top: IsoOperator, bottom: IsoOperator, threads: int | None = None) -> IsoOperator:
+    """Operator of ``top`` stacked on ``bottom`` (both on the same grid).
+
+    Parameters
+    ----------
+    top, bottom : IsoOperator
+        ``top`` must be transmissive; ``bottom`` may be opaque (then only ``Rt`` is formed).
+    threads : int, optional
+        Worker threads for the Fourier orders (default :data:`THREADS`).
+
+    Returns
+    -------
+    IsoOperator
+        With ``max(top.m, bottom.m)`` orders, ``eta_top`` of ``top`` and ``eta_bottom`` of
+        ``bottom``.
+    """
+    _check_pair(top, bottom)
+    m = max(top.m, bottom.m)
+    opaque = bottom.opaque
+
+    def one(l: int):
+        blk1 = {k: top.block(k, l) for k in ("Rt", "Rb", "Ttb", "Tbt")}
+        blk2 = {k: bottom.block(k, l) for k in (("Rt",) if opaque else ("Rt", "Rb", "Ttb",
+                                                                        "Tbt"))}
+        return _add_order(blk1, blk2, opaque)
+
+    threads = threads or THREADS
+    if threads > 1 and m > 4:
+        with ThreadPoolExecutor(threads) as pool:
+            results = list(pool.map(one, range(m)))
+    else:
+        results = [one(l) for l in range(m)]
+    names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
+    blocks = {name: [r[name] for r in results] for name in names}
+    return IsoOperator(top.grid, blocks, top.eta_top, None if opaque else bottom.eta_bottom)
+
+
+def _density(*mats) -> float:
+    h = mats[0].shape[0]
+    return sum(m.nnz for m in mats) / (len(mats) * h * h)
+
+
+def _add_order(b1: dict, b2: dict, opaque: bool) -> dict:
+    Rt1, Rb1, Ttb1, Tbt1 = b1["Rt"], b1["Rb"], b1["Ttb"], b1["Tbt"]
+    Rt2 = b2["Rt"]
+    h = Rt1.shape[0]
+    coupled = Rb1.nnz > 0 and Rt2.nnz > 0
+    if opaque:
+        mats = (Rb1, Rt2, Ttb1, Tbt1)
+    else:
+        mats = (Rb1, Rt2, Ttb1, Tbt1, b2["Rb"], b2["Ttb"], b2["Tbt"])
+    if _density(*mats) < SPARSE_DENSITY:
+        return _add_order_sparse(b1, b2, opaque, coupled)
+    return _add_order_dense(b1, b2, opaque, coupled, h)
+
+
+def _add_order_dense(b1, b2, opaque, coupled, h):
+    Rt1, Rb1, Ttb1, Tbt1 = (b1[k].toarray() for k in ("Rt", "Rb", "Ttb", "Tbt"))
+    Rt2 = b2["Rt"].toarray()
+    if opaque:
+        rhs = Ttb1
+    else:
+        Rb2, Ttb2, Tbt2 = (b2[k].toarray() for k in ("Rb", "Ttb", "Tbt"))
+        rhs = np.hstack([Ttb1, Rb1 @ Tbt2])
+    if coupled:
+        A = np.eye(h) - Rb1 @ Rt2
+        Y = sla.lu_solve(sla.lu_factor(A, check_finite=False), rhs, check_finite=False)
+    else:
+        Y = rhs
+    Y1 = Y[:, :h]
+    out = {"Rt": Rt1 + Tbt1 @ (Rt2 @ Y1)}
+    if not opaque:
+        Y2 = Y[:, h:]
+        out["Ttb"] = Ttb2 @ Y1
+        out["Rb"] = Rb2 + Ttb2 @ Y2
+        out["Tbt"] = Tbt1 @ Tbt2 + Tbt1 @ (Rt2 @ Y2)
+    return {k: _prune(sps.csr_matrix(v)) for k, v in out.items()}
+
+
+def _sparse_lu(A: sps.csc_matrix):
+    if _HAVE_UMFPACK:  # pragma: no cover - optional dependency
+        return spla.factorized(A)
+    lu = spla.splu(A, permc_spec="COLAMD")
+    return lu.solve
+
+
+def _add_order_sparse(b1, b2, opaque, coupled):
+    Rt1, Rb1, Ttb1, Tbt1 = b1["Rt"], b1["Rb"], b1["Ttb"], b1["Tbt"]
+    Rt2 = b2["Rt"]
+    h = Rt1.shape[0]
+    if opaque:
+        rhs = Ttb1
+    else:
+        Rb2, Ttb2, Tbt2 = b2["Rb"], b2["Ttb"], b2["Tbt"]
+        rhs = sps.hstack([Ttb1, Rb1 @ Tbt2], format="csc")
+    if coupled:
+        A = (sps.identity(h, format="csc") - (Rb1 @ Rt2)).tocsc()
+        solve = _sparse_lu(A)
+        Y = sps.csr_matrix(_solve_columns(solve, rhs.tocsc()))
+    else:
+        Y = sps.csr_matrix(rhs)
+    Y1 = Y[:, :h]
+    out = {"Rt": Rt1 + Tbt1 @ (Rt2 @ Y1)}
+    if not opaque:
+        Y2 = Y[:, h:]
+        out["Ttb"] = Ttb2 @ Y1
+        out["Rb"] = Rb2 + Ttb2 @ Y2
+        out["Tbt"] = Tbt1 @ Tbt2 + Tbt1 @ (Rt2 @ Y2)
+    return {k: _prune(sps.csr_matrix(v)) for k, v in out.items()}
+
+
+def _solve_columns(solve, rhs: sps.csc_matrix) -> np.ndarray:
+    """Solve for the nonzero columns of a sparse right-hand side only (empty columns stay
+    zero): the sparse-RHS shortcut of seed 000 sec. 3.3."""
+    out = np.zeros(rhs.shape)
+    cols = np.flatnonzero(np.diff(rhs.indptr))
+    if cols.size:
+        out[:, cols] = solve(rhs[:, cols].toarray())
+    return out
+
+
+def double(layer: IsoOperator, times: int, threads: int | None = None) -> IsoOperator:
+    """Add ``layer`` to itself ``times`` times (thickness multiplied by ``2**times``)."""
+    for _ in range(times):
+        layer = add(layer, layer, threads)
+    return layer

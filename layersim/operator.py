@@ -1,0 +1,284 @@
+"""Discrete scattering operators of isotropic layers in the cosine basis.
+
+Representation (seed 004 eq. (10), (14); seed 000 eq. (5))
+-----------------------------------------------------------
+The solver uses the discrete-ordinates convention: ``mu > 0`` propagates deeper into the stack
+(downwards), ``mu < 0`` towards the top. Radiance is expanded in azimuth as
+``L(mu, phi) = sum_l L_l(mu) cos(l phi)`` and sampled at the ``h = n/2`` positive nodes ``mu_j``
+of a :class:`Grid` (the same nodes serve both hemispheres). A layer maps incident to scattered
+radiance independently for every order ``l``::
+
+    L_out,l[o] = sum_i B_l[o, i] L_in,l[i],      B_l[o, i] = c_l f_l(mu_o, mu_i) w_i |mu_i|
+
+with ``c_0 = 2 pi``, ``c_l = pi`` (l >= 1) and ``f(mu_i, mu_o, phi) = sum_l f_l cos(l phi)`` the
+BSDF (1/sr, radiance convention) between *propagation* directions, ``phi`` the azimuth difference
+of the propagation directions (``phi = 0`` is specular or straight-through).
+
+Per order there are four ``h x h`` blocks, indexed ``[outgoing node, incident node]``:
+
+=======  ===========================  =============================
+block    incident                     outgoing
+=======  ===========================  =============================
+``Rt``   top, propagating down        leaves the top (up)
+``Rb``   bottom, propagating up       leaves the bottom (down)
+``Ttb``  top, propagating down        leaves the bottom (down)
+``Tbt``  bottom, propagating up       leaves the top (up)
+=======  ===========================  =============================
+
+An opaque operator (bottom layer is a conductor or a diffuse base) stores ``Rt`` only; the other
+blocks are ``None`` ("left out") and adding skips them.
+
+Orders at or beyond ``m`` are exactly zero. Blocks are scipy CSR matrices; entries whose
+magnitude is below :data:`DROP_TOLERANCE` times the largest entry of the same block and order are
+pruned when an operator is assembled.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sps
+
+from . import quadrature
+from .errors import FileFormatError, OperatorError
+
+BLOCKS = ("Rt", "Rb", "Ttb", "Tbt")
+#: Relative drop threshold for operator entries (per block and order).
+DROP_TOLERANCE = 1e-12
+
+
+def order_weight(l: int | np.ndarray):
+    """c_l of eq. (14) in seed 004: 2 pi for l = 0, pi otherwise."""
+    return np.where(np.asarray(l) == 0, 2.0 * np.pi, np.pi)
+
+
+@dataclass(frozen=True, eq=False)
+class Grid:
+    """Discrete ordinates: ``h = n // 2`` positive nodes ``mu`` (increasing) with weights ``w``
+    of the named quadrature rule on [-1, 1]."""
+
+    rule: str
+    n: int
+    mu: np.ndarray = field(repr=False)
+    w: np.ndarray = field(repr=False)
+
+    @classmethod
+    def make(cls, rule: str, n: int) -> "Grid":
+        mu, w = quadrature.hemisphere(rule, n)
+        mu.setflags(write=False)
+        w.setflags(write=False)
+        return cls(rule, n, mu, w)
+
+    @property
+    def h(self) -> int:
+        return self.n // 2
+
+    @cached_property
+    def flux_weight(self) -> np.ndarray:
+        """``w_j mu_j``: the hemispherical flux of a unit radiance at node ``j`` is
+        ``2 pi w_j mu_j`` (summed over nodes: ~pi)."""
+        return self.w * self.mu
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Grid) and self.rule == other.rule and self.n == other.n
+
+    def __hash__(self) -> int:
+        return hash((self.rule, self.n))
+
+
+class IsoOperator:
+    """Scattering operator of an isotropic layer or stack (see module docstring).
+
+    Parameters
+    ----------
+    grid : Grid
+    blocks : dict
+        ``{"Rt": [csr (h, h)] * m, "Rb": ..., "Ttb": ..., "Tbt": ...}``; a missing or ``None``
+        entry marks a block that is left out (opaque operators keep only ``Rt``).
+    eta_top, eta_bottom : float
+        Absolute indices of the media directly above and below (``eta_bottom`` is ``None`` for
+        an opaque operator). Used for generalized reciprocity and transmission eval.
+    """
+
+    def __init__(self, grid: Grid, blocks: dict, eta_top: float = 1.0,
+                 eta_bottom: float | None = 1.0):
+        self.grid = grid
+        self.blocks = {name: blocks.get(name) for name in BLOCKS}
+        lengths = {len(v) for v in self.blocks.values() if v is not None}
+        if self.blocks["Rt"] is None or len(lengths) != 1:
+            raise OperatorError("an operator needs an Rt block and the same number of orders "
+                                "in every block")
+        self.m = lengths.pop()
+        self.eta_top = float(eta_top)
+        self.eta_bottom = None if self.opaque else float(eta_bottom)
+
+    # ---- structure ---------------------------------------------------------------------
+
+    @property
+    def opaque(self) -> bool:
+        return self.blocks["Ttb"] is None
+
+    @property
+    def h(self) -> int:
+        return self.grid.h
+
+    def block(self, name: str, l: int) -> sps.csr_matrix:
+        """Block ``name`` of order ``l`` (an all-zero matrix beyond ``m``)."""
+        blk = self.blocks[name]
+        if blk is None:
+            raise OperatorError(f"block {name} was left out of this operator (opaque)")
+        if l >= self.m:
+            return sps.csr_matrix((self.h, self.h))
+        return blk[l]
+
+    def nnz(self) -> int:
+        return sum(mat.nnz for blk in self.blocks.values() if blk is not None for mat in blk)
+
+    def memory_bytes(self) -> int:
+        """Bytes held by the sparse blocks (values, indices and row pointers)."""
+        return sum(mat.data.nbytes + mat.indices.nbytes + mat.indptr.nbytes
+                   for blk in self.blocks.values() if blk is not None for mat in blk)
+
+    def density(self) -> float:
+        present = sum(1 for blk in self.blocks.values() if blk is not None)
+        return self.nnz() / max(1, present * self.m * self.h * self.h)
+
+    def truncated(self, m: int) -> "IsoOperator":
+        """The same operator keeping orders ``0..m-1`` (padding with zero orders if larger)."""
+        def fix(blk):
+            if blk is None:
+                return None
+            if m <= len(blk):
+                return blk[:m]
+            return blk + [sps.csr_matrix((self.h, self.h)) for _ in range(m - len(blk))]
+        return IsoOperator(self.grid, {k: fix(v) for k, v in self.blocks.items()},
+                           self.eta_top, self.eta_bottom)
+
+    def __repr__(self) -> str:
+        return (f"IsoOperator(n={self.grid.n}, rule={self.grid.rule}, m={self.m}, "
+                f"{'opaque' if self.opaque else 'transmissive'}, nnz={self.nnz()}, "
+                f"density={100 * self.density():.3g}%)")
+
+    # ---- construction ------------------------------------------------------------------
+
+    @classmethod
+    def from_series(cls, grid: Grid, m: int, series: dict, eta_top: float,
+                    eta_bottom: float | None) -> "IsoOperator":
+        """Assemble an operator from per-pair cosine series of the BSDF.
+
+        ``series[name]`` is a list of chunks ``(o, i, coef)``: node indices ``o, i`` of shape (P,)
+        and ``coef`` of shape (P, K) holding ``f_l(mu_o, mu_i)`` for ``l < K`` (zero-padded).
+        A block given as ``None`` is left out; a block missing from ``series`` is all zero.
+        """
+        h = grid.h
+        blocks = {}
+        for name in BLOCKS:
+            chunks = series.get(name, [])
+            if chunks is None:
+                blocks[name] = None
+                continue
+            mats = []
+            for l in range(m):
+                parts = [(o, i, c[:, l]) for o, i, c in chunks if c.shape[1] > l]
+                if not parts:
+                    mats.append(sps.csr_matrix((h, h)))
+                    continue
+                o = np.concatenate([p[0] for p in parts])
+                i = np.concatenate([p[1] for p in parts])
+                vals = np.concatenate([p[2] for p in parts]) * grid.flux_weight[i] * order_weight(l)
+                mats.append(_pruned_csr(vals, o, i, h))
+            blocks[name] = mats
+        return cls(grid, blocks, eta_top, eta_bottom)
+
+    @classmethod
+    def from_dense(cls, grid: Grid, blocks: dict, eta_top: float,
+                   eta_bottom: float | None) -> "IsoOperator":
+        """Assemble from dense arrays ``blocks[name]`` of shape (m, h, h) (already scaled as
+        ``B_l``), pruning small entries."""
+        out = {}
+        for name in BLOCKS:
+            arr = blocks.get(name)
+            out[name] = None if arr is None else [_prune(sps.csr_matrix(a)) for a in arr]
+        return cls(grid, out, eta_top, eta_bottom)
+
+    # ---- BSDF coefficients ---------------------------------------------------------------
+
+    def coefficients(self, name: str, l: int) -> np.ndarray:
+        """Dense ``f_l(mu_o, mu_i)`` (1/sr) of block ``name``, shape (h, h) [o, i]."""
+        mat = self.block(name, l).toarray()
+        return mat / (order_weight(l) * self.grid.flux_weight[None, :])
+
+    # ---- diagnostics -------------------------------------------------------------------
+
+    def albedo_nodes(self) -> dict:
+        """Energy fractions per incident node: ``{"Rt": (h,), "Ttb": (h,), ...}``.
+
+        ``E[i] = sum_o B_0[o, i] w_o mu_o / (w_i mu_i)``, the fraction of the power of a beam
+        arriving along node ``i`` that leaves through the block's side (quadrature-consistent).
+        """
+        fw = self.grid.flux_weight
+        out = {}
+        for name, blk in self.blocks.items():
+            if blk is None:
+                continue
+            out[name] = (blk[0].T @ fw) / fw
+        return out
+
+    # ---- persistence -------------------------------------------------------------------
+
+    def to_arrays(self, prefix: str = "") -> dict:
+        """Flat arrays for ``np.savez`` (one CSR triple per block, orders concatenated)."""
+        d = {f"{prefix}rule": np.array(self.grid.rule), f"{prefix}n": np.array(self.grid.n),
+             f"{prefix}m": np.array(self.m), f"{prefix}eta_top": np.array(self.eta_top),
+             f"{prefix}eta_bottom": np.array(np.nan if self.eta_bottom is None
+                                             else self.eta_bottom)}
+        for name, blk in self.blocks.items():
+            if blk is None:
+                continue
+            stacked = sps.vstack(blk, format="csr") if blk else sps.csr_matrix((0, self.h))
+            d[f"{prefix}{name}_data"] = stacked.data
+            d[f"{prefix}{name}_indices"] = stacked.indices.astype(np.int32)
+            d[f"{prefix}{name}_indptr"] = stacked.indptr.astype(np.int64)
+        return d
+
+    @classmethod
+    def from_arrays(cls, d, prefix: str = "") -> "IsoOperator":
+        try:
+            rule = str(d[f"{prefix}rule"])
+            n, m = int(d[f"{prefix}n"]), int(d[f"{prefix}m"])
+            eta_top = float(d[f"{prefix}eta_top"])
+            eb = float(d[f"{prefix}eta_bottom"])
+            grid = Grid.make(rule, n)
+            h = grid.h
+            blocks = {}
+            for name in BLOCKS:
+                key = f"{prefix}{name}_data"
+                if key not in d:
+                    blocks[name] = None
+                    continue
+                stacked = sps.csr_matrix((d[key], d[f"{prefix}{name}_indices"],
+                                          d[f"{prefix}{name}_indptr"]), shape=(m * h, h))
+                blocks[name] = [stacked[l * h:(l + 1) * h] for l in range(m)]
+        except (KeyError, ValueError, TypeError) as exc:
+            raise FileFormatError(f"not a layersim operator file ({exc})") from None
+        return cls(grid, blocks, eta_top, None if np.isnan(eb) else eb)
+
+
+def _prune(mat: sps.csr_matrix) -> sps.csr_matrix:
+    if mat.nnz:
+        cut = DROP_TOLERANCE * np.abs(mat.data).max()
+        mat.data[np.abs(mat.data) < cut] = 0.0
+        mat.eliminate_zeros()
+    return mat
+
+
+def _pruned_csr(vals: np.ndarray, rows: np.ndarray, cols: np.ndarray, h: int) -> sps.csr_matrix:
+    keep = vals != 0
+    if keep.any():
+        cut = DROP_TOLERANCE * np.abs(vals[keep]).max()
+        keep &= np.abs(vals) >= cut
+    mat = sps.csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(h, h))
+    mat.sum_duplicates()
+    return mat
