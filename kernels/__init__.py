@@ -1,3 +1,9 @@
 """Warp kernels (installed as ``layersim.kernels``): the per-interface and per-medium physics
-(:mod:`.physics`), BSDF sampling for Fourier projection (:mod:`.projection`), and the particle
-random walk used by :mod:`layersim.montecarlo`. Kernels run on Warp's CPU device and on CUDA."""
+(:mod:`.physics`), BSDF sampling for Fourier projection (:mod:`.projection`), evaluation of
+tabulated Fourier series (:mod:`.fourier_eval`) and the particle random walk used by
+:mod:`layersim.montecarlo`. Kernels run on Warp's CPU device and on CUDA."""
+
+from .runtime import ensure_init as _ensure_init
+
+# Initialise before any module defines kernels, so the banner and notices stay silenced.
+_ensure_init()

@@ -3,26 +3,49 @@
 from __future__ import annotations
 
 import os
+import sys
 
 import warp as wp
 
 _initialised = False
 
 
+def _verbose() -> bool:
+    return os.environ.get("LAYERSIM_WARP_VERBOSE", "") not in ("", "0")
+
+
 def ensure_init() -> None:
-    """Initialise Warp once, quietly (no banner on the command line)."""
+    """Initialise Warp once. Unless ``$LAYERSIM_WARP_VERBOSE`` is set, the banner and the native
+    library's "no CUDA driver" notice (printed to the C-level stderr on CPU-only machines) are
+    silenced, so that command-line output stays readable."""
     global _initialised
-    if not _initialised:
-        wp.config.quiet = os.environ.get("LAYERSIM_WARP_VERBOSE", "") == ""
+    if _initialised:
+        return
+    if not _verbose():
+        # Warp >= 1.18 uses log_level; older versions the quiet flag.
+        if hasattr(wp.config, "log_level") and hasattr(wp, "LOG_WARNING"):
+            wp.config.log_level = wp.LOG_WARNING
+        wp.config.quiet = True
+    if _verbose():
         wp.init()
-        _initialised = True
+    else:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        try:
+            with open(os.devnull, "w") as null:
+                os.dup2(null.fileno(), 2)
+                wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+    _initialised = True
 
 
 def device_for(device=None):
     """The Warp device to run on: the given one, else ``$LAYERSIM_DEVICE``, else the CPU.
 
-    Projection kernels are cheap and run on the CPU by default; pass ``"cuda"`` (or set
-    ``LAYERSIM_DEVICE=cuda``) to run them on a GPU.
+    Projection and evaluation kernels are light and run on the CPU by default; pass ``"cuda"``
+    (or set ``LAYERSIM_DEVICE=cuda``) to run them on a GPU.
     """
     ensure_init()
     name = device or os.environ.get("LAYERSIM_DEVICE") or "cpu"

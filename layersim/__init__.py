@@ -8,5 +8,8 @@ Public entry points (see CONVENTIONS.md)::
 """
 from .errors import LayersimError, SceneError, InfeasibleError, OperatorError
 from .scene import Scene, Dielectric, Conductor, Medium, Diffuse, Discretization
+from .plan import Plan, make_plan
+from .bsdf import BSDF
+from .solver import solve, add
 
 __version__ = "0.1.0"

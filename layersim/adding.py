@@ -15,9 +15,15 @@ With ``A = I - Rb1 Rt2`` and the push-through identities ``(I - Rt2 Rb1)^-1 Rt2 
     Ttb = Ttb2 Y1          Rt  = Rt1 + Tbt1 Rt2 Y1
     Rb  = Rb2 + Ttb2 Y2    Tbt = Tbt1 Tbt2 + Tbt1 Rt2 Y2
 
-Below an opaque bottom layer only ``Rt`` is computed. Orders are independent and are solved in
-a thread pool (LAPACK and SuperLU release the GIL); each order uses dense LAPACK or sparse SuperLU
-(UMFPACK via scikit-umfpack when installed) depending on the density of its blocks.
+Below an opaque bottom layer only ``Rt`` is computed. Each order uses dense LAPACK or sparse
+SuperLU (UMFPACK via scikit-umfpack when installed) depending on the density of its blocks.
+
+Threads: orders are independent and can be spread over a thread pool (``threads=``), but on the
+block sizes of typical plans (h <= 256) the per-order work is too small for Python threads to pay
+off, and OpenBLAS's own threads slow small dense products down several-fold (measured on the
+2-core CI machine, coated gold n = 196: 1.9 s with 2 BLAS threads, 0.21 s with one; a 2-thread
+pool: 0.34 s). Adding therefore runs orders sequentially by default with BLAS limited to one
+thread (via threadpoolctl) for blocks below :data:`BLAS_SINGLE_BELOW` ordinates.
 """
 
 from __future__ import annotations
@@ -25,10 +31,14 @@ from __future__ import annotations
 import os
 from concurrent.futures import ThreadPoolExecutor
 
+from contextlib import nullcontext
+
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
+
+from threadpoolctl import threadpool_limits
 
 from .errors import OperatorError
 from .operator import IsoOperator, _prune
@@ -40,9 +50,11 @@ except ImportError:  # pragma: no cover - depends on the environment
     _HAVE_UMFPACK = False
 
 #: Orders whose blocks hold fewer than this fraction of nonzeros use sparse LU.
-SPARSE_DENSITY = 0.08
-#: Worker threads for independent Fourier orders (default: CPU count, at most 8).
-THREADS = int(os.environ.get("LAYERSIM_THREADS", "0")) or min(8, os.cpu_count() or 1)
+SPARSE_DENSITY = 0.05
+#: Worker threads for independent Fourier orders (``$LAYERSIM_THREADS``, default 1; see above).
+THREADS = int(os.environ.get("LAYERSIM_THREADS", "1"))
+#: Blocks with fewer ordinates per hemisphere than this run with single-threaded BLAS.
+BLAS_SINGLE_BELOW = 512
 
 
 def _check_pair(top: IsoOperator, bottom: IsoOperator) -> None:
@@ -84,14 +96,24 @@ def add(top: IsoOperator, bottom: IsoOperator, threads: int | None = None) -> Is
         return _add_order(blk1, blk2, opaque)
 
     threads = threads or THREADS
-    if threads > 1 and m > 4:
-        with ThreadPoolExecutor(threads) as pool:
-            results = list(pool.map(one, range(m)))
-    else:
-        results = [one(l) for l in range(m)]
+    limit = threadpool_limits(1, user_api="blas") if top.h < BLAS_SINGLE_BELOW else nullcontext()
+    with limit:
+        if threads > 1 and m > 4:
+            with ThreadPoolExecutor(threads) as pool:
+                results = list(pool.map(one, range(m)))
+        else:
+            results = [one(l) for l in range(m)]
     names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
     blocks = {name: [r[name] for r in results] for name in names}
-    return IsoOperator(top.grid, blocks, top.eta_top, None if opaque else bottom.eta_bottom)
+    # unscattered light crosses both layers only through both deltas (the multiply reflected
+    # terms involve the smooth reflection blocks)
+    delta = {}
+    if not opaque:
+        for name in ("Ttb", "Tbt"):
+            if name in top.delta and name in bottom.delta:
+                delta[name] = top.delta[name] * bottom.delta[name]
+    return IsoOperator(top.grid, blocks, top.eta_top, None if opaque else bottom.eta_bottom,
+                       delta)
 
 
 def _density(*mats) -> float:

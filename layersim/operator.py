@@ -28,6 +28,11 @@ block    incident                     outgoing
 An opaque operator (bottom layer is a conductor or a diffuse base) stores ``Rt`` only; the other
 blocks are ``None`` ("left out") and adding skips them.
 
+Unscattered transmission through media is a delta in direction: it sits on the diagonal of the
+transmission blocks with the same value in every order. It stays in the blocks (the adding
+equations need it), and is also recorded in ``delta[name]`` (per node), so that the BSDF can
+evaluate the smooth part without it and report the delta separately.
+
 Orders at or beyond ``m`` are exactly zero. Blocks are scipy CSR matrices; entries whose
 magnitude is below :data:`DROP_TOLERANCE` times the largest entry of the same block and order are
 pruned when an operator is assembled.
@@ -103,7 +108,7 @@ class IsoOperator:
     """
 
     def __init__(self, grid: Grid, blocks: dict, eta_top: float = 1.0,
-                 eta_bottom: float | None = 1.0):
+                 eta_bottom: float | None = 1.0, delta: dict | None = None):
         self.grid = grid
         self.blocks = {name: blocks.get(name) for name in BLOCKS}
         lengths = {len(v) for v in self.blocks.values() if v is not None}
@@ -113,6 +118,8 @@ class IsoOperator:
         self.m = lengths.pop()
         self.eta_top = float(eta_top)
         self.eta_bottom = None if self.opaque else float(eta_bottom)
+        self.delta = {} if self.opaque or not delta else {
+            k: np.asarray(v, float) for k, v in delta.items() if v is not None}
 
     # ---- structure ---------------------------------------------------------------------
 
@@ -154,7 +161,7 @@ class IsoOperator:
                 return blk[:m]
             return blk + [sps.csr_matrix((self.h, self.h)) for _ in range(m - len(blk))]
         return IsoOperator(self.grid, {k: fix(v) for k, v in self.blocks.items()},
-                           self.eta_top, self.eta_bottom)
+                           self.eta_top, self.eta_bottom, self.delta)
 
     def __repr__(self) -> str:
         return (f"IsoOperator(n={self.grid.n}, rule={self.grid.rule}, m={self.m}, "
@@ -194,14 +201,24 @@ class IsoOperator:
 
     @classmethod
     def from_dense(cls, grid: Grid, blocks: dict, eta_top: float,
-                   eta_bottom: float | None) -> "IsoOperator":
+                   eta_bottom: float | None, delta: dict | None = None) -> "IsoOperator":
         """Assemble from dense arrays ``blocks[name]`` of shape (m, h, h) (already scaled as
         ``B_l``), pruning small entries."""
         out = {}
         for name in BLOCKS:
             arr = blocks.get(name)
             out[name] = None if arr is None else [_prune(sps.csr_matrix(a)) for a in arr]
-        return cls(grid, out, eta_top, eta_bottom)
+        return cls(grid, out, eta_top, eta_bottom, delta)
+
+    @classmethod
+    def identity(cls, grid: Grid, m: int, eta: float) -> "IsoOperator":
+        """A layer that transmits everything unchanged (all orders), reflecting nothing."""
+        h = grid.h
+        eye = sps.identity(h, format="csr")
+        zero = sps.csr_matrix((h, h))
+        blocks = {"Rt": [zero] * m, "Rb": [zero] * m, "Ttb": [eye] * m, "Tbt": [eye] * m}
+        ones = np.ones(h)
+        return cls(grid, blocks, eta, eta, delta={"Ttb": ones, "Tbt": ones})
 
     # ---- BSDF coefficients ---------------------------------------------------------------
 
@@ -234,6 +251,8 @@ class IsoOperator:
              f"{prefix}m": np.array(self.m), f"{prefix}eta_top": np.array(self.eta_top),
              f"{prefix}eta_bottom": np.array(np.nan if self.eta_bottom is None
                                              else self.eta_bottom)}
+        for name, vec in self.delta.items():
+            d[f"{prefix}delta_{name}"] = vec
         for name, blk in self.blocks.items():
             if blk is None:
                 continue
@@ -261,9 +280,11 @@ class IsoOperator:
                 stacked = sps.csr_matrix((d[key], d[f"{prefix}{name}_indices"],
                                           d[f"{prefix}{name}_indptr"]), shape=(m * h, h))
                 blocks[name] = [stacked[l * h:(l + 1) * h] for l in range(m)]
+            delta = {name: np.asarray(d[f"{prefix}delta_{name}"]) for name in ("Ttb", "Tbt")
+                     if f"{prefix}delta_{name}" in d}
         except (KeyError, ValueError, TypeError) as exc:
             raise FileFormatError(f"not a layersim operator file ({exc})") from None
-        return cls(grid, blocks, eta_top, None if np.isnan(eb) else eb)
+        return cls(grid, blocks, eta_top, None if np.isnan(eb) else eb, delta)
 
 
 def _prune(mat: sps.csr_matrix) -> sps.csr_matrix:

@@ -170,4 +170,4 @@ def medium_operator(grid: Grid, m: int, albedo: float, g: float, tau: float,
         Rl, Tl = _double(Rl, Tl, k)
         R[:L], T[:L] = Rl, Tl
     blocks = {"Rt": R, "Rb": R, "Ttb": T, "Tbt": T}
-    return IsoOperator.from_dense(grid, blocks, eta, eta)
+    return IsoOperator.from_dense(grid, blocks, eta, eta, delta={"Ttb": direct, "Tbt": direct})

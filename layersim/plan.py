@@ -1,0 +1,301 @@
+"""Discretisation plan: from a validated scene, decide what to compute and at what resolution.
+
+The plan is made before any heavy work, and says what it chose and why:
+
+* **Ordinates** ``n`` (quadrature on mu in [-1, 1]): from the narrowest angular lobe of the stack.
+  A microfacet lobe of roughness alpha has an angular width of about ``alpha`` in reflection and
+  ``alpha |1 - 1/eta|`` in refraction (the refracted direction moves by that fraction of the
+  facet tilt); ``n = N_PER_WIDTH / width`` resolves it with a few ordinates across (the constant is
+  set so that alpha = 0.1, eta = 1.5 gives layerlab's n = 196; ``benchmarks/convergence.py``
+  checks it). Henyey-Greenstein media need ``~N_PER_WIDTH / sqrt(1 - g)`` at most.
+* **Fourier orders** ``md``: not from a fitted formula but from the lobes themselves: a pre-pass
+  of the projection kernel over every ordinate pair returns the length of each pair's peak
+  series (:func:`layersim.fourier.peak_length`); the plan keeps every order needed by lobes whose
+  incident and outgoing elevations are both within :data:`THETA_FULL` of the normal. A lobe at
+  elevation theta is ~alpha cos(theta) wide in azimuth, so pairs closer to the horizon would need
+  ~1/(alpha mu) orders (thousands at the most grazing ordinates); they are truncated and tapered
+  (Lanczos sigma factors, so that they blur instead of ringing negative). Truncating orders never
+  changes energy (only order 0 carries energy); the plan reports how many pairs are affected.
+  Media add the reach of their phase function.
+* **What is left out**: transmission blocks below an opaque base, index-matched interfaces and
+  empty media (exact no-ops), anisotropic coupling (``ms = 0``) for isotropic stacks.
+* **Memory**: estimated from the same pre-pass (coefficients actually stored) and refused up front
+  when it exceeds the limit (``LAYERSIM_MAX_MEMORY`` bytes, default: half the available RAM).
+
+A ``[discretization]`` table in the scene overrides ``n``, ``md`` and the quadrature rule.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InfeasibleError
+from .operator import Grid
+from .scene import Conductor, Dielectric, Diffuse, Medium, Scene
+
+#: Ordinates per unit of inverse lobe width (see module docstring).
+N_PER_WIDTH = 6.5
+N_MIN, N_MAX = 64, 4096
+MD_MAX = 20_000
+#: Lobes with both elevations within this angle of the normal keep all their Fourier orders.
+THETA_FULL = 80.0
+#: Relative truncation of the Fourier series (same as the projection's).
+SERIES_RELERR = 1e-7
+DEFAULT_RULE = "gauss-lobatto"
+
+
+def _available_memory() -> int:
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
+        return 8 << 30
+
+
+def memory_limit() -> int:
+    """Bytes a solve may use: ``$LAYERSIM_MAX_MEMORY`` or half the available memory."""
+    env = os.environ.get("LAYERSIM_MAX_MEMORY")
+    if env:
+        try:
+            return int(float(env))
+        except ValueError:
+            raise InfeasibleError(f"LAYERSIM_MAX_MEMORY must be a number of bytes, got {env!r}")
+    return _available_memory() // 2
+
+
+@dataclass
+class LayerPlan:
+    index: int
+    kind: str
+    action: str          # "project", "adding-doubling", "diffuse", "left out"
+    detail: str = ""
+    width: float | None = None   # narrowest lobe width (radians) when it drives n
+    orders: int = 1              # Fourier orders this layer needs
+
+
+@dataclass
+class Plan:
+    """What :func:`layersim.solve` will compute (see module docstring)."""
+
+    rule: str
+    n: int
+    md: int
+    ms: int = 0
+    representation: str = "isotropic"
+    layers: list = field(default_factory=list)
+    left_out: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
+    memory_bytes: int = 0
+    overridden: dict = field(default_factory=dict)
+
+    @property
+    def grid(self) -> Grid:
+        return Grid.make(self.rule, self.n)
+
+    def report(self) -> str:
+        """Human-readable summary (printed by ``layersim plan`` and ``layersim solve``)."""
+        src = lambda k: " (from the scene)" if k in self.overridden else ""
+        lines = [
+            f"representation: {self.representation} "
+            + ("(cosine series in the azimuth difference)" if self.representation == "isotropic"
+               else "(complex exponential series, coupled modes)"),
+            f"ordinates: n = {self.n}{src('n')}, {self.rule}{src('quadrature')} "
+            f"({self.n // 2} per hemisphere)",
+            f"Fourier orders: md = {self.md}{src('md')}" + (f", ms = {self.ms}"
+                                                          if self.representation != "isotropic"
+                                                          else ", ms = 0"),
+            f"estimated memory: {self.memory_bytes / 2**20:.1f} MiB",
+        ]
+        for lp in self.layers:
+            lines.append(f"  layer {lp.index} ({lp.kind}): {lp.action}"
+                         + (f" -- {lp.detail}" if lp.detail else ""))
+        for item in self.left_out:
+            lines.append(f"  left out: {item}")
+        for note in self.notes:
+            lines.append(f"  note: {note}")
+        return "\n".join(lines)
+
+
+def _interface_widths(layer, eta_rel: complex) -> tuple[float, str]:
+    alpha = min(layer.alpha_u, layer.alpha_v)
+    if isinstance(layer, Conductor):
+        return alpha, "reflection lobe"
+    eta = eta_rel.real
+    if eta == 1.0:
+        return math.inf, ""
+    t = alpha * abs(1.0 - 1.0 / max(eta, 1.0 / eta))
+    return t, "refraction lobe"
+
+
+def _n_for_width(width: float) -> int:
+    n = math.ceil(N_PER_WIDTH / width)
+    n += n % 2
+    return max(N_MIN, n)
+
+
+def make_plan(scene: Scene) -> Plan:
+    """Plan the solve of a monochromatic or RGB scene (RGB channels share one plan).
+
+    Raises
+    ------
+    InfeasibleError
+        If a layer cannot be represented (smooth interface) or the discretisation it needs
+        exceeds the limits (ordinates, orders, memory). The message names the layer, the limit
+        and what to change.
+    """
+    disc = scene.discretization
+    rule = disc.quadrature or DEFAULT_RULE
+    plans: list[LayerPlan] = []
+    left_out: list[str] = []
+    notes: list[str] = []
+    if scene.anisotropic:
+        raise InfeasibleError(
+            "anisotropic roughness needs the coupled-mode (anisotropic) solver, which is not "
+            "available yet; use alpha_u == alpha_v, or layersim.montecarlo for a reference")
+    mono = scene.channel(0)
+    widths = []
+    media_orders = 1
+    for i, layer in enumerate(mono.layers):
+        kind = layer.kind
+        if isinstance(layer, (Dielectric, Conductor)):
+            eta_rel = mono.relative_ior(i)
+            if isinstance(layer, Dielectric) and all(
+                    s.relative_ior(i) == 1.0 for s in (scene.channel(c) for c in range(scene.channels))):
+                left_out.append(f"layer {i} (dielectric): index-matched interface (relative "
+                                "index 1) is an exact no-op")
+                plans.append(LayerPlan(i, kind, "left out", "index-matched"))
+                continue
+            if layer.smooth:
+                raise InfeasibleError(
+                    f"layer {i} ({kind}): smooth interfaces (roughness 0) are not representable "
+                    "in the Fourier basis yet (their reflection is a delta in every Fourier "
+                    "order); give a small roughness (e.g. 0.01), or use layersim.montecarlo, "
+                    "which handles smooth interfaces exactly")
+            width, what = _interface_widths(layer, eta_rel)
+            widths.append((width, i, kind, what))
+            plans.append(LayerPlan(i, kind, "project",
+                                   f"{layer.distribution} alpha={layer.alpha_u:g}, relative "
+                                   f"index {_fmt_eta(eta_rel)}", width=width))
+        elif isinstance(layer, Medium):
+            if layer.tau == 0.0:
+                left_out.append(f"layer {i} (medium): tau = 0 is an exact no-op")
+                plans.append(LayerPlan(i, kind, "left out", "tau = 0"))
+                continue
+            from .ingredients.medium import hg_orders
+            orders = hg_orders(layer.g) if max(
+                s.layers[i].albedo for s in (scene.channel(c) for c in range(scene.channels))) > 0 else 1
+            media_orders = max(media_orders, orders)
+            if layer.g != 0.0:
+                widths.append((math.sqrt(1.0 - abs(layer.g)), i, kind, "phase-function lobe"))
+            plans.append(LayerPlan(i, kind, "adding-doubling",
+                                   f"tau={layer.tau:g}, g={layer.g:g}: scattering in {orders} "
+                                   "order(s), unscattered beam in all", orders=orders))
+        elif isinstance(layer, Diffuse):
+            plans.append(LayerPlan(i, kind, "diffuse", "order 0 only"))
+    if scene.opaque:
+        left_out.append("transmission blocks (Ttb, Tbt) and bottom reflection: the base is "
+                        "opaque")
+    left_out.append("anisotropic coupling (ms = 0): every layer is isotropic")
+
+    # ---- ordinates -------------------------------------------------------------------
+    overridden = {}
+    if disc.n is not None:
+        n = disc.n
+        overridden["n"] = n
+    elif widths:
+        width, idx, kind, what = min(widths)
+        n = _n_for_width(width)
+        if n > N_MAX:
+            raise InfeasibleError(
+                f"layer {idx} ({kind}): its {what} is {width:.2g} rad wide and needs about "
+                f"n = {n} ordinates (limit {N_MAX}); increase the roughness, move the relative "
+                "index away from 1, or use layersim.montecarlo")
+        notes.append(f"n set by layer {idx} ({kind}): {what} ~{width:.3g} rad wide")
+    else:
+        n = N_MIN
+    if disc.quadrature:
+        overridden["quadrature"] = rule
+    if rule == "simpson38" and (n - 1) % 3:
+        n = 3 * math.ceil((n - 1) / 3) + 1
+        n += 3 * (n % 2)
+    grid = Grid.make(rule, n)
+
+    # ---- Fourier orders and memory (pre-pass over the interfaces' pairs) ---------------
+    prepass = []
+    md_needed = media_orders
+    for lp in plans:
+        if lp.action != "project":
+            continue
+        layer = mono.layers[lp.index]
+        lengths, full = _interface_prepass(grid, layer, mono.ior_above(lp.index))
+        lp.orders = int(lengths[full].max()) if full.any() else 1
+        md_needed = max(md_needed, lp.orders)
+        prepass.append((lp, lengths))
+    if disc.md is not None:
+        md = disc.md
+        overridden["md"] = md
+        if md < md_needed:
+            notes.append(f"md = {md} from the scene is below the {md_needed} orders the lobes "
+                         "need: lobes are truncated in azimuth (ringing)")
+    else:
+        md = max(1, md_needed)
+    stored = 0
+    for lp, lengths in prepass:
+        stored += int(np.minimum(lengths, md).sum())
+        trunc = int(np.count_nonzero(lengths > md))
+        if trunc:
+            notes.append(f"layer {lp.index}: {trunc} ordinate pairs beyond {THETA_FULL:g} deg "
+                         f"would need up to {int(lengths.max())} orders; they keep {md} "
+                         "(tapered; energy unaffected)")
+    if md > MD_MAX:
+        raise InfeasibleError(f"the stack needs {md} Fourier orders (limit {MD_MAX}); increase "
+                              "the roughness of the smoothest interface or use layersim.montecarlo")
+    h = grid.h
+    media = sum(1 for lp in plans if lp.action == "adding-doubling")
+    stored += media * (4 * media_orders * h * h + 4 * md * h)
+    # the stack itself (assume as dense as the densest ingredient, at most dense) plus adding
+    # temporaries: per order per thread ~12 dense h x h arrays
+    stored_bytes = int(12 * min(stored * 2, 4 * md * h * h)) + 12 * 8 * h * h * 8
+    memory = stored_bytes * max(1, scene.channels if scene.channels > 1 else 1)
+    limit = memory_limit()
+    if memory > limit:
+        raise InfeasibleError(
+            f"the plan (n = {n}, md = {md}) needs about {memory / 2**30:.2f} GiB, over the "
+            f"limit of {limit / 2**30:.2f} GiB (LAYERSIM_MAX_MEMORY); lower n or md in "
+            "[discretization], or increase the roughness of the smoothest interface")
+    return Plan(rule=rule, n=n, md=md, layers=plans, left_out=left_out, notes=notes,
+                memory_bytes=memory, overridden=overridden)
+
+
+def _fmt_eta(eta: complex) -> str:
+    return f"{eta.real:.4g}" if eta.imag == 0 else f"{eta.real:.4g}+{eta.imag:.4g}i"
+
+
+def _interface_prepass(grid: Grid, layer, eta_above: float):
+    """Series lengths of the significant ordinate pairs of one interface, and which of them lie
+    within :data:`THETA_FULL` (one cheap kernel launch per block)."""
+    from . import fourier
+    from .kernels import projection as kproj
+    from .ingredients.microfacet import ENERGY_DROP, L_FIT, _block_pairs
+
+    eta = complex(layer.ior) / eta_above
+    names = ("Rt",) if isinstance(layer, Conductor) else ("Rt", "Rb", "Ttb", "Tbt")
+    fw = grid.flux_weight
+    mu_full = math.cos(math.radians(THETA_FULL))
+    lengths, full = [], []
+    for name in names:
+        mu_i, mu_o, o, i = _block_pairs(grid, name, triangle=False)
+        phi = np.broadcast_to(np.linspace(0.0, np.pi, 9), (mu_i.size, 9))
+        s, q = kproj.microfacet_split(mu_i, mu_o, phi, eta, layer.alpha, layer.alpha,
+                                      layer.distribution)
+        q0, qpi = q[:, 0], q[:, -1]
+        bound = 10.0 * fourier.peak_values(q0, layer.distribution) * np.abs(s).max(axis=1)
+        energy = bound * 2.0 * np.pi * np.maximum(fw[i], fw[o])
+        sig = energy > ENERGY_DROP
+        lengths.append(fourier.peak_length(q0[sig], qpi[sig], layer.distribution,
+                                           SERIES_RELERR) + L_FIT)
+        full.append(np.minimum(np.abs(mu_i[sig]), np.abs(mu_o[sig])) >= mu_full)
+    return np.concatenate(lengths), np.concatenate(full)

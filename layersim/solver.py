@@ -1,0 +1,123 @@
+"""``solve``: scene -> plan -> layer operators -> adding -> BSDF; and ``add`` on solved BSDFs."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+from . import adding
+from .bsdf import BSDF
+from .errors import OperatorError
+from .ingredients import diffuse_operator, interface_operator, medium_operator
+from .ingredients.microfacet import ProjectionStats
+from .operator import IsoOperator
+from .plan import Plan, make_plan
+from .scene import Conductor, Dielectric, Diffuse, Medium, Scene
+
+
+def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionStats):
+    layer = scene.layers[i]
+    eta_above = scene.ior_above(i)
+    if isinstance(layer, (Dielectric, Conductor)):
+        return interface_operator(grid, plan.md, layer, eta_above, stats)
+    if isinstance(layer, Medium):
+        return medium_operator(grid, plan.md, layer.albedo, layer.g, layer.tau, eta_above)
+    if isinstance(layer, Diffuse):
+        return diffuse_operator(grid, layer.albedo, eta_above)
+    raise TypeError(f"layer {i}: no operator for kind {layer.kind!r}")  # pragma: no cover
+
+
+def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
+          verbose: bool = False) -> BSDF:
+    """Solve a scene with the adding equations in the Fourier basis.
+
+    Parameters
+    ----------
+    scene : Scene
+        Validated scene (``Scene.from_toml`` / ``Scene.from_dict``); RGB scenes are solved per
+        channel on one shared plan.
+    like : BSDF, optional
+        Reuse the discretisation (rule, n, md) of another solved BSDF, so that the two can be
+        combined with :func:`add` or :func:`layersim.subtract`.
+    threads : int, optional
+        Threads for the Fourier orders in the adding equations.
+    verbose : bool
+        Print the plan and timings.
+
+    Returns
+    -------
+    BSDF
+    """
+    t_start = time.perf_counter()
+    if like is not None:
+        op = like.operators[0]
+        scene = replace(scene, discretization=replace(
+            scene.discretization, n=op.grid.n, md=op.m, quadrature=op.grid.rule))
+    plan = make_plan(scene)
+    if verbose:
+        print(plan.report())
+    grid = plan.grid
+    t_plan = time.perf_counter() - t_start
+    stats = ProjectionStats()
+    t_layers = t_adding = 0.0
+    cache: dict = {}
+    stacks = []
+    for c in range(scene.channels):
+        mono = scene.channel(c)
+        ops = []
+        for lp in plan.layers:
+            if lp.action == "left out":
+                continue
+            key = (mono.layers[lp.index], mono.ior_above(lp.index))
+            if key not in cache:
+                t0 = time.perf_counter()
+                cache[key] = _layer_operator(plan, grid, mono, lp.index, stats)
+                t_layers += time.perf_counter() - t0
+            ops.append(cache[key])
+        t0 = time.perf_counter()
+        if not ops:
+            stack = IsoOperator.identity(grid, plan.md, scene.top_ior)
+        else:
+            stack = ops[-1]
+            for op in reversed(ops[:-1]):
+                stack = adding.add(op, stack, threads)
+        t_adding += time.perf_counter() - t0
+        stacks.append(stack)
+    info = {
+        "scene": scene.name, "source": scene.source, "channels": scene.channels,
+        "n": plan.n, "md": plan.md, "ms": plan.ms, "rule": plan.rule,
+        "seconds": {"plan": t_plan, "layers": t_layers, "projection": stats.seconds,
+                    "adding": t_adding, "total": time.perf_counter() - t_start},
+        "projection": {"pairs": stats.pairs, "projected": stats.projected,
+                       "refit": stats.refit, "truncated": stats.truncated},
+        "nnz": sum(op.nnz() for op in stacks),
+        "memory_bytes": sum(op.memory_bytes() for op in stacks),
+    }
+    if verbose:
+        s = info["seconds"]
+        print(f"solved in {s['total']:.2f} s (plan {s['plan']:.2f} s, layers {s['layers']:.2f} s, "
+              f"adding {s['adding']:.2f} s)")
+    return BSDF(stacks, plan, info)
+
+
+def add(top, bottom, threads: int | None = None):
+    """Stack ``top`` on ``bottom`` with the adding equations.
+
+    Both must be solved on the same discretisation (see ``solve(..., like=...)``) and
+    ``top`` must be transmissive, ending in the medium that ``bottom`` starts in. Accepts
+    :class:`BSDF` objects (per channel; a 1-channel operand is shared by all channels of the
+    other) or :class:`IsoOperator` objects, and returns the same type.
+    """
+    if isinstance(top, IsoOperator) and isinstance(bottom, IsoOperator):
+        return adding.add(top, bottom, threads)
+    if not (isinstance(top, BSDF) and isinstance(bottom, BSDF)):
+        raise TypeError("add() takes two BSDF objects (from layersim.solve) or two operators")
+    if top.channels != bottom.channels and 1 not in (top.channels, bottom.channels):
+        raise OperatorError(f"cannot add a {top.channels}-channel BSDF to a "
+                            f"{bottom.channels}-channel one")
+    channels = max(top.channels, bottom.channels)
+    pick = lambda b, c: b.operators[0 if b.channels == 1 else c]
+    ops = [adding.add(pick(top, c), pick(bottom, c), threads) for c in range(channels)]
+    info = {"scene": f"{top.info.get('scene', 'top')} + {bottom.info.get('scene', 'bottom')}",
+            "channels": channels}
+    return BSDF(ops, None, info)
