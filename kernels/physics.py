@@ -238,4 +238,4 @@ def hg_eval(cos_theta: Any, g: Any):
     directions before and after scattering (``cos_theta = 1``: no deflection)."""
     one = type(g)(1.0)
     denom = one + g * g - type(g)(2.0) * g * cos_theta
-    return (one - g * g) / (type(g)(4.0 * wp.pi) * denom * wp.sqrt(denom))
+    return (one - g * g) / (type(g)(4.0) * type(g)(wp.pi) * denom * wp.sqrt(denom))

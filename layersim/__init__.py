@@ -6,7 +6,7 @@ Public entry points (see CONVENTIONS.md)::
     bsdf = layersim.solve(scene)
     bsdf.eval(wi, wo); bsdf.albedo(wi); bsdf.bin_energies(wi, mu_edges, phi_edges)
 """
-from .errors import LayersimError, SceneError, InfeasibleError, OperatorError
+from .errors import LayersimError, SceneError, InfeasibleError, OperatorError, FileFormatError
 from .scene import Scene, Dielectric, Conductor, Medium, Diffuse, Discretization
 from .plan import Plan, make_plan
 from .bsdf import BSDF

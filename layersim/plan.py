@@ -205,6 +205,11 @@ def make_plan(scene: Scene) -> Plan:
     if disc.n is not None:
         n = disc.n
         overridden["n"] = n
+        if widths:
+            width, idx, kind, what = min(widths)
+            if n < _n_for_width(width):
+                notes.append(f"n = {n} from the scene is below the ~{_n_for_width(width)} that "
+                             f"layer {idx} ({kind}) needs ({what} ~{width:.3g} rad wide)")
     elif widths:
         width, idx, kind, what = min(widths)
         n = _n_for_width(width)

@@ -7,7 +7,7 @@ from dataclasses import replace
 
 from . import adding
 from .bsdf import BSDF
-from .errors import OperatorError
+from .errors import InfeasibleError, OperatorError
 from .ingredients import diffuse_operator, interface_operator, medium_operator
 from .ingredients.microfacet import ProjectionStats
 from .operator import IsoOperator
@@ -15,16 +15,39 @@ from .plan import Plan, make_plan
 from .scene import Conductor, Dielectric, Diffuse, Medium, Scene
 
 
+#: Discrete energy balance an interface operator may exceed 1 by before it is refused.
+ENERGY_TOLERANCE = 1e-6
+
+
 def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionStats):
     layer = scene.layers[i]
     eta_above = scene.ior_above(i)
     if isinstance(layer, (Dielectric, Conductor)):
-        return interface_operator(grid, plan.md, layer, eta_above, stats)
+        op = interface_operator(grid, plan.md, layer, eta_above, stats)
+        _check_energy(op, i, layer, plan)
+        return op
     if isinstance(layer, Medium):
         return medium_operator(grid, plan.md, layer.albedo, layer.g, layer.tau, eta_above)
     if isinstance(layer, Diffuse):
         return diffuse_operator(grid, layer.albedo, eta_above)
     raise TypeError(f"layer {i}: no operator for kind {layer.kind!r}")  # pragma: no cover
+
+
+def _check_energy(op: IsoOperator, i: int, layer, plan: Plan) -> None:
+    """Refuse an interface operator whose discrete energy balance exceeds 1: its lobes are too
+    narrow for the ordinates (the quadrature then over-counts them)."""
+    alb = op.albedo_nodes()
+    worst = 0.0
+    for r, t in (("Rt", "Ttb"), ("Rb", "Tbt")):
+        if r in alb:
+            total = alb[r] + (alb[t] if t in alb else 0.0)
+            worst = max(worst, float(total.max()))
+    if worst > 1.0 + ENERGY_TOLERANCE:
+        raise InfeasibleError(
+            f"layer {i} ({layer.kind}): with n = {plan.n} ordinates the discrete operator "
+            f"reflects and transmits {worst:.4g} times the incident energy: its lobes "
+            f"(roughness {layer.alpha_u:g}) are narrower than the ordinate spacing; raise n in "
+            "[discretization] (or remove the override and let the planner choose)")
 
 
 def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,

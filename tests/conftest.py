@@ -1,0 +1,44 @@
+"""Shared fixtures: small, fast scenes and solved stacks reused across test modules."""
+
+import numpy as np
+import pytest
+
+import layersim
+
+
+def unit(theta_deg, phi_deg=0.0, below=False):
+    """Unit direction at polar angle theta (degrees from +z) and azimuth phi; ``below`` mirrors
+    it to the lower hemisphere."""
+    th, ph = np.radians(theta_deg), np.radians(phi_deg)
+    v = np.stack(np.broadcast_arrays(np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph),
+                                     np.cos(th)), axis=-1)
+    if below:
+        v = v * np.array([1.0, 1.0, -1.0])
+    return v
+
+
+def random_directions(rng, n, lower=False, min_z=0.05):
+    """Random unit vectors on the upper (or lower) hemisphere with |z| >= min_z."""
+    z = rng.uniform(min_z, 1.0, n)
+    ph = rng.uniform(0, 2 * np.pi, n)
+    s = np.sqrt(1 - z * z)
+    v = np.stack([s * np.cos(ph), s * np.sin(ph), -z if lower else z], axis=-1)
+    return v
+
+
+@pytest.fixture(scope="session")
+def coated_gold():
+    """Rough lacquer (eta 1.5, alpha 0.1) over rough gold (alpha 0.1) at the planner's
+    discretisation (n = 196)."""
+    scene = layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": 0.1},
+        {"kind": "conductor", "ior": [0.143552, 3.98397], "roughness": 0.1}]})
+    return layersim.solve(scene)
+
+
+@pytest.fixture(scope="session")
+def rough_glass():
+    """A single rough dielectric interface (eta 1.5, alpha 0.3): all four blocks."""
+    scene = layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": 0.3}]})
+    return layersim.solve(scene)

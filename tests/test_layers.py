@@ -1,0 +1,286 @@
+"""Isotropic layer calculus: published tables, closed forms, conservation, reciprocity and the
+algebra of the adding equations."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sps
+
+import layersim
+from layersim import adding
+from layersim.errors import InfeasibleError, OperatorError
+from layersim.ingredients import diffuse_operator, interface_operator, medium_operator
+from layersim.operator import Grid, IsoOperator
+from layersim.scene import Conductor, Dielectric
+
+from conftest import unit
+
+GRID = Grid.make("gauss-lobatto", 48)
+M = 24
+
+
+def close_ops(a, b, rtol):
+    for name in ("Rt", "Rb", "Ttb", "Tbt"):
+        if a.blocks[name] is None:
+            assert b.blocks[name] is None
+            continue
+        for l in range(max(a.m, b.m)):
+            x, y = a.block(name, l).toarray(), b.block(name, l).toarray()
+            scale = max(np.abs(y).max(), 1e-300)
+            assert np.abs(x - y).max() <= rtol * scale, (name, l, np.abs(x - y).max() / scale)
+
+
+def reciprocity_error(op):
+    worst = 0.0
+    for l in range(op.m):
+        f = {k: op.coefficients(k, l) for k, v in op.blocks.items() if v is not None}
+        scale = max(np.abs(v).max() for v in f.values()) + 1e-300
+        for k in ("Rt", "Rb"):
+            if k in f:
+                worst = max(worst, np.abs(f[k] - f[k].T).max() / scale)
+        if "Ttb" in f:
+            diff = f["Ttb"] / op.eta_bottom ** 2 - f["Tbt"].T / op.eta_top ** 2
+            worst = max(worst, np.abs(diff).max() / scale)
+    return worst
+
+
+# ---- published reference: van de Hulst (1980), Vol. 1, Table 12 ------------------------------
+
+def test_van_de_hulst_table_12_isotropic_slab():
+    """tau = 2, albedo 0.9, mu_i = 0.9: reflected intensity pi f (seed 004 sec. 6.1)."""
+    scene = layersim.Scene.from_dict({"layer": [{"kind": "medium", "albedo": 0.9, "tau": 2.0}],
+                                      "discretization": {"n": 200}})
+    bsdf = layersim.solve(scene)
+    mu_o = np.array([0.1, 0.3, 0.5, 0.7, 0.9, 1.0])
+    table = np.array([0.45143, 0.43807, 0.40866, 0.37554, 0.34382, 0.32910])
+    wi = np.array([np.sqrt(1 - 0.81), 0.0, 0.9])
+    wo = np.stack([-np.sqrt(1 - mu_o ** 2), 0 * mu_o, mu_o], axis=-1)
+    got = np.pi * bsdf.eval(wi, wo)
+    np.testing.assert_allclose(got, table, rtol=1e-4)
+    R, T = bsdf.albedo(wi)
+    assert R == pytest.approx(0.38040, abs=1e-5)   # flux column of the same table row
+
+
+# ---- closed forms --------------------------------------------------------------------------
+
+def test_lambertian_base_reflects_exactly_its_albedo():
+    bsdf = layersim.solve(layersim.Scene.from_dict({"layer": [{"kind": "diffuse",
+                                                                "albedo": 0.7}]}))
+    wi = unit([0.0, 30.0, 75.0, 89.0])
+    R, T = bsdf.albedo(wi)
+    np.testing.assert_allclose(R, 0.7, rtol=1e-13)
+    np.testing.assert_array_equal(T, 0.0)
+    # pointwise: albedo / pi, normalised by the grid's hemispherical flux integral
+    grid = bsdf.grid
+    expected = 0.7 / (2 * np.pi * np.sum(grid.w * grid.mu))
+    np.testing.assert_allclose(bsdf.eval(wi, unit([10.0, 50.0, 60.0, 5.0], 77.0)), expected,
+                               rtol=1e-12)
+    assert expected == pytest.approx(0.7 / np.pi, rel=1e-3)
+
+
+def test_smooth_limit_fresnel_at_normal_incidence():
+    bsdf = layersim.solve(layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": 0.1}]}))
+    R, T = bsdf.albedo(unit(0.0))
+    assert R == pytest.approx(0.04, abs=5e-5)
+    assert T == pytest.approx(0.96, abs=5e-5)
+    R, T = bsdf.albedo(unit(0.0, below=True))  # from inside the glass: the same Fresnel
+    assert R == pytest.approx(0.04, abs=5e-5)
+
+
+def _diffuser(grid, r, t, eta=1.0):
+    """A layer that scatters r (reflected) and t (transmitted) of any beam into a Lambertian
+    distribution: blocks r U and t U with the projector U = 1 fw^T / sum(fw)."""
+    fw = grid.flux_weight
+    U = sps.csr_matrix(np.outer(np.ones(grid.h), fw) / fw.sum())
+    z = sps.csr_matrix((grid.h, grid.h))
+    return IsoOperator(grid, {"Rt": [r * U, z], "Rb": [r * U, z], "Ttb": [t * U, z],
+                              "Tbt": [t * U, z]}, eta, eta)
+
+
+def test_adding_two_scalar_diffusers_gives_the_stokes_sums():
+    """Stokes (1860) / seed 004 eq. (1): R = r1 + t1^2 r2 / (1 - r1 r2), T = t1 t2 / (1 - r1 r2)."""
+    r1, t1, r2, t2 = 0.3, 0.6, 0.5, 0.25
+    stack = adding.add(_diffuser(GRID, r1, t1), _diffuser(GRID, r2, t2))
+    alb = stack.albedo_nodes()
+    np.testing.assert_allclose(alb["Rt"], r1 + t1 ** 2 * r2 / (1 - r1 * r2), rtol=1e-13)
+    np.testing.assert_allclose(alb["Ttb"], t1 * t2 / (1 - r1 * r2), rtol=1e-13)
+    np.testing.assert_allclose(alb["Rb"], r2 + t2 ** 2 * r1 / (1 - r1 * r2), rtol=1e-13)
+    # a glass plate: two identical non-absorbing diffusers, R + T = 1
+    plate = adding.add(_diffuser(GRID, 0.04, 0.96), _diffuser(GRID, 0.04, 0.96))
+    a = plate.albedo_nodes()
+    np.testing.assert_allclose(a["Rt"], 0.04 + 0.96 ** 2 * 0.04 / (1 - 0.04 ** 2), rtol=1e-13)
+    np.testing.assert_allclose(a["Rt"] + a["Ttb"], 1.0, rtol=1e-14)
+
+
+# ---- conservation --------------------------------------------------------------------------
+
+@pytest.mark.parametrize("g", [0.0, 0.7, -0.5])
+def test_conservative_slab_conserves_energy(g):
+    op = medium_operator(GRID, M, 1.0, g, 3.0, 1.0)
+    a = op.albedo_nodes()
+    np.testing.assert_allclose(a["Rt"] + a["Ttb"], 1.0, atol=1e-12)
+    np.testing.assert_allclose(a["Rb"] + a["Tbt"], 1.0, atol=1e-12)
+    absorbing = medium_operator(GRID, M, 0.8, g, 3.0, 1.0).albedo_nodes()
+    assert np.all(absorbing["Rt"] + absorbing["Ttb"] < 1.0 - 1e-3)
+
+
+def test_thick_conservative_slab_stays_finite_and_conserving():
+    op = medium_operator(GRID, 1, 1.0, 0.0, 1e4, 1.0)
+    a = op.albedo_nodes()
+    assert np.all(np.isfinite(a["Rt"]))
+    np.testing.assert_allclose(a["Rt"] + a["Ttb"], 1.0, atol=1e-9)
+    assert np.all(a["Ttb"] < 2e-4)  # diffusion: T ~ 4/(3 tau) for tau -> infinity
+
+
+def test_stacks_never_create_energy(coated_gold, rough_glass):
+    for bsdf in (coated_gold, rough_glass):
+        a = bsdf.operators[0].albedo_nodes()
+        assert np.all(a["Rt"] + a.get("Ttb", 0.0) <= 1.0 + 1e-9)
+        assert np.all(a["Rt"] > 0)
+    # lacquer over a conservative HG slab (transmissive stack, all four blocks)
+    d = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3), 1.0)
+    stack = adding.add(d, medium_operator(GRID, M, 1.0, 0.5, 2.0, 1.5))
+    a = stack.albedo_nodes()
+    assert np.all(a["Rt"] + a["Ttb"] <= 1.0 + 1e-9)
+    assert np.all(a["Rb"] + a["Tbt"] <= 1.0 + 1e-9)
+
+
+# ---- reciprocity ---------------------------------------------------------------------------
+
+def test_every_ingredient_and_stack_is_reciprocal(coated_gold, rough_glass):
+    d = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3), 1.0)
+    c = interface_operator(GRID, M, Conductor(ior=complex(0.2, 3.0), alpha_u=0.2,
+                                              alpha_v=0.2), 1.5)
+    hg = medium_operator(GRID, M, 0.9, 0.6, 1.5, 1.5)
+    diff = diffuse_operator(GRID, 0.5, 1.5)
+    for op in (d, c, hg, diff, adding.add(d, hg), adding.add(d, adding.add(hg, c)),
+               coated_gold.operators[0], rough_glass.operators[0]):
+        assert reciprocity_error(op) < 1e-10
+
+
+def test_projection_of_all_blocks_is_reciprocal_without_the_shortcut():
+    """Projecting every block independently (no reciprocity shortcut) reproduces the
+    shortcut's operator: this checks the physics and the projection against reciprocity."""
+    layer = Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3)
+    full = interface_operator(GRID, M, layer, 1.0, reciprocity=False)
+    short = interface_operator(GRID, M, layer, 1.0)
+    close_ops(full, short, rtol=1e-4)
+    assert reciprocity_error(full) < 1e-4
+
+
+def test_eval_is_reciprocal_in_the_radiance_convention(rough_glass):
+    rng = np.random.default_rng(7)
+    from conftest import random_directions
+    for lower in (False, True):
+        wi = random_directions(rng, 300)
+        wo = random_directions(rng, 300, lower)
+        f_io = rough_glass.eval(wi, wo)
+        f_oi = rough_glass.eval(wo, wi)
+        eta_i, eta_o = 1.0, (1.5 if lower else 1.0)
+        np.testing.assert_allclose(f_io / eta_o ** 2, f_oi / eta_i ** 2, rtol=1e-8,
+                                   atol=1e-10 * np.abs(f_io).max())
+
+
+# ---- algebra -------------------------------------------------------------------------------
+
+def test_adding_is_associative():
+    a = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3), 1.0)
+    b = medium_operator(GRID, M, 0.9, 0.5, 1.0, 1.5)
+    c = interface_operator(GRID, M, Dielectric(ior=1.0, alpha_u=0.2, alpha_v=0.2), 1.5)
+    close_ops(adding.add(adding.add(a, b), c), adding.add(a, adding.add(b, c)), rtol=1e-10)
+    base = diffuse_operator(GRID, 0.6, 1.0)
+    close_ops(adding.add(adding.add(a, b), adding.add(c, base)),
+              adding.add(a, adding.add(adding.add(b, c), base)), rtol=1e-10)
+
+
+def test_adding_an_index_matched_clear_layer_is_a_no_op():
+    a = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3), 1.0)
+    clear = IsoOperator.identity(GRID, M, 1.5)
+    close_ops(adding.add(a, clear), a, rtol=1e-14)
+    close_ops(adding.add(IsoOperator.identity(GRID, M, 1.0), a), a, rtol=1e-14)
+    empty = medium_operator(GRID, M, 0.9, 0.3, 0.0, 1.5)   # tau = 0
+    close_ops(adding.add(a, empty), a, rtol=1e-14)
+
+
+@pytest.mark.parametrize("g", [0.0, 0.8])
+def test_adding_doubling_of_tau_equals_adding_two_halves(g):
+    full = medium_operator(GRID, M, 0.95, g, 3.0, 1.0)
+    half = medium_operator(GRID, M, 0.95, g, 1.5, 1.0)
+    close_ops(adding.add(half, half), full, rtol=1e-10)
+    assert np.allclose(adding.add(half, half).delta["Ttb"], full.delta["Ttb"], rtol=1e-14)
+
+
+def test_threaded_adding_equals_serial_adding():
+    """layerlab's HG layers went wrong when built in parallel; ours must not."""
+    hg = medium_operator(GRID, M, 0.9, 0.7, 0.5, 1.0)
+    serial = adding.add(hg, hg, threads=1)
+    parallel = adding.add(hg, hg, threads=2)
+    close_ops(parallel, serial, rtol=0.0)
+
+
+def test_adding_refuses_mismatched_operators():
+    a = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3), 1.0)
+    other = medium_operator(Grid.make("gauss-lobatto", 50), M, 0.5, 0.0, 1.0, 1.5)
+    with pytest.raises(OperatorError, match="different grids"):
+        adding.add(a, other)
+    with pytest.raises(OperatorError, match="index mismatch"):
+        adding.add(a, medium_operator(GRID, M, 0.5, 0.0, 1.0, 1.0))
+    with pytest.raises(OperatorError, match="opaque"):
+        adding.add(diffuse_operator(GRID, 0.5, 1.0), a)
+
+
+# ---- stiff cases and refusals --------------------------------------------------------------
+
+@pytest.mark.parametrize("alpha,n", [(0.3, 128), (0.5, 96)])
+def test_rough_coatings_at_high_resolution_are_finite_and_conserving(alpha, n):
+    """layerlab crashes for coatings with alpha >= 0.2 at n >= ~92."""
+    scene = layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": alpha},
+        {"kind": "medium", "albedo": 0.99, "g": 0.3, "tau": 1.0},
+        {"kind": "diffuse", "albedo": 0.8}], "discretization": {"n": n}})
+    bsdf = layersim.solve(scene)
+    R, T = bsdf.albedo(unit([0.0, 45.0, 85.0]))
+    assert np.all(np.isfinite(R)) and np.all((R > 0.3) & (R < 1.0))
+
+
+def test_smooth_interfaces_are_refused_with_a_reason():
+    scene = layersim.Scene.from_dict({"layer": [{"kind": "dielectric", "ior": 1.5}]})
+    with pytest.raises(InfeasibleError, match="layer 0 \\(dielectric\\).*smooth.*montecarlo"):
+        layersim.solve(scene)
+
+
+def test_nearly_index_matched_interface_is_refused_up_front():
+    scene = layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.0001, "roughness": 0.1}]})
+    with pytest.raises(InfeasibleError, match="layer 0 \\(dielectric\\).*refraction lobe.*ordinates"):
+        layersim.make_plan(scene)
+
+
+def test_memory_limit_is_enforced_before_any_heavy_work(monkeypatch):
+    monkeypatch.setenv("LAYERSIM_MAX_MEMORY", "1000000")
+    scene = layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": 0.1},
+        {"kind": "conductor", "ior": [0.143552, 3.98397], "roughness": 0.1}]})
+    with pytest.raises(InfeasibleError, match="GiB.*LAYERSIM_MAX_MEMORY"):
+        layersim.solve(scene)
+
+
+def test_under_resolved_override_is_refused_instead_of_creating_energy():
+    scene = layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": 0.02}], "discretization": {"n": 64}})
+    assert any("below the" in note for note in layersim.make_plan(scene).notes)
+    with pytest.raises(InfeasibleError, match="layer 0 \\(dielectric\\).*raise n"):
+        layersim.solve(scene)
+
+
+def test_plan_reports_what_it_leaves_out():
+    plan = layersim.make_plan(layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.0, "roughness": 0.3},     # index matched: no-op
+        {"kind": "medium", "albedo": 0.5, "tau": 0.0},            # empty medium: no-op
+        {"kind": "dielectric", "ior": 1.5, "roughness": 0.3},
+        {"kind": "diffuse", "albedo": 0.5}]}))
+    text = plan.report()
+    assert "index-matched" in text and "tau = 0" in text
+    assert "transmission blocks" in text and "opaque" in text
+    assert "ms = 0" in text
+    assert [lp.action for lp in plan.layers] == ["left out", "left out", "project", "diffuse"]
