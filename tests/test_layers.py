@@ -284,3 +284,21 @@ def test_plan_reports_what_it_leaves_out():
     assert "transmission blocks" in text and "opaque" in text
     assert "ms = 0" in text
     assert [lp.action for lp in plan.layers] == ["left out", "left out", "project", "diffuse"]
+
+
+def test_energy_limiter_removes_overcounting_and_keeps_reciprocity():
+    from layersim.energy import limit_energy, node_energy
+    d = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3), 1.0)
+    # simulate a quadrature that over-counts the lobes of a few ordinates by 0.5 %
+    bump = np.ones(GRID.h)
+    bump[5:9] = 1.0025
+    B = sps.diags(bump)
+    for name in ("Rt", "Ttb", "Rb", "Tbt"):
+        d.blocks[name] = [(B @ mat @ B).tocsr() for mat in d.blocks[name]]
+    top, bot = node_energy(d, np.ones(GRID.h), np.ones(GRID.h))
+    assert max(top.max(), bot.max()) > 1.0 + 1e-3
+    excess, scaled = limit_energy(d)
+    assert excess > 1e-3 and scaled > 0
+    top, bot = node_energy(d, np.ones(GRID.h), np.ones(GRID.h))
+    assert max(top.max(), bot.max()) <= 1.0 + 1e-12
+    assert reciprocity_error(d) < 1e-10
