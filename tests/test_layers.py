@@ -291,7 +291,7 @@ def test_energy_limiter_removes_overcounting_and_keeps_reciprocity():
     d = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3), 1.0)
     # simulate a quadrature that over-counts the lobes of a few ordinates by 0.5 %
     bump = np.ones(GRID.h)
-    bump[5:9] = 1.0025
+    bump[-4:] = 1.0025   # near-normal ordinates, where R + T is within 1e-5 of 1
     B = sps.diags(bump)
     for name in ("Rt", "Ttb", "Rb", "Tbt"):
         d.blocks[name] = [(B @ mat @ B).tocsr() for mat in d.blocks[name]]
