@@ -29,6 +29,7 @@ convergence study, ``benchmarks/projection_accuracy.py``).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -141,7 +142,9 @@ def cos_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+@functools.lru_cache(maxsize=16)
 def _gl(n):
+    """Gauss-Legendre nodes and weights on [0, 1] (cached: computing them is an eigenproblem)."""
     x, w = np.polynomial.legendre.leggauss(n)
     return 0.5 * (x + 1.0), 0.5 * w
 

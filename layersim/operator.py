@@ -186,17 +186,7 @@ class IsoOperator:
             if chunks is None:
                 blocks[name] = None
                 continue
-            mats = []
-            for l in range(m):
-                parts = [(o, i, c[:, l]) for o, i, c in chunks if c.shape[1] > l]
-                if not parts:
-                    mats.append(sps.csr_matrix((h, h)))
-                    continue
-                o = np.concatenate([p[0] for p in parts])
-                i = np.concatenate([p[1] for p in parts])
-                vals = np.concatenate([p[2] for p in parts]) * grid.flux_weight[i] * order_weight(l)
-                mats.append(_pruned_csr(vals, o, i, h))
-            blocks[name] = mats
+            blocks[name] = _orders_to_csr(chunks, m, grid)
         return cls(grid, blocks, eta_top, eta_bottom)
 
     @classmethod
@@ -287,19 +277,47 @@ class IsoOperator:
         return cls(grid, blocks, eta_top, None if np.isnan(eb) else eb, delta)
 
 
+def _orders_to_csr(chunks, m: int, grid: Grid) -> list:
+    """Per-order CSR blocks ``B_l = c_l f_l w_i mu_i`` from per-pair series chunks, built
+    directly from sorted index arrays (one sort for all orders), pruned per order."""
+    h = grid.h
+    rows, cols, orders, vals = [], [], [], []
+    for o, i, c in chunks:
+        c = c[:, :m]
+        p, l = np.nonzero(c)
+        rows.append(o[p])
+        cols.append(i[p])
+        orders.append(l)
+        vals.append(c[p, l])
+    empty = [sps.csr_matrix((h, h)) for _ in range(m)]
+    if not rows:
+        return empty
+    o, i = np.concatenate(rows), np.concatenate(cols)
+    l, v = np.concatenate(orders), np.concatenate(vals)
+    if o.size == 0:
+        return empty
+    v = v * grid.flux_weight[i] * order_weight(l)
+    order = np.lexsort((i, o, l))
+    o, i, l, v = o[order], i[order], l[order], v[order]
+    bounds = np.searchsorted(l, np.arange(m + 1))
+    mats = []
+    for k in range(m):
+        a, b = bounds[k], bounds[k + 1]
+        if a == b:
+            mats.append(sps.csr_matrix((h, h)))
+            continue
+        ok, ik, vk = o[a:b], i[a:b], v[a:b]
+        keep = np.abs(vk) >= DROP_TOLERANCE * np.abs(vk).max()
+        ok, ik, vk = ok[keep], ik[keep], vk[keep]
+        indptr = np.zeros(h + 1, np.int64)
+        np.cumsum(np.bincount(ok, minlength=h), out=indptr[1:])
+        mats.append(sps.csr_matrix((vk, ik.astype(np.int32), indptr), shape=(h, h)))
+    return mats
+
+
 def _prune(mat: sps.csr_matrix) -> sps.csr_matrix:
     if mat.nnz:
         cut = DROP_TOLERANCE * np.abs(mat.data).max()
         mat.data[np.abs(mat.data) < cut] = 0.0
         mat.eliminate_zeros()
-    return mat
-
-
-def _pruned_csr(vals: np.ndarray, rows: np.ndarray, cols: np.ndarray, h: int) -> sps.csr_matrix:
-    keep = vals != 0
-    if keep.any():
-        cut = DROP_TOLERANCE * np.abs(vals[keep]).max()
-        keep &= np.abs(vals) >= cut
-    mat = sps.csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(h, h))
-    mat.sum_duplicates()
     return mat

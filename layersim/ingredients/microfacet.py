@@ -213,20 +213,20 @@ def pair_series(mu_i, mu_o, eta: complex, alpha: float, dist: str, m: int, q0=No
     precondition = dist == "ggx" and mu_i[0] * mu_o[0] < 0
     coef, resid, phi_max = _fit(mu_i, mu_o, q0, qpi, eta, alpha, dist, L_FIT, Q_IN, Q_OUT,
                                 precondition)
+    peak = fourier.peak_series(q0, qpi, dist, max(K, 1))
+    if precondition:
+        peak = fourier.cos_product(peak, _prefactor_poly(q0, qpi, alpha))
+    series = np.zeros((q0.size, peak.shape[1] + L_HARD - 1))
+    base = fourier.cos_product(peak, coef)
+    series[:, :base.shape[1]] = base
     hard = np.flatnonzero((resid > FIT_RESIDUAL) & (phi_max >= REFIT_MIN_SUPPORT))
     if hard.size:
         coef_h, resid_h, _ = _fit(mu_i[hard], mu_o[hard], q0[hard], qpi[hard], eta, alpha,
                                   dist, L_HARD, Q_IN_HARD, Q_OUT_HARD, precondition)
         better = resid_h < resid[hard]
-        wide = np.zeros((coef.shape[0], L_HARD))
-        wide[:, :L_FIT] = coef
-        wide[hard[better]] = coef_h[better]
-        coef = wide
+        rows = hard[better]
+        series[rows] = fourier.cos_product(peak[rows], coef_h[better])
         stats.refit += int(better.sum())
-    peak = fourier.peak_series(q0, qpi, dist, max(K, 1))
-    if precondition:
-        peak = fourier.cos_product(peak, _prefactor_poly(q0, qpi, alpha))
-    series = fourier.cos_product(peak, coef)
     # per-pair length: last coefficient above RELERR * |f_0|
     mag = np.abs(series)
     above = mag >= RELERR * np.maximum(mag[:, :1], 1e-300)
