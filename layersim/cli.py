@@ -2,6 +2,7 @@
 
     layersim plan SCENE              print the discretisation plan (no heavy work)
     layersim solve SCENE [-o FILE]   solve, print plan, timings and albedos; save the BSDF
+    layersim info FILE               reload a saved BSDF and print its summary and albedos
 
 Errors in the input print one line (``layersim: error: ...``) and exit with status 2.
 """
@@ -64,6 +65,23 @@ def cmd_solve(args) -> int:
     return 0
 
 
+def cmd_info(args) -> int:
+    from .bsdf import BSDF
+    bsdf = BSDF.load(args.file)
+    info = bsdf.info
+    op = bsdf.operators[0]
+    print(f"{args.file}: scene '{info.get('scene', '?')}', {bsdf.channels} channel(s), "
+          f"{'opaque' if bsdf.opaque else 'transmissive'}")
+    print(f"discretisation: n = {op.grid.n} ({op.grid.rule}), md = {op.m}; "
+          f"{sum(o.nnz() for o in bsdf.operators)} nonzero coefficients, "
+          f"{sum(o.memory_bytes() for o in bsdf.operators) / 2**20:.1f} MiB")
+    if "seconds" in info:
+        print(f"solved in {info['seconds']['total']:.2f} s")
+    print("albedo (energy fractions):")
+    print(_albedo_table(bsdf, [0.0, 30.0, 60.0, 80.0, 89.0]))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="layersim", description="Reflectance of layered materials")
     sub = p.add_subparsers(dest="command", required=True)
@@ -75,6 +93,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-o", "--output", help="where to save the solved BSDF (default: "
                                            "SCENE_STEM.lsim in the current directory)")
     sp.set_defaults(func=cmd_solve)
+    sp = sub.add_parser("info", help="reload a saved BSDF (.lsim) and print its summary")
+    sp.add_argument("file", help="file written by 'layersim solve'")
+    sp.set_defaults(func=cmd_info)
     return p
 
 

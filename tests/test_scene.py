@@ -176,3 +176,20 @@ def test_cli_subprocess_has_no_traceback(tmp_path):
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr
     assert proc.stderr.strip().count("\n") == 0 and "bottom layer" in proc.stderr
+
+
+def test_cli_solve_writes_a_file_that_info_reloads(tmp_path, capsys):
+    scene = tmp_path / "slab.toml"
+    scene.write_text('[[layer]]\nkind = "medium"\nalbedo = 0.9\ntau = 2.0\n')
+    out = tmp_path / "slab.lsim"
+    assert cli_main(["solve", str(scene), "-o", str(out)]) == 0
+    solved = capsys.readouterr().out
+    assert "ordinates: n = " in solved and "albedo (energy fractions)" in solved
+    assert cli_main(["info", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "transmissive" in text
+    # the albedo table is the same after reloading
+    rows = lambda t: [line for line in t.splitlines() if line.strip().startswith(("0.0", "30.0"))]
+    assert rows(text) == rows(solved) and len(rows(text)) == 2
+    (tmp_path / "junk.lsim").write_text("nope")
+    assert cli_main(["info", str(tmp_path / "junk.lsim")]) == 2
