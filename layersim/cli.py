@@ -3,6 +3,8 @@
     layersim plan SCENE              print the discretisation plan (no heavy work)
     layersim solve SCENE [-o FILE]   solve, print plan, timings and albedos; save the BSDF
     layersim info FILE               reload a saved BSDF and print its summary and albedos
+    layersim bench [--quick] [--stability] [--backend B ...] --out DIR
+                                     solver vs Monte Carlo report and stability suite
 
 Errors in the input print one line (``layersim: error: ...``) and exit with status 2.
 """
@@ -82,6 +84,19 @@ def cmd_info(args) -> int:
     return 0
 
 
+def cmd_bench(args) -> int:
+    from . import bench
+    results = bench.run(args.out, quick=args.quick, stability=args.stability,
+                        backends=args.backend or ("auto",), scene_dir=args.scenes,
+                        scenes=args.scene, command="layersim " + " ".join(args.argv))
+    fails = [c["name"] for c in results["stability"] if c["outcome"] == "fail"]
+    print(f"wrote {args.out}/results.json, report.md and plots")
+    if fails:
+        print(f"stability failures: {', '.join(fails)}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="layersim", description="Reflectance of layered materials")
     sub = p.add_subparsers(dest="command", required=True)
@@ -96,12 +111,24 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("info", help="reload a saved BSDF (.lsim) and print its summary")
     sp.add_argument("file", help="file written by 'layersim solve'")
     sp.set_defaults(func=cmd_info)
+    sp = sub.add_parser("bench", help="benchmark report: solver vs Monte Carlo, stability suite")
+    sp.add_argument("--out", required=True, help="output folder")
+    sp.add_argument("--quick", action="store_true", help="small version (< 2 min on 2 cores)")
+    sp.add_argument("--stability", action="store_true", help="also run the stability suite")
+    sp.add_argument("--backend", action="append", help="Monte Carlo backend(s) to time "
+                    "(auto, warp-cpu, warp-cuda, opencl); repeatable")
+    sp.add_argument("--scenes", help="folder of scene files (default benchmarks/scenes)")
+    sp.add_argument("--scene", action="append", help="run only this scene (file stem); "
+                    "repeatable")
+    sp.set_defaults(func=cmd_bench)
     return p
 
 
 def main(argv=None) -> int:
     parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(argv)
+    args.argv = argv
     try:
         return args.func(args)
     except (LayersimError, ValueError, OSError) as exc:

@@ -1,0 +1,72 @@
+"""Benchmark reports: solver and Monte Carlo side by side (:mod:`.runner`), and the stability
+suite of stiff and extreme cases (:mod:`.stability`), written by :mod:`.report`. Driven by
+``layersim bench``."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+#: Scenes of the quick run (isotropic, solved in seconds).
+QUICK_SCENES = ("vandehulst_slab", "coated_gold", "dusty_gold")
+
+
+def default_scene_dir() -> Path:
+    """``benchmarks/scenes`` of the source tree this package runs from."""
+    return Path(__file__).resolve().parents[2] / "benchmarks" / "scenes"
+
+
+def run(out, quick: bool = False, stability: bool = False, backends=("auto",),
+        scene_dir=None, scenes=None, command: str | None = None, log=print) -> dict:
+    """Run the benchmark and write ``out/results.json``, ``out/report.md`` and PNG plots.
+
+    Parameters
+    ----------
+    out : path
+        Output folder (created).
+    quick : bool
+        Small version (three isotropic scenes, one incidence angle, short ladders): under two
+        minutes on a 2-core CPU.
+    stability : bool
+        Also run the stability suite.
+    backends : sequence of str
+        Monte Carlo backends to time (``"auto"`` picks the fastest present).
+    scene_dir : path, optional
+        Folder of ``*.toml`` scenes (default :func:`default_scene_dir`).
+    scenes : sequence of str, optional
+        Scene names (file stems) to run (default: all, or :data:`QUICK_SCENES` when quick).
+    """
+    from . import report, runner, stability as stab
+    from ..errors import InfeasibleError
+
+    scene_dir = Path(scene_dir) if scene_dir else default_scene_dir()
+    files = sorted(scene_dir.glob("*.toml"))
+    if not files:
+        raise InfeasibleError(f"no scene files in {scene_dir}; pass --scenes DIR")
+    wanted = scenes or (QUICK_SCENES if quick else None)
+    if wanted:
+        missing = set(wanted) - {f.stem for f in files}
+        if missing:
+            raise InfeasibleError(f"scene(s) {', '.join(sorted(missing))} not found in "
+                                  f"{scene_dir}")
+        files = [f for f in files if f.stem in wanted]
+    settings = runner.Settings.quick() if quick else runner.Settings()
+    settings.backends = tuple(backends)
+    results_scenes = [runner.run_scene(f, settings, log=log) for f in files]
+    results_stability = []
+    if stability:
+        mc = runner.montecarlo_module()
+        check = None
+        if mc is not None:
+            def check(scene, wi, particles, _mc=mc, _backend=backends[0]):
+                return _mc.simulate(scene, wi, particles // (10 if quick else 1),
+                                    mu_edges=[0.0, 1.0], phi_edges=[0.0, 6.283185307179586],
+                                    backend=_backend, seed=7)
+        for case in stab.cases():
+            if quick and case.name == "near_specular_0.005":
+                continue
+            r = stab.run_case(case, mc=check)
+            log(f"  stability {r['name']:28s} {r['outcome']:8s} {r['detail'][:100]}")
+            results_stability.append(r)
+    machine = report.machine_info(command or " ".join(["layersim"] + sys.argv[1:]))
+    return report.write(Path(out), machine, results_scenes, results_stability, settings)

@@ -1,0 +1,265 @@
+"""Write a benchmark run: ``results.json`` (raw numbers), ``report.md`` (tables) and PNG plots
+(error against run time per scene, hemispherical slices solver vs Monte Carlo, throughput)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def machine_info(command: str) -> dict:
+    import numpy
+    import scipy
+
+    info = {"cpu": _cpu_name(), "cores": os.cpu_count(), "platform": platform.platform(),
+            "python": platform.python_version(), "numpy": numpy.__version__,
+            "scipy": scipy.__version__, "command": command,
+            "date": time.strftime("%Y-%m-%d %H:%M:%S")}
+    try:
+        import warp
+        info["warp"] = warp.config.version
+        from ..kernels.runtime import cuda_available
+        if cuda_available():
+            info["gpu"] = [str(d) for d in warp.get_cuda_devices()]
+    except Exception:  # pragma: no cover - warp is a dependency; keep the report robust
+        pass
+    try:
+        import pyopencl as cl
+        info["opencl"] = [f"{p.name}: " + ", ".join(d.name for d in p.get_devices())
+                          for p in cl.get_platforms()]
+    except Exception:
+        info["opencl"] = []
+    try:
+        info["layersim_commit"] = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+            cwd=Path(__file__).resolve().parent, timeout=5).stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        info["layersim_commit"] = None
+    return info
+
+
+def _cpu_name() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _public(entry: dict) -> dict:
+    return {k: v for k, v in entry.items() if not k.startswith("_")}
+
+
+def write(out: Path, machine: dict, scenes: list, stability: list, settings) -> dict:
+    out.mkdir(parents=True, exist_ok=True)
+    results = {"machine": machine,
+               "settings": {"angles": list(settings.angles), "n_mu": settings.n_mu,
+                            "n_phi": settings.n_phi, "scales": list(settings.scales),
+                            "reference_scale": settings.reference_scale,
+                            "particles": list(settings.particles),
+                            "check_particles": settings.check_particles},
+               "scenes": [_public(s) for s in scenes], "stability": stability}
+    (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
+    images = {}
+    for s in scenes:
+        images[s["name"]] = _plots(out, s, settings)
+    throughput = _throughput_plot(out, scenes)
+    (out / "report.md").write_text(_markdown(results, images, throughput))
+    return results
+
+
+def _json_default(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(type(x).__name__)
+
+
+# ---- plots ---------------------------------------------------------------------------------
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _plots(out: Path, s: dict, settings) -> list[str]:
+    plt = _plt()
+    names = []
+    solver = [r for r in s.get("solver", []) if "error" in r]
+    mc = [r for r in s.get("montecarlo", []) if "error" in r]
+    if solver or mc:
+        fig, ax = plt.subplots(figsize=(5.5, 4))
+        if solver:
+            ax.loglog([r["seconds"] for r in solver], [r["error"] for r in solver], "o-",
+                      label="Fourier solver")
+            for r in solver:
+                ax.annotate(f"n={r['n']}", (r["seconds"], r["error"]), fontsize=7,
+                            textcoords="offset points", xytext=(4, 4))
+        for backend in sorted({r["backend"] for r in mc}):
+            rows = [r for r in mc if r["backend"] == backend]
+            ax.loglog([r["seconds"] for r in rows], [r["error"] for r in rows], "s--",
+                      label=f"Monte Carlo ({backend})")
+        ax.set_xlabel("wall time (s)")
+        ax.set_ylabel("relative L2 error of bin energies")
+        ax.set_title(s["name"])
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        name = f"{s['name']}_error_time.png"
+        fig.savefig(out / name, dpi=110)
+        plt.close(fig)
+        names.append(name)
+    ref = s.get("_ref")
+    mcb = s.get("_mc_bins")
+    if ref is not None:
+        panels = [("reference" if s["reference"].get("kind") == "solver" else "Monte Carlo "
+                   "reference", ref[0])]
+        if mcb is not None and s["reference"].get("kind") == "solver":
+            panels.append((f"Monte Carlo ({mc[-1]['particles']:.0e} paths)", mcb))
+        name = _slices(out, s["name"], panels, settings)
+        names.append(name)
+    return names
+
+
+def _slices(out: Path, name: str, panels, settings) -> str:
+    """Hemispherical slices on the projected unit disk: the BSDF averaged over each bin
+    (E_b / integral of cos over the bin), for the first incidence angle, top side, first
+    channel; solver and Monte Carlo side by side with a shared colour scale."""
+    plt = _plt()
+    mu, phi = settings.mu_edges, settings.phi_edges
+    proj = 0.5 * np.outer(np.diff(mu ** 2), np.diff(phi))
+    fig, axes = plt.subplots(1, len(panels), subplot_kw={"projection": "polar"},
+                             figsize=(4.2 * len(panels), 4))
+    axes = np.atleast_1d(axes)
+    values = [np.asarray(b)[0, 0, 0] / proj for _, b in panels]
+    vmax = max(float(np.percentile(v, 99.5)) for v in values) or 1.0
+    r = np.sqrt(1.0 - mu ** 2)
+    for ax, (title, _), v in zip(axes, panels, values):
+        mesh = ax.pcolormesh(phi, r, v, vmin=0, vmax=vmax, shading="flat", cmap="inferno")
+        ax.set_title(title, fontsize=9)
+        ax.set_yticklabels([])
+    fig.colorbar(mesh, ax=list(axes), shrink=0.8, label="f (1/sr), bin average")
+    fig.suptitle(f"{name}: reflection, incidence at {settings.angles[0]:g} deg\n"
+                 "(projected unit disk, azimuth of the outgoing direction)", fontsize=9)
+    file = f"{name}_slices.png"
+    fig.savefig(out / file, dpi=110)
+    plt.close(fig)
+    return file
+
+
+def _throughput_plot(out: Path, scenes: list):
+    rows = [(s["name"], r["backend"], r["paths_per_second"]) for s in scenes
+            for r in s.get("montecarlo", []) if "paths_per_second" in r]
+    if not rows:
+        return None
+    best = {}
+    for scene, backend, pps in rows:
+        best[(scene, backend)] = max(best.get((scene, backend), 0.0), pps)
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    labels = [f"{s}\n{b}" for s, b in best]
+    ax.barh(range(len(best)), list(best.values()))
+    ax.set_yticks(range(len(best)), labels, fontsize=7)
+    ax.set_xscale("log")
+    ax.set_xlabel("paths per second")
+    fig.tight_layout()
+    fig.savefig(out / "throughput.png", dpi=110)
+    plt.close(fig)
+    return {"file": "throughput.png", "rows": best}
+
+
+# ---- markdown ------------------------------------------------------------------------------
+
+def _fmt(x, spec=".3g"):
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "-"
+    return format(x, spec)
+
+
+def _markdown(results: dict, images: dict, throughput) -> str:
+    m = results["machine"]
+    lines = ["# layersim benchmark report", "",
+             f"- machine: {m.get('cpu')} ({m.get('cores')} cores), {m.get('platform')}",
+             f"- GPU: {', '.join(m['gpu']) if m.get('gpu') else 'none'}",
+             f"- OpenCL: {'; '.join(m.get('opencl') or []) or 'none'}",
+             f"- versions: python {m.get('python')}, numpy {m.get('numpy')}, scipy "
+             f"{m.get('scipy')}, warp {m.get('warp')}, layersim commit "
+             f"{m.get('layersim_commit')}",
+             f"- command: `{m.get('command')}`", f"- date: {m.get('date')}", "",
+             "Errors are relative L2 errors of the bin energies (both sides, all incidence "
+             "angles) against the reference; `albedo err` is max |R - R_ref| + |T - T_ref|.",
+             ""]
+    for s in results["scenes"]:
+        ref = s.get("reference", {})
+        lines += [f"## {s['name']}", ""]
+        if ref.get("kind") == "solver":
+            desc = f"solver at n = {ref['n']}, md = {ref['md']}"
+            chk = ref.get("montecarlo_check")
+            if chk:
+                desc += (f"; checked against {chk['particles']:.0e} Monte Carlo paths "
+                         f"({chk['backend']}): {100 * chk['within_3sigma']:.1f}% of bins within "
+                         f"3 sigma, albedos within {chk['albedo_sigma']:.1f} sigma")
+        elif ref.get("kind") == "montecarlo":
+            desc = (f"Monte Carlo, {ref.get('particles', 0):.0e} paths (the solver refused: "
+                    f"{ref.get('solver_refused')})")
+        else:
+            desc = ref.get("note", "none")
+        lines += [f"Reference: {desc}.", ""]
+        if s.get("solver"):
+            lines += ["| solver n | md | ms | seconds | error | albedo err |",
+                      "|---:|---:|---:|---:|---:|---:|"]
+            for r in s["solver"]:
+                if "refused" in r:
+                    lines.append(f"| refused at scale {r['scale']} | | | | | {r['refused']} |")
+                    continue
+                lines.append(f"| {r['n']} | {r['md']} | {r.get('ms', 0)} | "
+                             f"{r['seconds']:.2f} | {_fmt(r['error'])} | "
+                             f"{_fmt(r['albedo_error'])} |")
+            lines.append("")
+        if s.get("montecarlo"):
+            lines += ["| MC backend | paths | seconds | paths/s | error | stderr | in 3 sigma |",
+                      "|---|---:|---:|---:|---:|---:|---:|"]
+            for r in s["montecarlo"]:
+                if "refused" in r:
+                    lines.append(f"| {r['backend']} | {r['particles']:.0e} | refused: "
+                                 f"{r['refused']} | | | | |")
+                    continue
+                lines.append(f"| {r['backend']} | {r['particles']:.0e} | {r['seconds']:.2f} | "
+                             f"{r['paths_per_second']:.3g} | {_fmt(r['error'])} | "
+                             f"{_fmt(r['stderr'])} | {100 * r['within_3sigma']:.1f}% |")
+            lines.append("")
+        for img in images.get(s["name"], []):
+            lines += [f"![{img}]({img})", ""]
+    if throughput:
+        lines += ["## Throughput", "", "| scene | backend | paths/s |", "|---|---|---:|"]
+        for (scene, backend), pps in throughput["rows"].items():
+            lines.append(f"| {scene} | {backend} | {pps:.3g} |")
+        lines += ["", f"![throughput]({throughput['file']})", ""]
+    if results["stability"]:
+        counts = {k: sum(1 for c in results["stability"] if c["outcome"] == k)
+                  for k in ("pass", "refused", "fail")}
+        lines += ["## Stability suite", "",
+                  f"{counts['pass']} pass, {counts['refused']} refused, {counts['fail']} fail. "
+                  "Checks: finite; R, T >= 0; R + T <= 1 + 1e-6 (= 1 within 1e-6 when "
+                  "nothing absorbs); reciprocity within 1e-6 of the largest value; albedos "
+                  "within 4 standard errors of Monte Carlo where it runs.", "",
+                  "| case | what | outcome | seconds | detail |", "|---|---|---|---:|---|"]
+        for c in results["stability"]:
+            detail = c["detail"].replace("|", "/")
+            lines.append(f"| {c['name']} | {c.get('what', '')} | **{c['outcome']}** | "
+                         f"{c.get('seconds', 0):.1f} | {detail} |")
+        lines.append("")
+    return "\n".join(lines)

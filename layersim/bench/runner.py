@@ -1,0 +1,210 @@
+"""Solver and Monte Carlo side by side: error against run time on a scene suite.
+
+For each scene and a few incidence angles:
+
+* a **reference**: the solver on a finer discretisation (``reference_scale`` times the planner's
+  ordinates and orders), checked against a long Monte Carlo run (fraction of bins within 3
+  standard errors, albedo differences in standard errors); where the solver refuses the scene,
+  the long Monte Carlo run is the reference;
+* the **solver** at a ladder of discretisations (``scales`` times the planner's n and md) with
+  wall time and error against the reference;
+* **Monte Carlo** at a ladder of particle counts per backend, with wall time, error and standard
+  error.
+
+Error metrics, over the bin energies E_b of both sides and all incidence angles:
+``error`` = relative L2 = sqrt(sum (E - E_ref)^2 / sum E_ref^2); ``albedo_error`` =
+max |R - R_ref| + |T - T_ref|; ``within_3sigma`` = fraction of populated bins with
+|E - E_ref| <= 3 sigma (Monte Carlo rows, sigma its per-bin standard error).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import LayersimError
+from ..scene import Scene
+
+
+@dataclass
+class Settings:
+    angles: tuple = (0.0, 30.0, 60.0)
+    n_mu: int = 18
+    n_phi: int = 36
+    scales: tuple = (0.5, 0.75, 1.0, 1.5)
+    reference_scale: float = 2.0
+    particles: tuple = (10_000, 100_000, 1_000_000, 10_000_000)
+    check_particles: int = 10_000_000
+    backends: tuple = ("auto",)
+    seed: int = 1
+
+    @classmethod
+    def quick(cls) -> "Settings":
+        return cls(angles=(30.0,), n_mu=9, n_phi=18, scales=(0.5, 1.0), reference_scale=1.5,
+                   particles=(10_000, 100_000), check_particles=200_000)
+
+    @property
+    def mu_edges(self) -> np.ndarray:
+        return np.linspace(0.0, 1.0, self.n_mu + 1)
+
+    @property
+    def phi_edges(self) -> np.ndarray:
+        return np.linspace(0.0, 2.0 * np.pi, self.n_phi + 1)
+
+
+def direction(theta_deg: float, phi_deg: float = 0.0) -> np.ndarray:
+    th, ph = math.radians(theta_deg), math.radians(phi_deg)
+    return np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)])
+
+
+def montecarlo_module():
+    """``layersim.montecarlo`` if installed, else None."""
+    try:
+        from .. import montecarlo
+    except ImportError:
+        return None
+    return montecarlo
+
+
+def _rescaled(scene: Scene, n: int, md: int) -> Scene:
+    n = max(4, int(round(n / 2)) * 2)
+    return replace(scene, discretization=replace(scene.discretization, n=n, md=max(1, md)))
+
+
+def _solver_bins(bsdf, s: Settings) -> tuple[np.ndarray, np.ndarray]:
+    """Bin energies (angles, side, channel, mu, phi) and albedos (angles, 2, channel)."""
+    bins, alb = [], []
+    for theta in s.angles:
+        wi = direction(theta)
+        e = bsdf.bin_energies(wi, s.mu_edges, s.phi_edges)
+        R, T = bsdf.albedo(wi)
+        stack = lambda x: np.atleast_3d(np.asarray(x)).reshape(s.n_mu, s.n_phi, -1)
+        bins.append(np.stack([np.moveaxis(stack(e["top"]), -1, 0),
+                              np.moveaxis(stack(e["bottom"]), -1, 0)]))
+        alb.append(np.stack([np.atleast_1d(R), np.atleast_1d(T)]))
+    return np.array(bins), np.array(alb)
+
+
+def _mc_bins(mc, scene, s: Settings, particles: int, backend: str):
+    bins, errs, alb, alb_err = [], [], [], []
+    t0 = time.perf_counter()
+    for k, theta in enumerate(s.angles):
+        res = mc.simulate(scene, direction(theta), particles, mu_edges=s.mu_edges,
+                          phi_edges=s.phi_edges, backend=backend, seed=s.seed + k)
+        shape = lambda x: np.moveaxis(np.asarray(x).reshape(s.n_mu, s.n_phi, -1), -1, 0)
+        bins.append(np.stack([shape(res.bins["top"]), shape(res.bins["bottom"])]))
+        errs.append(np.stack([shape(res.bins_stderr["top"]), shape(res.bins_stderr["bottom"])]))
+        alb.append(np.stack([np.atleast_1d(res.reflectance), np.atleast_1d(res.transmittance)]))
+        alb_err.append(np.stack([np.atleast_1d(res.reflectance_stderr),
+                                 np.atleast_1d(res.transmittance_stderr)]))
+        used = getattr(res, "backend", backend)
+    return (np.array(bins), np.array(errs), np.array(alb), np.array(alb_err),
+            time.perf_counter() - t0, used)
+
+
+def _error(bins, ref) -> float:
+    den = float(np.sum(ref ** 2))
+    return float(np.sqrt(np.sum((bins - ref) ** 2) / den)) if den > 0 else float("nan")
+
+
+def _albedo_error(alb, ref) -> float:
+    return float(np.max(np.sum(np.abs(alb - ref), axis=1)))
+
+
+def _within(bins, ref, sigma, k=3.0) -> float:
+    populated = (ref > 0) | (bins > 0)
+    if not populated.any():
+        return float("nan")
+    ok = np.abs(bins - ref) <= k * sigma + 1e-15
+    return float(np.mean(ok[populated]))
+
+
+def run_scene(path: Path, s: Settings, log=print) -> dict:
+    """Benchmark one scene file; returns the ``scenes[]`` entry of results.json."""
+    from ..plan import make_plan
+    from ..solver import solve
+
+    scene = Scene.from_toml(path)
+    out = {"name": scene.name, "file": str(path), "angles": list(s.angles), "solver": [],
+           "montecarlo": []}
+    mc = montecarlo_module()
+    log(f"[{scene.name}]")
+    # ---- reference -----------------------------------------------------------------
+    ref_bins = ref_alb = None
+    try:
+        plan = make_plan(scene)
+        n0, md0 = plan.n, plan.md
+        t0 = time.perf_counter()
+        ref = solve(_rescaled(scene, s.reference_scale * n0, int(s.reference_scale * md0)))
+        ref_bins, ref_alb = _solver_bins(ref, s)
+        out["reference"] = {"kind": "solver", "n": ref.info["n"], "md": ref.info["md"],
+                            "seconds": time.perf_counter() - t0}
+        log(f"  reference: solver n={ref.info['n']} md={ref.info['md']}")
+    except LayersimError as exc:
+        out["reference"] = {"kind": "montecarlo", "solver_refused": str(exc)}
+        n0 = md0 = None
+        log(f"  solver refused: {exc}")
+    if mc is not None:
+        try:
+            b, e, a, ae, sec, used = _mc_bins(mc, scene, s, s.check_particles, s.backends[0])
+        except LayersimError as exc:
+            out["reference"]["montecarlo_refused"] = str(exc)
+            b = None
+        if b is not None:
+            check = {"particles": s.check_particles, "backend": used, "seconds": sec}
+            if ref_bins is None:
+                ref_bins, ref_alb = b, a
+                out["reference"].update(check)
+            else:
+                check["within_3sigma"] = _within(ref_bins, b, e)
+                check["albedo_sigma"] = float(np.max(np.abs(ref_alb - a) / np.maximum(ae, 1e-15)))
+                out["reference"]["montecarlo_check"] = check
+                log(f"  reference vs {s.check_particles:.0e} paths: "
+                    f"{100 * check['within_3sigma']:.1f}% of bins within 3 sigma, albedo "
+                    f"within {check['albedo_sigma']:.1f} sigma")
+    elif ref_bins is None:
+        out["reference"]["note"] = "no Monte Carlo backend installed: no reference"
+        return out
+    out["_ref"] = (ref_bins, ref_alb)
+    # ---- solver ladder --------------------------------------------------------------
+    if n0 is not None:
+        for scale in s.scales:
+            sc = _rescaled(scene, scale * n0, int(math.ceil(scale * md0)))
+            try:
+                t0 = time.perf_counter()
+                b = solve(sc)
+                sec = time.perf_counter() - t0
+            except LayersimError as exc:
+                out["solver"].append({"scale": scale, "refused": str(exc)})
+                continue
+            bins, alb = _solver_bins(b, s)
+            row = {"scale": scale, "n": b.info["n"], "md": b.info["md"], "ms": b.info.get("ms", 0),
+                   "seconds": sec, "error": _error(bins, ref_bins),
+                   "albedo_error": _albedo_error(alb, ref_alb)}
+            out["solver"].append(row)
+            out.setdefault("_solver_bins", {})[scale] = bins
+            log(f"  solver n={row['n']:4d} md={row['md']:5d}: {sec:7.2f} s  error {row['error']:.2e}")
+    # ---- Monte Carlo ladder -----------------------------------------------------------
+    if mc is not None:
+        for backend in s.backends:
+            for particles in s.particles:
+                try:
+                    b, e, a, ae, sec, used = _mc_bins(mc, scene, s, particles, backend)
+                except LayersimError as exc:
+                    out["montecarlo"].append({"backend": backend, "particles": particles,
+                                              "refused": str(exc)})
+                    break
+                row = {"backend": used, "particles": particles, "seconds": sec,
+                       "paths_per_second": particles * len(s.angles) / max(sec, 1e-9),
+                       "error": _error(b, ref_bins), "albedo_error": _albedo_error(a, ref_alb),
+                       "stderr": float(np.sqrt(np.sum(e ** 2) / np.sum(ref_bins ** 2))),
+                       "within_3sigma": _within(b, ref_bins, e)}
+                out["montecarlo"].append(row)
+                out["_mc_bins"] = b
+                log(f"  MC {used} {particles:.0e}: {sec:7.2f} s  error {row['error']:.2e} "
+                    f"(stderr {row['stderr']:.1e}, {100 * row['within_3sigma']:.0f}% in 3 sigma)")
+    return out

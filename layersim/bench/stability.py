@@ -1,0 +1,189 @@
+"""Stability suite: stiff and extreme cases, each solved and checked, or refused up front.
+
+Every case must end in one of three outcomes:
+
+``pass``
+    the solver returned a result that is finite, non-negative where physics says so, conserves
+    energy (R + T <= 1 + 1e-6 at every tested incidence, and R + T = 1 within the stated
+    tolerance when nothing absorbs), is reciprocal to the stated tolerance, and agrees with Monte
+    Carlo (albedos within 4 standard errors) where a Monte Carlo backend is available;
+``refused``
+    the solver raised a :class:`layersim.LayersimError` before heavy work, whose message names
+    the limit that was hit and what to change;
+``fail``
+    anything else (NaN, energy creation, an exception that is not a clear refusal, disagreement
+    with Monte Carlo). A failure is a bug to fix, not a case to drop.
+
+Each case lists the numbers behind its outcome in ``detail``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import LayersimError
+from ..scene import Scene
+
+GOLD = [0.143552, 3.98397]
+
+#: Tolerances of the checks (stated in the report).
+ENERGY_SLACK = 1e-6          # R + T <= 1 + ENERGY_SLACK
+CONSERVATION_TOL = 1e-6      # |R + T - 1| when nothing absorbs
+RECIPROCITY_TOL = 1e-6       # max |f(wi,wo)/eta_o^2 - f(wo,wi)/eta_i^2| / max f
+MC_SIGMAS = 4.0
+
+
+@dataclass
+class Case:
+    """One stability case.
+
+    ``layers`` are scene layers (dicts); ``conservative`` says nothing absorbs (R + T = 1 is
+    expected); ``angles`` are incidence angles (degrees) for the energy checks; negative angles
+    light the stack from below.
+    """
+
+    name: str
+    layers: list
+    what: str
+    conservative: bool = False
+    angles: tuple = (0.0, 45.0, 80.0)
+    discretization: dict = field(default_factory=dict)
+    top_ior: float = 1.0
+    mc_particles: int = 200_000
+
+    def scene(self) -> Scene:
+        data = {"stack": {"name": self.name, "top_ior": self.top_ior}, "layer": self.layers}
+        if self.discretization:
+            data["discretization"] = dict(self.discretization)
+        return Scene.from_dict(data)
+
+
+def cases() -> list[Case]:
+    """The named cases of issue 5 that do not need the anisotropic solver or subtraction
+    (those are added by their modules: see :func:`register`)."""
+    diel = lambda eta, a: {"kind": "dielectric", "ior": eta, "roughness": a}
+    cond = lambda ior, a: {"kind": "conductor", "ior": ior, "roughness": a}
+    med = lambda albedo, tau, g=0.0: {"kind": "medium", "albedo": albedo, "tau": tau, "g": g}
+    out = [
+        Case("near_specular_0.005", [cond(GOLD, 0.005)], "gold with alpha = 0.005"),
+        Case("near_specular_0.001", [cond(GOLD, 0.001)], "gold with alpha = 0.001"),
+        Case("thick_1e2", [med(0.95, 1e2, 0.5), {"kind": "diffuse", "albedo": 0.5}],
+             "HG slab tau = 100 over a diffuse base"),
+        Case("thick_1e4_conservative", [med(1.0, 1e4, 0.3)],
+             "conservative HG slab, tau = 10^4", conservative=True),
+        Case("conservative_albedo_1", [med(1.0, 2.0, 0.7)], "albedo 1, g 0.7, tau 2",
+             conservative=True, angles=(0.0, 45.0, 80.0, -30.0)),
+        Case("conservative_albedo_0.99999", [med(0.99999, 5.0, 0.0)],
+             "albedo 0.99999, tau 5 (R + T just below 1)"),
+        Case("index_1.0001", [diel(1.0001, 0.1)], "nearly index-matched rough interface"),
+        Case("index_4.0", [diel(4.0, 0.1)], "high index rough interface"),
+        Case("dense_side_tir", [diel(1.0, 0.1)],
+             "light arriving from the dense side (top index 1.5, below 1): total internal "
+             "reflection", top_ior=1.5, angles=(0.0, 30.0, 45.0, 60.0, 80.0)),
+        Case("conductor_k10", [cond([0.2, 10.0], 0.1)], "conductor with k = 10"),
+        Case("grazing_89", [diel(1.5, 0.1), cond(GOLD, 0.1)], "coated gold lit at 89 deg",
+             angles=(89.0,)),
+        Case("grazing_89.9", [diel(1.5, 0.1), cond(GOLD, 0.1)], "coated gold lit at 89.9 deg",
+             angles=(89.9,)),
+    ]
+    out.extend(_registered)
+    return out
+
+
+_registered: list[Case] = []
+
+
+def register(case: Case) -> None:
+    """Add a case (used by optional modules, e.g. anisotropic or subtraction cases)."""
+    _registered.append(case)
+
+
+def _direction(theta_deg: float, phi_deg: float = 0.0) -> np.ndarray:
+    th = math.radians(abs(theta_deg))
+    z = math.cos(th) * (1.0 if theta_deg >= 0 else -1.0)
+    return np.array([math.sin(th) * math.cos(math.radians(phi_deg)),
+                     math.sin(th) * math.sin(math.radians(phi_deg)), z])
+
+
+def _reciprocity(bsdf, scene: Scene, rng) -> float:
+    """max |f(wi, wo)/eta_o^2 - f(wo, wi)/eta_i^2| / max f over random pairs (reflection and,
+    where the stack transmits, transmission)."""
+    n = 400
+    z = rng.uniform(0.05, 1.0, (2, n))
+    ph = rng.uniform(0, 2 * np.pi, (2, n))
+    s = np.sqrt(1 - z * z)
+    wi = np.stack([s[0] * np.cos(ph[0]), s[0] * np.sin(ph[0]), z[0]], -1)
+    wo = np.stack([s[1] * np.cos(ph[1]), s[1] * np.sin(ph[1]), z[1]], -1)
+    worst, scale = 0.0, 0.0
+    pairs = [(wi, wo, scene.top_ior, scene.top_ior)]
+    if not bsdf.opaque:
+        pairs.append((wi, wo * np.array([1, 1, -1]), scene.top_ior, scene.bottom_ior))
+    for a, b, eta_a, eta_b in pairs:
+        f_ab = np.asarray(bsdf.eval(a, b))
+        f_ba = np.asarray(bsdf.eval(b, a))
+        worst = max(worst, float(np.max(np.abs(f_ab / eta_b ** 2 - f_ba / eta_a ** 2))))
+        scale = max(scale, float(np.max(np.abs(f_ab))))
+    return worst / max(scale, 1e-300)
+
+
+def run_case(case: Case, mc=None, solve=None) -> dict:
+    """Run one case; ``mc(scene, wi, particles)`` (optional) returns an object with
+    ``reflectance, transmittance, reflectance_stderr, transmittance_stderr``."""
+    if solve is None:
+        from ..solver import solve
+    t0 = time.perf_counter()
+    try:
+        scene = case.scene()
+        bsdf = solve(scene)
+    except LayersimError as exc:
+        return {"name": case.name, "what": case.what, "outcome": "refused",
+                "detail": str(exc), "seconds": time.perf_counter() - t0}
+    except Exception as exc:  # anything that is not a clear refusal is a failure
+        return {"name": case.name, "what": case.what, "outcome": "fail",
+                "detail": f"{type(exc).__name__}: {exc}", "seconds": time.perf_counter() - t0}
+    seconds = time.perf_counter() - t0
+    problems, numbers = [], {}
+    for theta in case.angles:
+        if theta < 0 and bsdf.opaque:
+            continue
+        wi = _direction(theta, 30.0)
+        R, T = (float(np.mean(x)) for x in bsdf.albedo(wi))
+        key = f"{theta:g}"
+        numbers[key] = {"R": R, "T": T}
+        if not (math.isfinite(R) and math.isfinite(T)):
+            problems.append(f"non-finite albedo at {theta:g} deg")
+            continue
+        if R < 0 or T < 0:
+            problems.append(f"negative energy at {theta:g} deg (R={R:.3g}, T={T:.3g})")
+        if R + T > 1 + ENERGY_SLACK:
+            problems.append(f"R + T = {R + T:.9f} > 1 at {theta:g} deg")
+        if case.conservative and abs(R + T - 1) > CONSERVATION_TOL:
+            problems.append(f"|R + T - 1| = {abs(R + T - 1):.2e} at {theta:g} deg")
+        if mc is not None:
+            res = mc(scene.channel(0) if scene.channels > 1 else scene, wi, case.mc_particles)
+            for name, ours, est, err in (("R", R, res.reflectance, res.reflectance_stderr),
+                                         ("T", T, res.transmittance, res.transmittance_stderr)):
+                est, err = float(np.mean(est)), float(np.mean(err))
+                z = abs(ours - est) / max(err, 1e-12)
+                numbers[key][f"{name}_mc"] = est
+                numbers[key][f"{name}_sigma"] = z
+                if z > MC_SIGMAS and abs(ours - est) > 1e-6:
+                    problems.append(f"{name} differs from Monte Carlo by {z:.1f} sigma at "
+                                    f"{theta:g} deg ({ours:.5f} vs {est:.5f} +- {err:.1e})")
+    rec = _reciprocity(bsdf, scene, np.random.default_rng(0))
+    numbers["reciprocity"] = rec
+    if not math.isfinite(rec) or rec > RECIPROCITY_TOL:
+        problems.append(f"reciprocity error {rec:.2e} > {RECIPROCITY_TOL:g}")
+    f = bsdf.eval(_direction(30.0), _direction(30.0, 210.0))
+    if not np.all(np.isfinite(f)):
+        problems.append("non-finite BSDF value")
+    detail = "; ".join(problems) if problems else ", ".join(
+        f"{k} deg: R={v['R']:.5f} T={v['T']:.5f}" for k, v in numbers.items()
+        if isinstance(v, dict)) + f"; reciprocity {rec:.1e}"
+    return {"name": case.name, "what": case.what, "outcome": "fail" if problems else "pass",
+            "detail": detail, "numbers": numbers, "seconds": seconds,
+            "plan": {"n": bsdf.info.get("n"), "md": bsdf.info.get("md")}}

@@ -1,0 +1,51 @@
+"""The benchmark report and the stability suite (small sizes)."""
+
+import json
+
+import pytest
+
+from layersim import bench
+from layersim.bench import stability
+
+
+@pytest.mark.parametrize("case", [c for c in stability.cases()
+                                  if c.name != "near_specular_0.005"], ids=lambda c: c.name)
+def test_stability_case_passes_or_is_refused_clearly(case):
+    result = stability.run_case(case)
+    assert result["outcome"] in ("pass", "refused"), result["detail"]
+    if result["outcome"] == "refused":
+        # a refusal names the layer and what to change
+        assert "layer 0" in result["detail"] and ("increase" in result["detail"]
+                                                   or "lower" in result["detail"])
+
+
+def test_stability_checks_can_fail():
+    """A solver that returns energy-creating results must be reported as a failure."""
+    import layersim
+
+    def broken_solve(scene):
+        bsdf = layersim.solve(scene)
+        for op in bsdf.operators:
+            op.blocks["Rt"] = [1.5 * m for m in op.blocks["Rt"]]
+        return bsdf
+
+    case = stability.Case("broken", [{"kind": "medium", "albedo": 1.0, "tau": 1.0}],
+                          "deliberately broken", conservative=True)
+    result = stability.run_case(case, solve=broken_solve)
+    assert result["outcome"] == "fail" and "R + T" in result["detail"]
+
+
+def test_quick_bench_writes_results_report_and_plots(tmp_path):
+    results = bench.run(tmp_path, quick=True, scenes=["vandehulst_slab"], log=lambda *a: None)
+    data = json.loads((tmp_path / "results.json").read_text())
+    assert data["machine"]["cores"] >= 1 and "command" in data["machine"]
+    (scene,) = data["scenes"]
+    assert scene["name"] == "vandehulst_slab" and scene["reference"]["kind"] == "solver"
+    errors = [row["error"] for row in scene["solver"]]
+    assert len(errors) == 2 and errors[1] < errors[0] < 1e-2   # converges with n
+    for row in scene["solver"]:
+        assert {"n", "md", "ms", "seconds", "error"} <= set(row)
+    report = (tmp_path / "report.md").read_text()
+    assert "vandehulst_slab" in report and "![vandehulst_slab_error_time.png]" in report
+    assert (tmp_path / "vandehulst_slab_error_time.png").stat().st_size > 1000
+    assert results["stability"] == []
