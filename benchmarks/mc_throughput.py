@@ -8,7 +8,9 @@ interactions) for
                 (0.143552 + 3.98397 i), alpha (0.2, 0.1), Beckmann;
 
 both lit at 30 degrees. Each measurement follows a warm-up run (kernel compilation excluded) and
-runs for about ``--seconds``. Prints a table and writes JSON (device, versions, command,
+runs for about ``--seconds``. ``cores`` is process CPU time over wall time (CPU backends: how
+many cores the run kept busy; the 1-minute load average is recorded too, since other processes
+on the machine skew CPU timings). Prints a table and writes JSON (device, versions, command,
 results)::
 
     python benchmarks/mc_throughput.py [--backends warp-cpu opencl] [--seconds 3] [--json out.json]
@@ -19,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import platform
 import sys
 import time
@@ -61,9 +64,13 @@ def measure(backend: str, scene, seconds: float) -> dict:
             break
         n *= 2 if res.seconds > 0.05 else 8
     n = int(max(n, n * seconds / max(res.seconds, 1e-9)) // batch * batch) or batch
+    load = os.getloadavg()[0]
+    cpu = time.process_time()
     res = mc.simulate(scene, WI, n, backend=backend, batch_size=batch, seed=2)
+    cpu = time.process_time() - cpu
     return {"backend": backend, "device": res.device, "particles": int(res.particles),
             "seconds": res.seconds, "paths_per_s": res.particles / res.seconds,
+            "cpu_seconds": cpu, "cores_used": cpu / res.seconds, "load_avg_1min": load,
             "events_per_s": res.events / res.seconds, "events_per_path": res.events / n,
             "reflectance": res.reflectance, "reflectance_stderr": res.reflectance_stderr}
 
@@ -78,8 +85,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     backends = args.backends or mc.available_backends()
     results = []
-    print(f"{'scene':8s} {'backend':10s} {'paths/s':>12s} {'events/s':>12s} {'ev/path':>8s}  "
-          "device")
+    print(f"{'scene':8s} {'backend':10s} {'paths/s':>12s} {'events/s':>12s} {'ev/path':>8s} "
+          f"{'cores':>6s}  device")
     for name in args.scenes:
         scene = layersim.Scene.from_dict(SCENES[name])
         for backend in backends:
@@ -87,7 +94,7 @@ def main(argv=None) -> int:
             r["scene"] = name
             results.append(r)
             print(f"{name:8s} {backend:10s} {r['paths_per_s']:12.4g} {r['events_per_s']:12.4g} "
-                  f"{r['events_per_path']:8.3f}  {r['device']}", flush=True)
+                  f"{r['events_per_path']:8.3f} {r['cores_used']:6.2f}  {r['device']}", flush=True)
     ratios = {}
     for name in args.scenes:
         by = {r["backend"]: r for r in results if r["scene"] == name}

@@ -17,6 +17,7 @@ Backends
 from __future__ import annotations
 
 import os
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -258,7 +259,15 @@ class _OpenCLRunner:
                                self.tally.nbytes)
         cl.enqueue_fill_buffer(self.queue, self.buffers["counters"], np.int64(0), 0,
                                self.counters.nbytes)
-        self.kernel(self.queue, (n_threads,), None, *[values[p] for p in _PARAMS])
+        done = self.kernel(self.queue, (n_threads,), None, *[values[p] for p in _PARAMS])
+        self.queue.flush()
+        # Wait by polling with sleeps: a blocking wait spins in the host thread, which on a
+        # CPU device (PoCL) takes a core away from the kernel's worker threads.
+        while done.command_execution_status != cl.command_execution_status.COMPLETE:
+            if done.command_execution_status < 0:
+                raise RuntimeError(f"OpenCL walk kernel failed (status "
+                                   f"{done.command_execution_status})")
+            time.sleep(0.0005)
         cl.enqueue_copy(self.queue, self.tally, self.buffers["tally"])
         cl.enqueue_copy(self.queue, self.counters, self.buffers["counters"])
         self.queue.finish()
