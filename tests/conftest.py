@@ -1,4 +1,4 @@
-"""Shared fixtures: the OpenCL device (skip where none) and quiet Warp."""
+"""Shared fixtures: the OpenCL device (tests that need one skip where there is none)."""
 
 import pytest
 

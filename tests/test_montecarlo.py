@@ -284,11 +284,10 @@ def test_rough_interface_matches_quadrature_of_eval(eval_probe, layer, wi_spec):
 
 
 def test_rough_interface_generalized_reciprocity():
-    """Bin energies obey the reciprocity of the radiance-convention BSDF: for narrow bins around
-    wi and wo, E(wi->wo) / (mu_o dw_o) / eta_o^2 == E(wo->wi) / (mu_i dw_i) / eta_i^2 (checked in
-    aggregate through the hemispherical transmittances of both sides, which satisfy
-    eta_t^2 * integral over wi ... ) -- here: T_top(mu) integrated against 2 mu dmu equals
-    T_bottom integrated likewise, times eta^2 (the diffuse transmittances)."""
+    """Radiance-convention reciprocity f(wi, wo) / eta_o^2 = f(wo, wi) / eta_i^2 implies that the
+    diffuse (cosine-weighted hemispherical) transmittance from inside is 1/eta^2 times the one
+    from outside. Directional transmittances T(mu) from both sides, integrated with a 6-point
+    Gauss-Legendre rule in mu (1 % quadrature allowance for the rough lobes)."""
     eta = 1.4
     s = scene({"kind": "dielectric", "ior": eta, "roughness": 0.35})
     x, w = np.polynomial.legendre.leggauss(6)
