@@ -367,6 +367,15 @@ class Program:
         return inst
 
 
+def _warp_builtins() -> dict:
+    """Warp's table of kernel builtins (module path differs between Warp versions)."""
+    try:
+        from warp._src.context import builtin_functions
+    except ImportError:                                     # Warp < 1.10
+        from warp.context import builtin_functions
+    return builtin_functions
+
+
 def _python_function(func):
     pyfunc = getattr(func, "func", None)
     if pyfunc is None or not callable(pyfunc) or getattr(func, "is_builtin", lambda: True)():
@@ -591,9 +600,9 @@ class _FunctionTranslator:
             base = self.resolve(node.value)
             if base is wp and not hasattr(wp, node.attr):
                 # kernel-only builtins (wp.vector, ...) live in Warp's builtin table
-                from warp._src.context import builtin_functions
-                if node.attr in builtin_functions:
-                    return builtin_functions[node.attr]
+                builtins_table = _warp_builtins()
+                if node.attr in builtins_table:
+                    return builtins_table[node.attr]
             return getattr(base, node.attr)
         self.fail(f"cannot resolve {ast.unparse(node)}")
 
