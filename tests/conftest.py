@@ -1,4 +1,5 @@
-"""Shared fixtures: small, fast scenes and solved stacks reused across test modules."""
+"""Shared fixtures: small, fast scenes and solved stacks reused across test modules, and the
+OpenCL device (tests that need one skip where there is none)."""
 
 import numpy as np
 import pytest
@@ -42,3 +43,19 @@ def rough_glass():
     scene = layersim.Scene.from_dict({"layer": [
         {"kind": "dielectric", "ior": 1.5, "roughness": 0.3}]})
     return layersim.solve(scene)
+
+def _opencl_device():
+    try:
+        import pyopencl as cl
+        devices = [d for p in cl.get_platforms() for d in p.get_devices()]
+    except Exception:                                       # no ICD loader, no platform
+        return None
+    return devices[0] if devices else None
+
+
+@pytest.fixture(scope="session")
+def cl_device():
+    dev = _opencl_device()
+    if dev is None:
+        pytest.skip("no OpenCL device (pip install pocl-binary-distribution)")
+    return dev

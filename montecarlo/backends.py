@@ -1,0 +1,285 @@
+"""Where the random walk runs: Warp (CPU or CUDA) or OpenCL (through pyopencl).
+
+Both backends launch the same walk, :func:`layersim.kernels.walk.walk_thread`: Warp compiles it
+directly, the OpenCL backend compiles the C source that :mod:`layersim.kernels.opencl_codegen`
+generates from it. A backend here only allocates buffers, launches one batch of particles and
+returns the integer tallies of that batch, summed over the kernel's replicas.
+
+Backends
+--------
+``"warp-cpu"``   Warp's CPU device (always present; runs a launch on one core).
+``"warp-cuda"``  Warp on the first CUDA device.
+``"opencl"``     the OpenCL device named by ``$PYOPENCL_CTX`` if set, else the first GPU of any
+                 platform, else the first device (PoCL's CPU device uses every core).
+``"auto"``       the fastest one present: warp-cuda, else opencl, else warp-cpu.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import LayersimError
+from ..kernels import walk
+from ..kernels.opencl_codegen import Program, parameters
+from ..kernels.runtime import ensure_init
+from .stack import StackArrays
+
+__all__ = ["BACKENDS", "BackendUnavailableError", "Launch", "available_backends", "make_runner",
+           "resolve_backend"]
+
+BACKENDS = ("auto", "warp-cpu", "warp-cuda", "opencl")
+
+#: Kernel parameters of the walk, in order (the thread index excluded).
+_PARAMS = [name for name, _ in parameters(walk.walk_thread)[1:]]
+
+
+class BackendUnavailableError(LayersimError, RuntimeError):
+    """The requested backend is not installed or has no device; the message says what to
+    install or which backend to use instead."""
+
+
+@dataclass(frozen=True)
+class Launch:
+    """Everything a backend needs for a run (one channel, one incident direction)."""
+
+    stack: StackArrays
+    wi: np.ndarray            # float32 (3,)
+    mu_edges: np.ndarray      # float32
+    phi_edges: np.ndarray     # float32
+    seed: int
+    max_steps: int
+
+    @property
+    def n_bins(self) -> int:
+        """Bins per side including the total."""
+        return (len(self.mu_edges) - 1) * (len(self.phi_edges) - 1) + 1
+
+
+# ------------------------------------------------------------------------------------------------
+# Discovery
+# ------------------------------------------------------------------------------------------------
+
+
+def _cuda_count() -> int:
+    ensure_init()
+    import warp as wp
+    return wp.get_cuda_device_count()
+
+
+def _opencl_device():
+    """The OpenCL device to use, or raise BackendUnavailableError saying what to install."""
+    try:
+        import pyopencl as cl
+    except ImportError as exc:
+        raise BackendUnavailableError(
+            "backend 'opencl' needs pyopencl: pip install pyopencl pocl-binary-distribution "
+            "(PoCL provides a CPU device where no vendor OpenCL driver is installed)") from exc
+    if os.environ.get("PYOPENCL_CTX"):
+        return cl.create_some_context(interactive=False).devices[0]
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error:
+        platforms = []
+    devices = [d for p in platforms for d in p.get_devices()]
+    if not devices:
+        raise BackendUnavailableError(
+            "backend 'opencl': no OpenCL device found; install a vendor OpenCL driver or "
+            "`pip install pocl-binary-distribution` for a CPU device, or use backend='warp-cpu'")
+    gpus = [d for d in devices if d.type & cl.device_type.GPU]
+    return (gpus or devices)[0]
+
+
+def available_backends() -> list[str]:
+    """Backends that can run here, fastest first."""
+    out = []
+    if _cuda_count() > 0:
+        out.append("warp-cuda")
+    try:
+        _opencl_device()
+        out.append("opencl")
+    except BackendUnavailableError:
+        pass
+    out.append("warp-cpu")
+    return out
+
+
+def resolve_backend(backend: str) -> str:
+    """Validate a backend name and resolve ``"auto"``."""
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; expected one of {', '.join(BACKENDS)}")
+    if backend == "auto":
+        return available_backends()[0]
+    return backend
+
+
+def make_runner(backend: str, launch: Launch):
+    """A runner for a resolved backend name: ``runner.run(first, count) -> (tally, counters)``."""
+    if backend == "opencl":
+        return _OpenCLRunner(launch)
+    return _WarpRunner(launch, cuda=(backend == "warp-cuda"))
+
+
+def _kernel_args(launch: Launch, n_threads: int, per_thread: int, first: int, count: int,
+                 n_copies: int) -> dict:
+    st = launch.stack
+    return dict(
+        n_threads=n_threads, per_thread=per_thread, first=first, count=count,
+        seed_lo=launch.seed & 0xFFFFFFFF, seed_hi=(launch.seed >> 32) & 0xFFFFFFFF,
+        wi=launch.wi, n_slabs=st.n_slabs, max_steps=launch.max_steps,
+        n_mu_edges=len(launch.mu_edges), n_phi_edges=len(launch.phi_edges), n_copies=n_copies)
+
+
+def _reduce(tally: np.ndarray, counters: np.ndarray, n_copies: int, n_bins: int):
+    """Sum the replicas (int64, exact): tally (2 sides, 2 moments, n_bins), counters (2,)."""
+    t = tally.reshape(n_copies, 2, 2, n_bins).sum(axis=0, dtype=np.int64)
+    c = counters.reshape(n_copies, 2).sum(axis=0, dtype=np.int64)
+    return t, c
+
+
+# ------------------------------------------------------------------------------------------------
+# Warp
+# ------------------------------------------------------------------------------------------------
+
+
+class _WarpRunner:
+    def __init__(self, launch: Launch, cuda: bool):
+        ensure_init()
+        import warp as wp
+        self.wp = wp
+        if cuda:
+            if _cuda_count() == 0:
+                raise BackendUnavailableError(
+                    "backend 'warp-cuda': Warp sees no CUDA device; install an NVIDIA driver "
+                    "(and a CUDA build of warp-lang), or use backend='opencl' or 'warp-cpu'")
+            self.device = wp.get_device("cuda")
+        else:
+            self.device = wp.get_device("cpu")
+        self.name = "warp-cuda" if cuda else "warp-cpu"
+        self.device_name = f"{self.device.alias} ({self.device.name})"
+        self.launch = launch
+        # GPUs: replicas spread the atomics, a few particles per thread amortise the counters;
+        # Warp's CPU device runs a launch serially on one core, so one replica suffices.
+        self.n_copies = 256 if cuda else 1
+        self.per_thread = 4 if cuda else 1
+        dev = self.device
+        st = launch.stack
+        self.arrays = dict(
+            bnd_i=wp.array(st.bnd_i, dtype=wp.int32, device=dev),
+            bnd_f=wp.array(st.bnd_f, dtype=wp.float32, device=dev),
+            slab_f=wp.array(st.slab_f, dtype=wp.float32, device=dev),
+            mu_edges=wp.array(launch.mu_edges, dtype=wp.float32, device=dev),
+            phi_edges=wp.array(launch.phi_edges, dtype=wp.float32, device=dev),
+            tally=wp.zeros(self.n_copies * 4 * launch.n_bins, dtype=wp.int64, device=dev),
+            counters=wp.zeros(self.n_copies * 2, dtype=wp.int64, device=dev))
+
+    def run(self, first: int, count: int):
+        wp = self.wp
+        n_threads = -(-count // self.per_thread)
+        args = _kernel_args(self.launch, n_threads, self.per_thread, first, count, self.n_copies)
+        args["wi"] = wp.vec3(*[float(x) for x in self.launch.wi])
+        args["first"] = wp.int64(first)
+        args["seed_lo"] = wp.uint32(args["seed_lo"])
+        args["seed_hi"] = wp.uint32(args["seed_hi"])
+        args.update(self.arrays)
+        self.arrays["tally"].zero_()
+        self.arrays["counters"].zero_()
+        wp.launch(walk.walk_kernel, dim=n_threads, inputs=[args[p] for p in _PARAMS],
+                  device=self.device)
+        return _reduce(self.arrays["tally"].numpy(), self.arrays["counters"].numpy(),
+                       self.n_copies, self.launch.n_bins)
+
+
+# ------------------------------------------------------------------------------------------------
+# OpenCL
+# ------------------------------------------------------------------------------------------------
+
+_KERNELS: dict = {}        # id(context) -> the built walk kernel
+
+
+def opencl_source() -> str:
+    """OpenCL C source of the walk kernel ``walk``, generated from the Warp functions."""
+    prog = Program()
+    prog.add_kernel(walk.walk_thread, name="walk")
+    return prog.source()
+
+
+class _OpenCLRunner:
+    def __init__(self, launch: Launch):
+        import pyopencl as cl
+        self.cl = cl
+        device = _opencl_device()
+        if "cl_khr_int64_base_atomics" not in device.extensions:
+            raise BackendUnavailableError(
+                f"backend 'opencl': device {device.name!r} lacks cl_khr_int64_base_atomics, "
+                "which the deterministic fixed-point tallies need; use backend='warp-cpu' or "
+                "another OpenCL device ($PYOPENCL_CTX)")
+        self.name = "opencl"
+        self.device_name = f"{device.name.strip()} ({device.platform.name.strip()})"
+        self.ctx = _context_for(device)
+        self.queue = cl.CommandQueue(self.ctx)
+        key = id(self.ctx)
+        if key not in _KERNELS:
+            program = cl.Program(self.ctx, opencl_source()).build()
+            _KERNELS[key] = cl.Kernel(program, "walk")
+        self.kernel = _KERNELS[key]
+        gpu = bool(device.type & cl.device_type.GPU)
+        self.n_copies = 256 if gpu else 4 * max(device.max_compute_units, 1)
+        self.per_thread = 4 if gpu else 1
+        self.launch = launch
+        st = launch.stack
+        mf = cl.mem_flags
+        ro = mf.READ_ONLY | mf.COPY_HOST_PTR
+        self.buffers = dict(
+            bnd_i=cl.Buffer(self.ctx, ro, hostbuf=st.bnd_i),
+            bnd_f=cl.Buffer(self.ctx, ro, hostbuf=st.bnd_f),
+            slab_f=cl.Buffer(self.ctx, ro, hostbuf=st.slab_f),
+            mu_edges=cl.Buffer(self.ctx, ro, hostbuf=launch.mu_edges),
+            phi_edges=cl.Buffer(self.ctx, ro, hostbuf=launch.phi_edges))
+        self.tally = np.zeros(self.n_copies * 4 * launch.n_bins, dtype=np.int64)
+        self.counters = np.zeros(self.n_copies * 2, dtype=np.int64)
+        self.buffers["tally"] = cl.Buffer(self.ctx, mf.READ_WRITE, self.tally.nbytes)
+        self.buffers["counters"] = cl.Buffer(self.ctx, mf.READ_WRITE, self.counters.nbytes)
+
+    def run(self, first: int, count: int):
+        cl = self.cl
+        n_threads = -(-count // self.per_thread)
+        args = _kernel_args(self.launch, n_threads, self.per_thread, first, count, self.n_copies)
+        scalars = dict(
+            n_threads=np.int32, per_thread=np.int32, first=np.int64, count=np.int32,
+            seed_lo=np.uint32, seed_hi=np.uint32, n_slabs=np.int32, max_steps=np.int32,
+            n_mu_edges=np.int32, n_phi_edges=np.int32, n_copies=np.int32)
+        values = {k: t(args[k]) for k, t in scalars.items()}
+        values["wi"] = cl.cltypes.make_float3(*[float(x) for x in self.launch.wi])
+        values.update(self.buffers)
+        cl.enqueue_fill_buffer(self.queue, self.buffers["tally"], np.int64(0), 0,
+                               self.tally.nbytes)
+        cl.enqueue_fill_buffer(self.queue, self.buffers["counters"], np.int64(0), 0,
+                               self.counters.nbytes)
+        done = self.kernel(self.queue, (n_threads,), None, *[values[p] for p in _PARAMS])
+        self.queue.flush()
+        # Wait by polling with sleeps: a blocking wait spins in the host thread, which on a
+        # CPU device (PoCL) takes a core away from the kernel's worker threads.
+        while done.command_execution_status != cl.command_execution_status.COMPLETE:
+            if done.command_execution_status < 0:
+                raise RuntimeError(f"OpenCL walk kernel failed (status "
+                                   f"{done.command_execution_status})")
+            time.sleep(0.0005)
+        cl.enqueue_copy(self.queue, self.tally, self.buffers["tally"])
+        cl.enqueue_copy(self.queue, self.counters, self.buffers["counters"])
+        self.queue.finish()
+        return _reduce(self.tally, self.counters, self.n_copies, self.launch.n_bins)
+
+
+_CONTEXTS: dict = {}
+
+
+def _context_for(device):
+    import pyopencl as cl
+    key = device.int_ptr
+    if key not in _CONTEXTS:
+        _CONTEXTS[key] = cl.Context([device])
+    return _CONTEXTS[key]

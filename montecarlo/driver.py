@@ -1,0 +1,215 @@
+"""``simulate``: the Monte Carlo reference entry point (``CONVENTIONS.md``)."""
+
+from __future__ import annotations
+
+import math
+import numbers
+import time
+import warnings
+
+import numpy as np
+
+from ..scene import Scene
+from .backends import BACKENDS, Launch, make_runner, resolve_backend
+from .estimates import TallySum
+from .result import MCResult
+from .stack import flatten
+
+__all__ = ["simulate", "MAX_BATCH"]
+
+#: Largest batch: keeps each batch's fixed-point sums (<= count * 2^32) inside int64.
+MAX_BATCH = 1 << 30
+_DEFAULT_BATCH = {"warp-cpu": 1 << 17, "opencl": 1 << 19, "warp-cuda": 1 << 24}
+
+
+def simulate(scene: Scene, wi, particles: int, mu_edges=(0.0, 1.0), phi_edges=(0.0, 2 * math.pi),
+             backend: str = "auto", seed: int = 0, *, batch_size: int | None = None,
+             target_stderr: float | None = None, progress: bool = False,
+             max_steps: int = 100_000) -> MCResult:
+    """Particle Monte Carlo estimate of the energy leaving a layer stack lit from ``wi``.
+
+    Parameters
+    ----------
+    scene : layersim.Scene
+        Validated scene; RGB scenes are simulated channel by channel with the same seed (common
+        random numbers, so colour differences are less noisy than the channels themselves).
+    wi : array_like, shape (3,)
+        Unit direction toward the light, local frame; ``wi.z > 0`` lights the top, ``wi.z < 0``
+        the bottom (only for a stack that is not opaque).
+    particles : int
+        Number of particles (per channel), > 0.
+    mu_edges : array_like
+        Increasing bin edges in ``|cos theta_o|`` within [0, 1].
+    phi_edges : array_like
+        Increasing bin edges in ``phi_o`` (radians) within [0, 2 pi].
+    backend : {"auto", "warp-cpu", "warp-cuda", "opencl"}
+        Where to run; ``"auto"`` picks CUDA, else OpenCL, else Warp's CPU device.
+    seed : int
+        0 <= seed < 2^64. The same seed gives bit-identical tallies on the same backend, for any
+        ``batch_size`` (the random numbers of particle ``p`` depend only on ``(seed, p)`` and the
+        tallies are integer sums).
+    batch_size : int, optional
+        Particles per kernel launch (default depends on the backend; at most 2^30).
+    target_stderr : float, optional
+        Stop after the first batch at which the standard errors of the reflectance,
+        transmittance and absorbed fraction are all at most this value (per channel).
+        ``particles`` is then the upper limit.
+    progress : bool
+        Show a tqdm progress bar (only on a terminal).
+    max_steps : int
+        Cap on the interactions of one walk; walks that reach it are reported in
+        ``result.truncated`` (with a warning) and their energy counts as absorbed.
+
+    Returns
+    -------
+    MCResult
+        Fractions, bin energies and standard errors (see :class:`MCResult`).
+
+    Raises
+    ------
+    ValueError
+        Bad ``wi``, ``particles``, edges, ``backend`` name, seed or options.
+    BackendUnavailableError
+        The requested backend is not installed or has no device.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene must be a layersim.Scene (Scene.from_toml / Scene.from_dict), "
+                        f"got {type(scene).__name__}")
+    wi = _check_wi(wi, scene)
+    particles = _check_int("particles", particles, 1, None)
+    mu_edges = _check_edges("mu_edges", mu_edges, 1.0, "|cos theta_o|")
+    phi_edges = _check_edges("phi_edges", phi_edges, 2 * math.pi, "phi_o (radians)")
+    if not isinstance(backend, str) or backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; expected one of {', '.join(BACKENDS)}")
+    seed = _check_int("seed", seed, 0, (1 << 64) - 1)
+    max_steps = _check_int("max_steps", max_steps, 1, (1 << 31) - 1)
+    if batch_size is not None:
+        batch_size = _check_int("batch_size", batch_size, 1, MAX_BATCH)
+    if target_stderr is not None:
+        if not (isinstance(target_stderr, numbers.Real) and math.isfinite(target_stderr)
+                and target_stderr > 0):
+            raise ValueError(f"target_stderr must be a positive number, got {target_stderr!r}")
+
+    name = resolve_backend(backend)
+    batch = batch_size or _DEFAULT_BATCH[name]
+    n_mu, n_phi = len(mu_edges) - 1, len(phi_edges) - 1
+    incident = 0 if wi[2] > 0 else 1
+
+    t0 = time.perf_counter()
+    per_channel = []
+    device = ""
+    for c in range(scene.channels):
+        launch = Launch(stack=flatten(scene.channel(c)), wi=wi.astype(np.float32),
+                        mu_edges=mu_edges.astype(np.float32),
+                        phi_edges=phi_edges.astype(np.float32), seed=seed, max_steps=max_steps)
+        runner = make_runner(name, launch)
+        device = runner.device_name
+        per_channel.append(_run(runner, launch, particles, batch, target_stderr, progress,
+                                f"{scene.name}" + (f"[{'RGB'[c]}]" if scene.channels > 1 else "")))
+    seconds = time.perf_counter() - t0
+
+    fields = {}
+    for key, get in (("reflectance", lambda s: s.side(incident)),
+                     ("transmittance", lambda s: s.side(1 - incident)),
+                     ("absorbed", lambda s: s.absorbed())):
+        vals = [get(s) for s in per_channel]
+        fields[key] = _stack([v[0] for v in vals])
+        fields[key + "_stderr"] = _stack([v[1] for v in vals])
+    bins, bins_err = {}, {}
+    for side, s in (("top", 0), ("bottom", 1)):
+        vals = [t.bins(s, (n_mu, n_phi)) for t in per_channel]
+        bins[side] = _stack([v[0] for v in vals])
+        bins_err[side] = _stack([v[1] for v in vals])
+    truncated = [t.truncated for t in per_channel]
+    if any(truncated):
+        frac = max(t.truncated / t.particles for t in per_channel)
+        warnings.warn(f"{sum(truncated)} walk(s) reached max_steps={max_steps} and were stopped "
+                      f"(up to {frac:.2e} of the particles; their energy counts as absorbed). "
+                      "Raise max_steps if this matters.", RuntimeWarning, stacklevel=2)
+    return MCResult(
+        **fields, bins=bins, bins_stderr=bins_err,
+        particles=_stack([t.particles for t in per_channel]),
+        events=_stack([t.events for t in per_channel]),
+        truncated=_stack(truncated), backend=name, device=device, seconds=seconds, seed=seed,
+        wi=wi, mu_edges=mu_edges, phi_edges=phi_edges)
+
+
+def _run(runner, launch: Launch, particles: int, batch: int, target, progress: bool, label):
+    from tqdm.auto import tqdm
+    total = TallySum(launch.n_bins)
+    bar = tqdm(total=particles, unit="paths", unit_scale=True, desc=label,
+               disable=None if progress else True, leave=False)
+    try:
+        done = 0
+        while done < particles:
+            count = min(batch, particles - done)
+            tally, counters = runner.run(done, count)
+            total.add(tally, counters, count)
+            done += count
+            bar.update(count)
+            if target is not None and done >= 2:
+                errs = (total.side(0)[1], total.side(1)[1], total.absorbed()[1])
+                if max(errs) <= target:
+                    break
+    finally:
+        bar.close()
+    return total
+
+
+def _stack(values):
+    """A scalar for one channel, else an array with a trailing channel axis."""
+    if len(values) == 1:
+        v = values[0]
+        return v if np.ndim(v) else (int(v) if isinstance(v, (int, np.integer)) else float(v))
+    return np.stack([np.asarray(v) for v in values], axis=-1)
+
+
+def _check_int(name: str, value, lo: int, hi: int | None) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise ValueError(f"{name} must be an integer, got {value!r}")
+    value = int(value)
+    if value < lo or (hi is not None and value > hi):
+        rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise ValueError(f"{name} must be {rng}, got {value}")
+    return value
+
+
+def _check_wi(wi, scene: Scene) -> np.ndarray:
+    try:
+        w = np.asarray(wi, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"wi must be a direction (x, y, z), got {wi!r}") from None
+    if w.shape != (3,):
+        raise ValueError(f"wi must be one direction of shape (3,), got shape {w.shape}; "
+                         "simulate() takes one incident direction per call")
+    if not np.all(np.isfinite(w)):
+        raise ValueError(f"wi must be finite, got {w}")
+    norm = float(np.linalg.norm(w))
+    if abs(norm - 1.0) > 1e-6:
+        raise ValueError(f"wi must be a unit vector, got |wi| = {norm:.9g}; normalise it")
+    w = w / norm
+    if w[2] == 0.0:
+        raise ValueError("wi.z must be non-zero: light at grazing incidence (wi.z = 0) never "
+                         "enters the stack")
+    if w[2] < 0 and scene.opaque:
+        raise ValueError(f"wi.z < 0 lights the stack from below, but scene '{scene.name}' ends "
+                         f"with an opaque {scene.stacks[0][-1].kind} layer; use wi.z > 0")
+    return w
+
+
+def _check_edges(name: str, edges, hi: float, what: str) -> np.ndarray:
+    try:
+        e = np.asarray(edges, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a 1-D sequence of numbers, got {edges!r}") from None
+    if e.ndim != 1 or e.size < 2:
+        raise ValueError(f"{name} must be a 1-D sequence of at least 2 edges, got shape "
+                         f"{e.shape}")
+    if not np.all(np.isfinite(e)):
+        raise ValueError(f"{name} must be finite, got {e}")
+    if np.any(np.diff(e) <= 0):
+        raise ValueError(f"{name} must be strictly increasing, got {e}")
+    if e[0] < 0 or e[-1] > hi * (1 + 1e-12):
+        raise ValueError(f"{name} are edges in {what} and must lie within [0, {hi:.9g}], "
+                         f"got [{e[0]:.9g}, {e[-1]:.9g}]")
+    return np.minimum(e, hi)

@@ -1,0 +1,95 @@
+"""Scene -> flat kernel parameters of the random walk (see :mod:`layersim.kernels.walk`).
+
+The walk sees the stack as slabs between boundaries. Reading the validated layers top to bottom:
+
+* an interface layer (dielectric, conductor, diffuse) is a boundary; two adjacent interfaces get a
+  zero-thickness clear slab (of the index in between) between them;
+* a medium layer is a slab; a medium without an interface above (or below) it gets an
+  index-matched *null* boundary there, which particles cross unchanged;
+* the stack ends with a boundary: the last interface, or a null boundary below a final medium,
+  under which lies the bottom medium (index ``scene.bottom_ior``) unless the stack is opaque.
+
+Relative indices come from :meth:`Scene.relative_ior`. A dielectric interface whose relative index
+is exactly 1 is a null boundary: nothing changes index there, so light passes straight through
+(the microfacet model is degenerate at ``eta = 1``: its refraction half vector vanishes).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..kernels import walk
+from ..kernels.physics import DISTRIBUTION_CODES
+from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
+
+__all__ = ["StackArrays", "flatten"]
+
+
+@dataclass(frozen=True)
+class StackArrays:
+    """Kernel parameters of one monochromatic stack.
+
+    Attributes
+    ----------
+    bnd_i : ndarray of int32, shape (2 * (n_slabs + 1),)
+        Per boundary: kind code (``walk.NULL`` ...), distribution code.
+    bnd_f : ndarray of float32, shape (8 * (n_slabs + 1),)
+        Per boundary: eta, k (relative to the medium above), alpha_u, alpha_v, cos and sin of the
+        tangent-frame rotation, Lambertian albedo, unused.
+    slab_f : ndarray of float32, shape (3 * max(n_slabs, 1),)
+        Per slab: tau (along the normal), single-scattering albedo, HG g (padded when empty).
+    n_slabs : int
+    opaque : bool
+        True when the bottom boundary is a conductor or a diffuse base.
+    """
+
+    bnd_i: np.ndarray
+    bnd_f: np.ndarray
+    slab_f: np.ndarray
+    n_slabs: int
+    opaque: bool
+
+
+def _boundary(scene: Scene, i: int | None):
+    """(ints, floats) of the boundary made by layer ``i`` (None: null boundary)."""
+    floats = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
+    if i is None:
+        return [walk.NULL, 0], floats
+    layer = scene.layers[i]
+    if isinstance(layer, Diffuse):
+        floats[6] = layer.albedo
+        return [walk.DIFFUSE, 0], floats
+    eta = scene.relative_ior(i)
+    if isinstance(layer, Dielectric) and eta.real == 1.0:
+        return [walk.NULL, 0], floats
+    kind = walk.CONDUCTOR if isinstance(layer, Conductor) else walk.DIELECTRIC
+    floats[:6] = [eta.real, eta.imag if kind == walk.CONDUCTOR else 0.0, layer.alpha_u,
+                  layer.alpha_v, math.cos(layer.rotation), math.sin(layer.rotation)]
+    return [kind, DISTRIBUTION_CODES[layer.distribution]], floats
+
+
+def flatten(scene: Scene) -> StackArrays:
+    """Boundary and slab records of a monochromatic, validated scene (no re-validation)."""
+    boundaries, slabs = [], []
+    last = None                      # what was appended last: "boundary" or "slab"
+    for i, layer in enumerate(scene.layers):
+        if isinstance(layer, Medium):
+            if last != "boundary":       # top of the stack, or a medium right below a medium
+                boundaries.append(_boundary(scene, None))
+            slabs.append([layer.tau, layer.albedo, layer.g])
+            last = "slab"
+        else:
+            if last == "boundary":       # two interfaces in a row: zero-thickness clear gap
+                slabs.append([0.0, 1.0, 0.0])
+            boundaries.append(_boundary(scene, i))
+            last = "boundary"
+    if last == "slab":
+        boundaries.append(_boundary(scene, None))
+    bnd_i = np.array([x for b in boundaries for x in b[0]], dtype=np.int32)
+    bnd_f = np.array([x for b in boundaries for x in b[1]], dtype=np.float32)
+    slab_f = np.array([x for s in slabs for x in s] or [0.0, 1.0, 0.0], dtype=np.float32)
+    assert len(boundaries) == len(slabs) + 1
+    return StackArrays(bnd_i, bnd_f, slab_f, len(slabs), scene.opaque)
