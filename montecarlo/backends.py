@@ -11,7 +11,13 @@ Backends
 ``"warp-cuda"``  Warp on the first CUDA device.
 ``"opencl"``     the OpenCL device named by ``$PYOPENCL_CTX`` if set, else the first GPU of any
                  platform, else the first device (PoCL's CPU device uses every core).
-``"auto"``       the fastest one present: warp-cuda, else opencl, else warp-cpu.
+``"auto"``       the fastest one present: warp-cuda; else opencl on a GPU, or on a CPU device
+                 with at least :data:`OPENCL_CPU_MIN_UNITS` compute units; else warp-cpu.
+
+Why the CPU threshold: on the 2-core development machine PoCL reached 0.41-0.45x warp-cpu's
+paths/s per core (its float32 math library is 4-6x slower than Warp's; measured with
+``benchmarks/mc_throughput.py``), so it only beats single-threaded warp-cpu with three or more
+cores; four keeps a margin.
 """
 
 from __future__ import annotations
@@ -32,6 +38,8 @@ __all__ = ["BACKENDS", "BackendUnavailableError", "Launch", "available_backends"
            "resolve_backend"]
 
 BACKENDS = ("auto", "warp-cpu", "warp-cuda", "opencl")
+#: An OpenCL CPU device needs this many compute units to be preferred over warp-cpu by "auto".
+OPENCL_CPU_MIN_UNITS = 4
 
 #: Kernel parameters of the walk, in order (the thread index excluded).
 _PARAMS = [name for name, _ in parameters(walk.walk_thread)[1:]]
@@ -99,12 +107,22 @@ def available_backends() -> list[str]:
     if _cuda_count() > 0:
         out.append("warp-cuda")
     try:
-        _opencl_device()
-        out.append("opencl")
+        device = _opencl_device()
     except BackendUnavailableError:
-        pass
+        device = None
+    fast_opencl = device is not None and (
+        not _is_cpu(device) or device.max_compute_units >= OPENCL_CPU_MIN_UNITS)
+    if fast_opencl:
+        out.append("opencl")
     out.append("warp-cpu")
+    if device is not None and not fast_opencl:
+        out.append("opencl")
     return out
+
+
+def _is_cpu(device) -> bool:
+    import pyopencl as cl
+    return bool(device.type & cl.device_type.CPU)
 
 
 def resolve_backend(backend: str) -> str:
