@@ -111,3 +111,73 @@ def microfacet_values(mu_i, mu_o, phi, eta, alpha_u, alpha_v, distribution="beck
     :func:`microfacet_split`."""
     return _launch_pairs(_microfacet_eval_kernel, mu_i, mu_o, phi,
                          _interface_params(eta, alpha_u, alpha_v, distribution), 1, device)[0]
+
+
+# ---------------------------------------------------------------------------------------------
+# Numeric projection: the BSDF on a uniform azimuth grid, then a discrete Fourier transform
+# ---------------------------------------------------------------------------------------------
+
+@wp.kernel
+def _uniform_eval_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
+                         eta: wp.float64, k: wp.float64, au: wp.float64, av: wp.float64,
+                         dist: int, f: wp.array2d(dtype=wp.float64)):
+    p, j = wp.tid()
+    n = f.shape[1]
+    phi = wp.float64(2.0) * wp.float64(wp.pi) * wp.float64(j) / wp.float64(n)
+    wi, wo = _pair_directions(mu_i[p], mu_o[p], phi)
+    f[p, j] = physics.microfacet_eval(wi, wo, eta, k, au, av, dist)
+
+
+@wp.kernel
+def _cosine_dft_kernel(f: wp.array2d(dtype=wp.float64), table: wp.array(dtype=wp.float64),
+                       c: wp.array2d(dtype=wp.float64)):
+    """c[p, l] = (2 - delta_l0) / N sum_j f[p, j] cos(2 pi l j / N), with the cosines read from
+    an exact table (index l j mod N) instead of a recurrence."""
+    p, l = wp.tid()
+    n = f.shape[1]
+    acc = wp.float64(0.0)
+    idx = int(0)
+    for j in range(n):
+        acc += f[p, j] * table[idx]
+        idx += l
+        if idx >= n:
+            idx -= n
+    scale = wp.float64(2.0) / wp.float64(n)
+    if l == 0:
+        scale = wp.float64(1.0) / wp.float64(n)
+    c[p, l] = acc * scale
+
+
+def uniform_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, samples: int,
+                          orders: int, device=None) -> np.ndarray:
+    """Cosine coefficients ``f_0 .. f_{orders-1}`` of the BSDF of ordinate pairs from ``samples``
+    uniform azimuths on [0, 2 pi) (trapezoidal rule = DFT; exact up to aliasing of orders beyond
+    ``samples - orders``).
+
+    On a CUDA device the samples stay on the device: a table-driven DFT kernel computes the
+    requested orders and only those are copied back. On the CPU the kernel samples and numpy's
+    real FFT transforms.
+    """
+    ensure_init()
+    dev = device_for(device)
+    mu_i = np.ascontiguousarray(mu_i, dtype=np.float64)
+    mu_o = np.ascontiguousarray(mu_o, dtype=np.float64)
+    P = mu_i.size
+    if P == 0:
+        return np.zeros((0, orders))
+    params = _interface_params(eta, alpha_u, alpha_v, distribution)
+    f = wp.empty((P, samples), dtype=wp.float64, device=dev)
+    wp.launch(_uniform_eval_kernel, dim=(P, samples), device=dev,
+              inputs=[wp.array(mu_i, dtype=wp.float64, device=dev),
+                      wp.array(mu_o, dtype=wp.float64, device=dev), *params], outputs=[f])
+    if dev.is_cuda:
+        table = np.cos(2.0 * np.pi * np.arange(samples) / samples)
+        c = wp.empty((P, orders), dtype=wp.float64, device=dev)
+        wp.launch(_cosine_dft_kernel, dim=(P, orders), device=dev,
+                  inputs=[f, wp.array(table, dtype=wp.float64, device=dev)], outputs=[c])
+        return c.numpy()
+    coef = np.fft.rfft(f.numpy(), axis=1).real[:, :orders] / samples
+    coef[:, 1:] *= 2.0
+    out = np.zeros((P, orders))
+    out[:, :coef.shape[1]] = coef
+    return out

@@ -34,6 +34,10 @@ from ..scene import Conductor, Dielectric
 
 #: Relative truncation of each pair's cosine series (|f_l| < RELERR |f_0| are dropped).
 RELERR = 1e-7
+#: A series cut at m orders is tapered (Lanczos sigma factors) only if the first discarded
+#: coefficients exceed this fraction of f_0: smaller tails ring far less than the taper would
+#: blur every order (sigma factors change order l by ~(pi l / m)^2 / 6).
+TAPER_THRESHOLD = 1e-4
 #: The smooth factor is fitted where the peak factor exceeds this fraction of its maximum.
 SUPPORT_TOLERANCE = 1e-14
 #: Pairs whose BSDF bound carries less than this fraction of a beam's energy are skipped.
@@ -72,6 +76,10 @@ class ProjectionStats:
     refit: int = 0
     truncated: int = 0
     """Pairs whose series needed more than ``m`` orders (truncated and tapered)."""
+    aliased: int = 0
+    """Pairs whose series the numeric path could not sample without aliasing."""
+    tapered: int = 0
+    """Truncated pairs whose discarded tail was large enough to taper."""
     orders_needed: int = 0
     seconds: float = 0.0
     notes: list = field(default_factory=list)
@@ -81,6 +89,8 @@ class ProjectionStats:
         self.projected += other.projected
         self.refit += other.refit
         self.truncated += other.truncated
+        self.aliased += other.aliased
+        self.tapered += other.tapered
         self.orders_needed = max(self.orders_needed, other.orders_needed)
         self.seconds += other.seconds
 
@@ -101,7 +111,13 @@ def _block_pairs(grid: Grid, name: str, triangle: bool):
 
 
 def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, dist: str,
-                   stats: ProjectionStats, triangle: bool = False):
+                   stats: ProjectionStats, triangle: bool = False, method=None):
+    """Project the significant pairs of one block, in batches of similar series length.
+
+    ``method(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats) -> (o, i, series)``
+    computes the series of a batch (default: the semi-analytic :func:`pair_series`).
+    """
+    method = method or _project_pairs
     mu_i, mu_o, o, i = _block_pairs(grid, name, triangle)
     stats.pairs += mu_i.size
     fw = grid.flux_weight
@@ -121,8 +137,8 @@ def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, di
     for start in range(0, order.size, BATCH):
         sel = order[start:start + BATCH]
         K = int(min(kest[start:start + BATCH].max(), m + L_HARD))
-        chunks.append(_project_pairs(mu_i[sel], mu_o[sel], o[sel], i[sel], q0[sel], qpi[sel],
-                                     K, m, eta, alpha, dist, stats))
+        chunks.append(method(mu_i[sel], mu_o[sel], o[sel], i[sel], q0[sel], qpi[sel],
+                             K, m, eta, alpha, dist, stats))
     stats.projected += keep.size
     return chunks
 
@@ -235,15 +251,26 @@ def pair_series(mu_i, mu_o, eta: complex, alpha: float, dist: str, m: int, q0=No
     stats.orders_needed = max(stats.orders_needed, int(length.max(initial=0)))
     cut = length > m
     stats.truncated += int(np.count_nonzero(cut))
+    tail = np.abs(series[:, m:]).max(axis=1, initial=0.0) if series.shape[1] > m else \
+        np.zeros(series.shape[0])
     out = np.zeros((series.shape[0], m))
     keep = min(m, series.shape[1])
     out[:, :keep] = series[:, :keep]
     out[np.arange(m)[None, :] >= length[:, None]] = 0.0
-    if taper and cut.any():
-        # Lanczos sigma factors on series truncated at m: blur instead of Gibbs ringing
-        # (order 0, hence energy, is unchanged).
-        out[cut] *= np.sinc(np.arange(m) / m)[None, :]
+    if taper:
+        apply_taper(out, tail, stats)
     return out, length
+
+
+def apply_taper(series: np.ndarray, tail: np.ndarray, stats: ProjectionStats) -> None:
+    """Lanczos sigma factors (in place) on rows whose discarded tail (largest coefficient at or
+    beyond m) exceeds :data:`TAPER_THRESHOLD` of f_0: blur instead of Gibbs ringing. Order 0,
+    hence energy, is unchanged."""
+    m = series.shape[1]
+    rows = tail > TAPER_THRESHOLD * np.abs(series[:, 0])
+    if rows.any():
+        series[rows] *= np.sinc(np.arange(m) / m)[None, :]
+        stats.tapered += int(np.count_nonzero(rows))
 
 
 def _project_pairs(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats):
@@ -253,7 +280,7 @@ def _project_pairs(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats):
 
 def interface_operator(grid: Grid, m: int, layer, eta_above: float,
                        stats: ProjectionStats | None = None,
-                       reciprocity: bool = True) -> IsoOperator:
+                       reciprocity: bool = True, method=None) -> IsoOperator:
     """Operator of an isotropic rough interface.
 
     Parameters
@@ -271,6 +298,9 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
         Project one triangle of each reflection block and ``Ttb`` only, deriving the rest by
         reciprocity (half the work). ``False`` projects every block independently (used by the
         tests to check the physics and the projection against reciprocity).
+    method : callable, optional
+        Series of a batch of pairs (default semi-analytic; see
+        :mod:`layersim.ingredients.numeric` for the sampled/FFT path).
     """
     if layer.anisotropic or layer.smooth:
         raise ValueError("interface_operator projects isotropic rough interfaces only")
@@ -288,13 +318,16 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
             if name == "Tbt":
                 series[name] = _mirror(series["Ttb"], 1.0 / eta.real ** 2, skip_diagonal=False)
             elif name == "Ttb":
-                series[name] = _project_block(grid, name, m, eta, alpha, dist, stats)
+                series[name] = _project_block(grid, name, m, eta, alpha, dist, stats,
+                                              method=method)
             else:
-                half = _project_block(grid, name, m, eta, alpha, dist, stats, triangle=True)
+                half = _project_block(grid, name, m, eta, alpha, dist, stats, triangle=True,
+                                      method=method)
                 series[name] = half + _mirror(half)
     else:
         for name in names:
-            series[name] = _project_block(grid, name, m, eta, alpha, dist, stats)
+            series[name] = _project_block(grid, name, m, eta, alpha, dist, stats,
+                                          method=method)
     if opaque:
         series.update({"Rb": None, "Ttb": None, "Tbt": None})
     stats.seconds += time.perf_counter() - t0
