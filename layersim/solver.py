@@ -12,6 +12,7 @@ from .bsdf import BSDF
 from .errors import InfeasibleError, OperatorError
 from .ingredients import diffuse_operator, interface_operator, medium_operator
 from .ingredients.microfacet import ProjectionStats
+from .ingredients.numeric import numeric_interface_operator
 from .operator import IsoOperator
 from .plan import Plan, make_plan
 from .scene import Conductor, Dielectric, Diffuse, Medium, Scene
@@ -23,11 +24,23 @@ from .scene import Conductor, Dielectric, Diffuse, Medium, Scene
 ENERGY_REFUSE = 1e-2
 
 
-def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionStats):
+#: Projection methods for interfaces: "numeric" samples the BSDF per pair at a rate set by the
+#: analytically known length of its series, then an FFT (default: more accurate at equal or
+#: lower cost on the CPU, and much faster on a GPU; benchmarks/projection_paths.py);
+#: "semi-analytic" multiplies exact peak series by fitted smooth factors (seed 000 sec. 4.1).
+PROJECTIONS = ("numeric", "semi-analytic")
+
+
+def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionStats,
+                    projection: str = "numeric", device=None):
     layer = scene.layers[i]
     eta_above = scene.ior_above(i)
     if isinstance(layer, (Dielectric, Conductor)):
-        op = interface_operator(grid, plan.md, layer, eta_above, stats)
+        if projection == "numeric":
+            op = numeric_interface_operator(grid, plan.md, layer, eta_above, stats,
+                                            device=device)
+        else:
+            op = interface_operator(grid, plan.md, layer, eta_above, stats)
         _check_energy(op, i, layer, plan)
         return op
     if isinstance(layer, Medium):
@@ -56,7 +69,7 @@ def _check_energy(op: IsoOperator, i: int, layer, plan: Plan) -> None:
 
 
 def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
-          verbose: bool = False) -> BSDF:
+          verbose: bool = False, projection: str = "numeric", device=None) -> BSDF:
     """Solve a scene with the adding equations in the Fourier basis.
 
     Parameters
@@ -71,11 +84,18 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
         Threads for the Fourier orders in the adding equations.
     verbose : bool
         Print the plan and timings.
+    projection : {"numeric", "semi-analytic"}
+        How interfaces are projected (see :data:`PROJECTIONS`).
+    device : str, optional
+        Warp device for the projection kernels (e.g. "cuda"; default: $LAYERSIM_DEVICE or cpu).
 
     Returns
     -------
     BSDF
     """
+    if projection not in PROJECTIONS:
+        raise ValueError(f"unknown projection {projection!r}; expected one of "
+                         + ", ".join(PROJECTIONS))
     t_start = time.perf_counter()
     if like is not None:
         op = like.operators[0]
@@ -99,7 +119,8 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
             key = (mono.layers[lp.index], mono.ior_above(lp.index))
             if key not in cache:
                 t0 = time.perf_counter()
-                cache[key] = _layer_operator(plan, grid, mono, lp.index, stats)
+                cache[key] = _layer_operator(plan, grid, mono, lp.index, stats, projection,
+                                             device)
                 t_layers += time.perf_counter() - t0
             ops.append(cache[key])
         t0 = time.perf_counter()
@@ -116,8 +137,10 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
         "n": plan.n, "md": plan.md, "ms": plan.ms, "rule": plan.rule,
         "seconds": {"plan": t_plan, "layers": t_layers, "projection": stats.seconds,
                     "adding": t_adding, "total": time.perf_counter() - t_start},
-        "projection": {"pairs": stats.pairs, "projected": stats.projected,
-                       "refit": stats.refit, "truncated": stats.truncated},
+        "projection": {"method": projection, "pairs": stats.pairs,
+                       "projected": stats.projected, "refit": stats.refit,
+                       "truncated": stats.truncated, "tapered": stats.tapered,
+                       "aliased": stats.aliased},
         "nnz": sum(op.nnz() for op in stacks),
         "memory_bytes": sum(op.memory_bytes() for op in stacks),
     }

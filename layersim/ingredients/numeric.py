@@ -35,10 +35,10 @@ EXTRA_ORDERS = 8
 
 
 def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, device,
-                   max_samples):
+                   max_samples, min_samples=16):
     length = fourier.peak_length(q0, qpi, dist, ALIAS_RELERR) + microfacet.L_FIT
     need = m + EXTRA_ORDERS + length
-    N = np.maximum(16, 1 << np.ceil(np.log2(need)).astype(int))
+    N = np.maximum(min_samples, 1 << np.ceil(np.log2(need)).astype(int))
     aliased = N > max_samples
     stats.aliased += int(np.count_nonzero(aliased))
     N = np.minimum(N, max_samples)
@@ -66,13 +66,15 @@ def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, 
 
 def numeric_interface_operator(grid: Grid, m: int, layer, eta_above: float,
                                stats: ProjectionStats | None = None, device=None,
-                               max_samples: int = MAX_SAMPLES,
+                               max_samples: int = MAX_SAMPLES, min_samples: int = 16,
                                reciprocity: bool = True) -> IsoOperator:
     """Operator of an isotropic rough interface by sampling and FFT (see module docstring).
 
     Parameters are those of :func:`layersim.ingredients.microfacet.interface_operator`, plus
-    ``device`` (Warp device for the sampling and, on CUDA, the transform) and ``max_samples``.
+    ``device`` (Warp device for the sampling and, on CUDA, the transform), ``max_samples`` and
+    ``min_samples`` (bounds on the azimuth samples per pair).
     """
-    method = functools.partial(_numeric_batch, device=device, max_samples=max_samples)
+    method = functools.partial(_numeric_batch, device=device, max_samples=max_samples,
+                               min_samples=min_samples)
     return microfacet.interface_operator(grid, m, layer, eta_above, stats,
                                          reciprocity=reciprocity, method=method)
