@@ -155,6 +155,36 @@ def smith_g1(w: Any, m: Any, au: Any, av: Any, dist: int):
 
 
 @wp.func
+def half_vector(wi: Any, wo: Any, eta: Any, k: Any):
+    """Generalized half vector of a rough interface (Walter et al. 2007, eq. 16): returns
+    ``(h, eta_i, eta_o)`` with ``h`` unnormalised and oriented to ``+z`` (``wi + wo`` in
+    reflection, ``eta_i wi + eta_o wo`` in refraction) and the relative indices of the media
+    holding ``wi`` and ``wo`` (1 above the interface, ``eta`` below). ``h`` is the zero vector
+    where no microfacet connects the two directions: on the horizon, for transmission through or
+    light from below a conductor (``k > 0``)."""
+    zero = eta * type(eta)(0.0)
+    one = type(eta)(1.0)
+    eta_i = one
+    eta_o = one
+    if wi[2] < zero:
+        eta_i = eta
+    if wo[2] < zero:
+        eta_o = eta
+    none = wi * zero
+    if wi[2] == zero or wo[2] == zero:
+        return none, eta_i, eta_o
+    reflect = wi[2] * wo[2] > zero
+    if k > zero and (not reflect or wi[2] < zero):
+        return none, eta_i, eta_o
+    h = wi + wo
+    if not reflect:
+        h = wi * eta_i + wo * eta_o
+    if h[2] < zero:
+        h = -h
+    return h, eta_i, eta_o
+
+
+@wp.func
 def microfacet_smooth_q(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, dist: int):
     """Split microfacet BSDF of an interface: returns ``(smooth, q)`` with
     ``f(wi, wo) = smooth * ndf_peak(q, dist)``.
@@ -166,26 +196,12 @@ def microfacet_smooth_q(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, di
     """
     zero = au * type(au)(0.0)
     one = type(au)(1.0)
-    if wi[2] == zero or wo[2] == zero:
-        return zero, zero
-    reflect = wi[2] * wo[2] > zero
-    conductor = k > zero
-    if conductor and (not reflect or wi[2] < zero):
-        return zero, zero
-    eta_i = one
-    eta_o = one
-    if wi[2] < zero:
-        eta_i = eta
-    if wo[2] < zero:
-        eta_o = eta
-    h = wi + wo
-    if not reflect:
-        h = wi * eta_i + wo * eta_o
-    if h[2] < zero:
-        h = -h
+    h, eta_i, eta_o = half_vector(wi, wo, eta, k)
     hlen2 = wp.dot(h, h)
     if hlen2 <= zero or h[2] <= zero:
         return zero, zero
+    reflect = wi[2] * wo[2] > zero
+    conductor = k > zero
     hz2 = h[2] * h[2]
     q = (h[0] * h[0] / (au * au) + h[1] * h[1] / (av * av)) / hz2
     m = h / wp.sqrt(hlen2)

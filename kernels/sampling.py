@@ -320,25 +320,11 @@ def microfacet_pdf(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, dist: i
     """
     zero = au * type(au)(0.0)
     one = type(au)(1.0)
-    if wi[2] == zero or wo[2] == zero:
+    h, eta_i, eta_o = physics.half_vector(wi, wo, eta, k)
+    if wp.dot(h, h) <= zero or h[2] <= zero:
         return zero
     refl = wi[2] * wo[2] > zero
     conductor = k > zero
-    if conductor and (not refl or wi[2] < zero):
-        return zero
-    eta_i = one
-    eta_o = one
-    if wi[2] < zero:
-        eta_i = eta
-    if wo[2] < zero:
-        eta_o = eta
-    h = wi + wo
-    if not refl:
-        h = wi * eta_i + wo * eta_o
-    if h[2] < zero:
-        h = -h
-    if wp.dot(h, h) <= zero or h[2] <= zero:
-        return zero
     m = wp.normalize(h)
     wu = wi
     if wi[2] < zero:
