@@ -271,6 +271,20 @@ class BSDF:
                                                 dphi[sel])
         return out
 
+    # ---- importance sampling (layersim.sampling) ----------------------------------------
+
+    def sample(self, wi, u):
+        """Importance-sample outgoing directions: returns ``(wo, weight, pdf)`` with
+        ``weight = f(wi, wo) |wo.z| / pdf`` (per channel). See :mod:`layersim.sampling`."""
+        from .sampling import sampler_for
+        return sampler_for(self).sample(wi, u)
+
+    def pdf(self, wi, wo) -> np.ndarray:
+        """Solid-angle density (1/sr) with which :meth:`sample` draws ``wo``. See
+        :mod:`layersim.sampling`."""
+        from .sampling import sampler_for
+        return sampler_for(self).pdf(wi, wo)
+
     # ---- energy ------------------------------------------------------------------------
 
     def _incident(self, wi):
