@@ -417,6 +417,12 @@ class BSDF:
 
     # ---- persistence -------------------------------------------------------------------
 
+    def export(self, path, version: int = 1, alpha=(0.0, 0.0)):
+        """Write a ``.bsdf`` file (``SCATFUN``) for layerlab, Mitsuba 0.6 and pbrt-v3; returns
+        the :class:`layersim.bsdffile.FourierTable` written. See :mod:`layersim.bsdffile`."""
+        from .bsdffile import export
+        return export(self, path, version=version, alpha=alpha)
+
     def save(self, path) -> Path:
         """Write the solved operators and metadata to ``path`` (numpy ``.npz`` container;
         reload with :meth:`BSDF.load`)."""
