@@ -10,24 +10,26 @@ Elevation (one query = one incident direction)
     ``mu`` is ``|cos theta_o|`` on one side (reflection ``side = 0`` or transmission ``side = 1``,
     each a block of the series table). The host passes the incident spline taps; the kernel
     interpolates the zeroth-order coefficient at every outgoing node, ``G_a = sum_b w_b
-    f_0(a, b)``, clamps it to ``>= 0``, and integrates the marginal ``q(mu) = mu * C(mu)`` exactly,
-    ``C`` being the cubic Hermite spline through the ``G_a`` with the derivative estimates of
-    :func:`layersim.bsdf.spline_weights` (constant beyond the outermost nodes, as ``eval``). Where
-    no clamping is needed, ``q`` is exactly the cosine-weighted azimuthal integral of ``eval`` (up
-    to the factor ``2 pi``), so ``sample`` importance-samples the interpolated BSDF perfectly.
-    Where the cubic dips below zero inside an interval (undershoot next to a sharp edge of a lobe),
-    that interval uses the linear interpolant of its two (clamped) end values instead: the
-    sampling density is never negative, and the density kernel applies the same rule.
+    f_0(a, b)``, and integrates the marginal ``q(mu) = mu * C(mu)`` exactly, ``C`` being the cubic
+    Hermite spline through the ``G_a`` with the derivative estimates of
+    :func:`layersim.bsdf.spline_weights` (constant beyond the outermost nodes, as ``eval``). In an
+    *exact* interval (the four node values involved are >= 0 and the cubic stays >= 0), ``q`` is
+    the cosine-weighted azimuthal integral of ``eval`` (up to the factor ``2 pi``), so ``sample``
+    importance-samples the interpolated BSDF perfectly. Otherwise (undershoot next to a sharp
+    edge of a lobe) the interval uses the linear interpolant of its two end values clamped to
+    ``>= 0``: the sampling density is never negative, and the density kernel applies the same
+    rule.
     Reflection versus transmission is chosen in proportion to the two sides' integrals.
 
 Azimuth (one query = one interpolated series, 16 pairs with spline weights)
     With ``g(phi) = sum_l g_l cos(l phi)`` the interpolated series of the sampled elevation,
     ``phi`` solves ``int_0^phi g = u pi g_0`` on ``[0, pi]`` (the series is even; the other half
-    of ``u`` picks the sign). The density is ``max(g, 0) / (2 pi g_0)``; if ``g_0 <= 0`` (only in a
-    clamped interval) the azimuth is uniform. A series that dips below zero somewhere (ringing of a
-    truncated series, cubic undershoot of very narrow lobes) makes the integral locally decrease,
-    and the sampled azimuths then follow ``g`` only up to the negative mass (documented in
-    :mod:`layersim.sampling`).
+    of ``u`` picks the sign). The density is ``max(g, 0) / (2 pi g_0)``; in a clamped (not exact)
+    elevation interval, or if ``g_0 <= 0``, the azimuth is uniform (there the series is dominated
+    by undershoot and ``2 pi g_0`` would not normalise it). A series that dips below zero somewhere
+    in an exact interval (ringing of a truncated series, cubic undershoot of very narrow lobes)
+    makes the integral locally decrease, and the sampled azimuths then follow ``g`` only up to the
+    negative mass (documented in :mod:`layersim.sampling`).
 
 All arithmetic is float64. Layout of the series table: see :mod:`.fourier_eval`.
 """

@@ -27,13 +27,14 @@ Cubic interpolation undershoots slightly below zero next to sharp edges of a lob
 clamped; see :mod:`layersim.bsdf`), and truncated series ring. The *sampling* density is kept
 non-negative, and ``pdf`` reports exactly the density that is sampled:
 
-* elevation: the interpolated ``f_0`` at the ordinates is clamped to ``>= 0``; in an interval where
-  the cubic through the clamped values still dips below zero, the sampler (and ``pdf``) use the
-  linear interpolant of its two end values instead;
-* azimuth: the density is ``max(g, 0) / (2 pi g_0)`` (uniform if ``g_0 <= 0``, which can only
-  happen in such a linear interval). Where ``g`` is negative somewhere, inverting the integral
-  follows ``g`` only up to its negative mass, so sample and pdf differ by that mass (measured
-  < 1e-6 of the total for the test stacks: see ``tests/test_sampling.py``);
+* elevation: in an interval between ordinates where the interpolated ``f_0`` is negative at one
+  of the four nodes involved or the cubic dips below zero, the sampler (and ``pdf``) use the
+  linear interpolant of its two end values clamped to ``>= 0`` instead, and sample the azimuth
+  uniformly there;
+* azimuth elsewhere: the density is ``max(g, 0) / (2 pi g_0)``. Where ``g`` is negative somewhere,
+  inverting its integral follows ``g`` only up to the negative mass, so ``pdf`` integrates to
+  ``1 + `` that mass (measured: 2e-6 for coated gold at 85 degrees, 5e-6 for rough glass at 30
+  degrees, exactly 1 where nothing rings: see ``tests/test_sampling.py``);
 * weights are ``max(f, 0) |wo.z| / pdf`` per channel (never negative).
 
 RGB
