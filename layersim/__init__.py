@@ -10,6 +10,8 @@ from .errors import LayersimError, SceneError, InfeasibleError, OperatorError, F
 from .scene import Scene, Dielectric, Conductor, Medium, Diffuse, Discretization
 from .plan import Plan, make_plan
 from .bsdf import BSDF
+from . import bsdffile
+from .bsdffile import FourierTable
 from .solver import solve, add
 
 __version__ = "0.1.0"

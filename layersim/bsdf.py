@@ -271,6 +271,20 @@ class BSDF:
                                                 dphi[sel])
         return out
 
+    # ---- importance sampling (layersim.sampling) ----------------------------------------
+
+    def sample(self, wi, u):
+        """Importance-sample outgoing directions: returns ``(wo, weight, pdf)`` with
+        ``weight = f(wi, wo) |wo.z| / pdf`` (per channel). See :mod:`layersim.sampling`."""
+        from .sampling import sampler_for
+        return sampler_for(self).sample(wi, u)
+
+    def pdf(self, wi, wo) -> np.ndarray:
+        """Solid-angle density (1/sr) with which :meth:`sample` draws ``wo``. See
+        :mod:`layersim.sampling`."""
+        from .sampling import sampler_for
+        return sampler_for(self).pdf(wi, wo)
+
     # ---- energy ------------------------------------------------------------------------
 
     def _incident(self, wi):
@@ -402,6 +416,12 @@ class BSDF:
         return out
 
     # ---- persistence -------------------------------------------------------------------
+
+    def export(self, path, version: int = 1, alpha=(0.0, 0.0)):
+        """Write a ``.bsdf`` file (``SCATFUN``) for layerlab, Mitsuba 0.6 and pbrt-v3; returns
+        the :class:`layersim.bsdffile.FourierTable` written. See :mod:`layersim.bsdffile`."""
+        from .bsdffile import export
+        return export(self, path, version=version, alpha=alpha)
 
     def save(self, path) -> Path:
         """Write the solved operators and metadata to ``path`` (numpy ``.npz`` container;

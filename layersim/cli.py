@@ -5,6 +5,12 @@
     layersim info FILE               reload a saved BSDF and print its summary and albedos
     layersim bench [--quick] [--stability] [--backend B ...] --out DIR
                                      solver vs Monte Carlo report and stability suite
+    layersim export SRC [-o F.bsdf]  write a tabulated Fourier BSDF file (layerlab/Mitsuba/pbrt)
+    layersim eval SRC --wi X,Y,Z --wo X,Y,Z     print f(wi, wo) (per channel for RGB)
+    layersim plot SRC (--wi THETA,PHI | --blocks) [-o F.png]   draw slices or operator blocks
+
+SRC is a scene (``.toml``, solved on the fly), a saved BSDF (``.lsim`` from ``solve -o``) or a
+``.bsdf`` file.
 
 Errors in the input print one line (``layersim: error: ...``) and exit with status 2.
 """
@@ -94,6 +100,114 @@ def cmd_bench(args) -> int:
     if fails:
         print(f"stability failures: {', '.join(fails)}", file=sys.stderr)
         return 1
+
+# ---- export / eval / plot ---------------------------------------------------------------
+
+def _load(path):
+    """A BSDF from a scene, a saved ``.lsim`` BSDF or a ``.bsdf`` file (a ``.bsdf`` file that
+    layersim cannot convert, e.g. anisotropic or on foreign nodes, stays a FourierTable, which
+    evaluates as pbrt-v3 does)."""
+    from .bsdf import BSDF
+    from .bsdffile import read
+    from .errors import FileFormatError, InfeasibleError
+    from .solver import solve
+    path = Path(path)
+    with open(path, "rb") as fh:
+        head = fh.read(8)
+    if head[:7] == b"SCATFUN":
+        table = read(path)
+        try:
+            return table.to_bsdf()
+        except (FileFormatError, InfeasibleError) as exc:
+            print(f"note: {path}: {exc}; evaluating the table as pbrt-v3 does",
+                  file=sys.stderr)
+            return table
+    if head[:2] == b"PK":                    # numpy .npz container of BSDF.save
+        return BSDF.load(path)
+    if path.suffix.lower() not in ("", ".toml"):
+        raise ValueError(f"{path}: not a scene (.toml), a saved BSDF (.lsim) or a .bsdf file")
+    return solve(_scene(path))
+
+
+def _vector(text: str, name: str, n: int) -> np.ndarray:
+    try:
+        v = np.array([float(x) for x in text.split(",")])
+    except ValueError:
+        v = np.zeros(0)
+    if v.size != n or not np.all(np.isfinite(v)):
+        what = "X,Y,Z" if n == 3 else "THETA,PHI"
+        raise ValueError(f"{name} must be {n} comma-separated finite numbers {what}, got "
+                         f"{text!r}")
+    return v
+
+
+def _unit(text: str, name: str) -> np.ndarray:
+    v = _vector(text, name, 3)
+    norm = float(np.linalg.norm(v))
+    if norm == 0.0:
+        raise ValueError(f"{name} must be a nonzero direction")
+    return v / norm
+
+
+def _format(f) -> str:
+    vals = np.atleast_1d(np.asarray(f, float))
+    return " ".join(f"{x:.6g}" for x in vals)
+
+
+def cmd_export(args) -> int:
+    from .bsdffile import FourierTable
+    bsdf = _load(args.source)
+    out = Path(args.output) if args.output else Path(Path(args.source).stem + ".bsdf")
+    alpha = _vector(args.alpha, "--alpha", 2) if args.alpha else (0.0, 0.0)
+    if isinstance(bsdf, FourierTable):
+        if args.version != bsdf.version:
+            raise ValueError(f"{args.source}: layersim cannot convert this file, so it can only "
+                             f"be copied as version {bsdf.version}")
+        table = bsdf
+        table.write(out)
+    else:
+        table = bsdf.export(out, version=args.version, alpha=alpha)
+    size = out.stat().st_size
+    print(f"wrote {out}: SCATFUN v{table.version}, {table.n_nodes} nodes, max order "
+          f"{table.max_order}, {table.channels} channel(s) "
+          f"({'Y, R, B' if table.channels == 3 else 'mono'}), {table.coef.size} coefficients, "
+          f"eta = {table.eta:g}, {size} bytes ({size / 2**20:.2f} MiB)")
+    return 0
+
+
+def cmd_eval(args) -> int:
+    wi, wo = _unit(args.wi, "--wi"), _unit(args.wo, "--wo")
+    bsdf = _load(args.source)
+    f = bsdf.eval(wi, wo)
+    print(f"wi = ({wi[0]:.6g}, {wi[1]:.6g}, {wi[2]:.6g}), wo = ({wo[0]:.6g}, {wo[1]:.6g}, "
+          f"{wo[2]:.6g})")
+    label = "f (R G B)" if bsdf.channels == 3 else "f"
+    print(f"{label} = {_format(f)} 1/sr")
+    return 0
+
+
+def cmd_plot(args) -> int:
+    from . import plot
+    if (args.wi is None) == (not args.blocks):
+        raise ValueError("plot needs exactly one of --wi THETA,PHI (hemispherical slices) and "
+                         "--blocks (the operator's four blocks)")
+    name = Path(args.source).stem
+    if args.blocks:
+        if args.order is not None and args.order < 0:
+            raise ValueError(f"--order must be >= 0, got {args.order}")
+        out = Path(args.output) if args.output else Path(name + "_blocks.png")
+        plot.plot_blocks(_load(args.source), out, order=args.order,
+                         phi_d=math.radians(args.phi_d), title=name)
+    else:
+        theta, phi = _vector(args.wi, "--wi", 2)
+        if not 0.0 <= theta <= 180.0 or theta == 90.0:
+            raise ValueError(f"--wi THETA must be in [0, 180] degrees and not 90 (the horizon), "
+                             f"got {theta:g}")
+        t, p = math.radians(theta), math.radians(phi)
+        wi = np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
+        out = Path(args.output) if args.output else Path(name + "_slices.png")
+        plot.plot_slices(_load(args.source), wi, out, log=args.log, title=name)
+    print(f"wrote {out}")
     return 0
 
 
@@ -121,13 +235,61 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--scene", action="append", help="run only this scene (file stem); "
                     "repeatable")
     sp.set_defaults(func=cmd_bench)
+
+    src_help = "scene (.toml), saved BSDF (.lsim) or .bsdf file"
+    sp = sub.add_parser("export", help="write a tabulated Fourier BSDF file (.bsdf) for "
+                                       "layerlab, Mitsuba 0.6 and pbrt-v3")
+    sp.add_argument("source", help=src_help)
+    sp.add_argument("-o", "--output", help="output file (default: SOURCE_STEM.bsdf)")
+    sp.add_argument("--version", type=int, choices=(1, 2), default=1,
+                    help="1: isotropic format of layerlab/Mitsuba 0.6/pbrt-v3 (default); "
+                         "2: the Layer Laboratory's anisotropic layout")
+    sp.add_argument("--alpha", help="A_TOP,A_BOTTOM: Beckmann-equivalent roughness hints for "
+                                    "the header (default 0,0)")
+    sp.set_defaults(func=cmd_export)
+    sp = sub.add_parser("eval", help="print f(wi, wo) in 1/sr (per channel for RGB)")
+    sp.add_argument("source", help=src_help)
+    sp.add_argument("--wi", required=True, help="X,Y,Z toward the light (local frame; "
+                                                "normalised)")
+    sp.add_argument("--wo", required=True, help="X,Y,Z toward the viewer (local frame; "
+                                                "normalised)")
+    sp.set_defaults(func=cmd_eval)
+    sp = sub.add_parser("plot", help="draw hemispherical slices (--wi) or the operator's "
+                                     "blocks (--blocks) into a PNG")
+    sp.add_argument("source", help=src_help)
+    sp.add_argument("--wi", help="THETA,PHI of the light in degrees (theta from the normal)")
+    sp.add_argument("--blocks", action="store_true", help="draw Tbt | Rt over Rb | Ttb")
+    sp.add_argument("--order", type=int, help="with --blocks: Fourier order l to show "
+                                              "(default: the BSDF at --phi-d)")
+    sp.add_argument("--phi-d", type=float, default=0.0,
+                    help="with --blocks: azimuth difference in degrees (0 = specular)")
+    sp.add_argument("--log", action="store_true", help="with --wi: logarithmic colours")
+    sp.add_argument("-o", "--output", help="PNG file (default: SOURCE_STEM_slices.png or "
+                                           "_blocks.png)")
+    sp.set_defaults(func=cmd_plot)
     return p
+
+
+def _attach_negative_values(argv: list) -> list:
+    """``--wo -0.5,0,0.87`` -> ``--wo=-0.5,0,0.87``: argparse would take a comma-separated value
+    starting with a minus sign for an option."""
+    out = []
+    it = iter(range(len(argv)))
+    for k in it:
+        a = argv[k]
+        if (a in ("--wi", "--wo", "--alpha") and k + 1 < len(argv)
+                and argv[k + 1][:1] == "-" and argv[k + 1][1:2] in set("0123456789.")):
+            out.append(f"{a}={argv[k + 1]}")
+            next(it, None)
+        else:
+            out.append(a)
+    return out
 
 
 def main(argv=None) -> int:
     parser = build_parser()
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = parser.parse_args(argv)
+    args = parser.parse_args(_attach_negative_values(argv))
     args.argv = argv
     try:
         return args.func(args)

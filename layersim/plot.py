@@ -1,0 +1,253 @@
+"""Pictures of a solved BSDF (matplotlib, Agg, PNG): the four blocks of the scattering operator
+and hemispherical slices for one incident direction.
+
+:func:`plot_blocks`
+    Like layerlab's ``plot_layer`` (seed 004 sec. 4.2): the BSDF of each block as an image over
+    ``(mu_i, mu_o)`` in the discrete-ordinates convention (``mu > 0`` propagates down), arranged
+    ``Tbt | Rt`` over ``Rb | Ttb``, for one Fourier order ``l`` (the coefficient ``f_l``) or at
+    one azimuth difference ``phi_d`` (the series summed), multiplied by ``|mu_i mu_o|`` to keep
+    grazing values in range; each panel has its own colour scale (0 to its 99th percentile).
+:func:`plot_slices`
+    ``f(wi, wo)`` over the outgoing hemispheres, on the projected unit disk (``wo.x, wo.y``,
+    viewed from above; the transmission disk shows ``wo.z < 0``). On that disk the area element
+    is ``|cos theta_o| d omega``, so the picture is the scattered energy density: integrated over
+    a disk it gives the albedo of that side. Markers: the incident direction (x) and the
+    specular / straight-through directions (+).
+
+Both accept anything with ``eval(wi, wo)``, ``channels`` and ``opaque`` (a
+:class:`layersim.BSDF` or a :class:`layersim.bsdffile.FourierTable`); Fourier orders need a
+``BSDF``. RGB shows the luminance in the block plot and colour images in the slices.
+Figures are drawn with matplotlib's object API and the Agg canvas: no global backend is changed.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.patches import Circle
+
+from .bsdf import BSDF, spline_weights
+from .channels import LUMINANCE
+from .operator import BLOCKS
+
+#: Panel order of layerlab's plot_layer: (block, mu_i range, mu_o range).
+PANELS = (("Tbt", (-1, 0), (-1, 0)), ("Rt", (0, 1), (-1, 0)),
+          ("Rb", (-1, 0), (0, 1)), ("Ttb", (0, 1), (0, 1)))
+_TITLES = {"Rt": r"$R^{t}$", "Rb": r"$R^{b}$", "Ttb": r"$T^{tb}$", "Tbt": r"$T^{bt}$"}
+
+
+def _scalar(values: np.ndarray, channels: int, channel) -> np.ndarray:
+    if channels == 1:
+        return values
+    if channel in (None, "luminance", "Y"):
+        return values @ LUMINANCE
+    return values[..., int(channel)]
+
+
+def _directions(mu_in, mu_out, dphi):
+    """wi, wo with ``wi.z = mu_in``, ``wo.z = -mu_out`` and propagation azimuth difference
+    ``dphi`` (the inverse of the conversion in :mod:`layersim.bsdf`)."""
+    si = np.sqrt(np.maximum(0.0, 1.0 - mu_in ** 2))
+    so = np.sqrt(np.maximum(0.0, 1.0 - mu_out ** 2))
+    wi = np.stack([si, np.zeros_like(si), mu_in], axis=-1)
+    phi_o = math.pi + dphi
+    wo = np.stack([so * np.cos(phi_o), so * np.sin(phi_o) * np.ones_like(so), -mu_out], axis=-1)
+    return wi, wo
+
+
+def _order_coefficient(bsdf: BSDF, c: int, name: str, l: int, mu_out, mu_in) -> np.ndarray:
+    """Interpolated ``f_l(mu_out, mu_in)`` of block ``name`` (1/sr), as ``eval`` interpolates."""
+    op = bsdf.operators[c]
+    if op.blocks[name] is None:
+        return np.zeros(mu_out.shape)
+    table = bsdf._table(c)
+    h = op.h
+    io, wo_ = spline_weights(op.grid.mu, np.abs(mu_out).ravel())
+    ii, wi_ = spline_weights(op.grid.mu, np.abs(mu_in).ravel())
+    pair = table.base(name) + (io[:, :, None] * h + ii[:, None, :]).reshape(-1, 16)
+    weight = (wo_[:, :, None] * wi_[:, None, :]).reshape(-1, 16)
+    start, end = table.offsets[pair], table.offsets[pair + 1]
+    has = l < end - start
+    vals = np.where(has, table.coef[np.where(has, start + l, 0)], 0.0)
+    return np.sum(weight * vals, axis=1).reshape(mu_out.shape)
+
+
+def block_images(bsdf, order: int | None = None, phi_d: float = 0.0, samples: int = 200,
+                 channel=None) -> dict:
+    """The four panels of :func:`plot_blocks` as arrays: ``{block: (samples, samples)}`` indexed
+    ``[mu_o, mu_i]`` (both increasing over the panel's range), already multiplied by
+    ``|mu_i mu_o|``."""
+    out = {}
+    for name, (i0, i1), (o0, o1) in PANELS:
+        # open grids: the ordinates' end points (mu = 0) are on the horizon
+        mu_i = i0 + (np.arange(samples) + 0.5) * (i1 - i0) / samples
+        mu_o = o0 + (np.arange(samples) + 0.5) * (o1 - o0) / samples
+        MI, MO = np.meshgrid(mu_i, mu_o)
+        if order is None:
+            wi, wo = _directions(MI, MO, phi_d)
+            vals = _scalar(np.asarray(bsdf.eval(wi, wo)), bsdf.channels, channel)
+        else:
+            if not isinstance(bsdf, BSDF):
+                raise TypeError("Fourier orders need a layersim BSDF (a .bsdf file converts with "
+                                "FourierTable.to_bsdf())")
+            if order < 0:
+                raise ValueError(f"order must be >= 0, got {order}")
+            per = np.stack([_order_coefficient(bsdf, c, name, order, MO, MI)
+                            for c in range(bsdf.channels)], axis=-1)
+            vals = _scalar(per if bsdf.channels > 1 else per[..., 0], bsdf.channels, channel)
+        out[name] = vals * np.abs(MI * MO)
+    return out
+
+
+def _save(fig: Figure, path) -> Path:
+    path = Path(path)
+    FigureCanvasAgg(fig)
+    fig.savefig(path, dpi=fig.dpi)
+    return path
+
+
+def plot_blocks(bsdf, path, order: int | None = None, phi_d: float = 0.0, samples: int = 200,
+                channel=None, title: str | None = None) -> Path:
+    """Draw the four blocks (``Tbt | Rt`` over ``Rb | Ttb``) into a PNG at ``path``.
+
+    Parameters
+    ----------
+    bsdf : layersim.BSDF or FourierTable
+    path : path-like
+    order : int, optional
+        Show the Fourier coefficient ``f_l`` of this order (signed for ``l >= 1``: diverging
+        colour map); default: the BSDF at azimuth difference ``phi_d``.
+    phi_d : float
+        Azimuth difference of the propagation directions (radians; 0 = specular / straight
+        through) when ``order`` is None.
+    samples : int
+        Pixels per panel side.
+    channel : None, "luminance" or int
+        RGB: what to show (default luminance).
+    """
+    images = block_images(bsdf, order, phi_d, samples, channel)
+    signed = order is not None and order > 0
+    fig = Figure(figsize=(8.4, 7.4), dpi=100, layout="constrained")
+    axes = fig.subplots(2, 2)
+    for ax, (name, (i0, i1), (o0, o1)) in zip(axes.ravel(), PANELS):
+        vals = images[name]
+        # each panel scaled to its own 99th percentile, as layerlab's plot_layer
+        vmax = float(np.percentile(np.abs(vals) if signed else vals, 99))
+        vmax = vmax if vmax > 0 else float(np.abs(vals).max() or 1.0)
+        im = ax.imshow(images[name], extent=[i0, i1, o0, o1], origin="lower", aspect="equal",
+                       cmap="RdBu_r" if signed else "viridis",
+                       vmin=-vmax if signed else 0.0, vmax=vmax, interpolation="nearest")
+        ax.invert_yaxis()
+        missing = getattr(bsdf, "opaque", False) and name != "Rt"
+        ax.set_title(_TITLES[name] + (" (left out: opaque)" if missing else ""))
+        ax.set_xlabel(r"$\mu_i$")
+        ax.set_ylabel(r"$\mu_o$")
+        if not missing:
+            fig.colorbar(im, ax=ax, shrink=0.85)
+    what = (f"Fourier order l = {order}: f_l |mu_i mu_o|" if order is not None else
+            f"f |mu_i mu_o| at phi_d = {math.degrees(phi_d):g} deg")
+    if bsdf.channels == 3:
+        what += (" (luminance)" if channel in (None, "luminance", "Y")
+                 else f" (channel {'RGB'[int(channel)]})")
+    fig.suptitle((title + ": " if title else "") + what)
+    return _save(fig, path)
+
+
+def slice_images(bsdf, wi, resolution: int = 256):
+    """``f(wi, wo)`` on the projected unit disk of each side: ``{"reflection": img,
+    "transmission": img or None}``, images (res, res) or (res, res, 3), NaN outside the disk;
+    row 0 is ``wo.y = -1`` (draw with ``origin="lower"``)."""
+    wi = np.asarray(wi, float)
+    c = (np.arange(resolution) + 0.5) / resolution * 2.0 - 1.0
+    X, Y = np.meshgrid(c, c)
+    r2 = X * X + Y * Y
+    inside = r2 < 1.0
+    z = np.sqrt(np.maximum(0.0, 1.0 - r2))
+    sides = {"reflection": 1.0, "transmission": -1.0}
+    out = {}
+    for side, sgn in sides.items():
+        if side == "transmission" and getattr(bsdf, "opaque", False):
+            out[side] = None
+            continue
+        zz = sgn * np.sign(wi[2]) * z
+        wo = np.stack([X, Y, zz], axis=-1)[inside]
+        wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+        vals = np.asarray(bsdf.eval(wi, wo))
+        shape = (resolution, resolution) + vals.shape[1:]
+        img = np.full(shape, np.nan)
+        img[inside] = vals
+        out[side] = img
+    return out
+
+
+def plot_slices(bsdf, wi, path, resolution: int = 256, log: bool = False,
+                title: str | None = None) -> Path:
+    """Draw hemispherical slices of ``f(wi, .)`` on the projected unit disk into a PNG.
+
+    Parameters
+    ----------
+    bsdf : layersim.BSDF or FourierTable
+    wi : array_like (3,)
+        Unit direction toward the light (local frame).
+    path : path-like
+    resolution : int
+        Pixels per disk side.
+    log : bool
+        Colour by ``log10 f`` (glossy lobes span decades; 4 decades shown); RGB images are
+        always linear (the largest luminance maps to 1, sRGB-encoded). Each side has its own
+        scale.
+    """
+    wi = np.asarray(wi, float)
+    if wi.shape != (3,) or not np.all(np.isfinite(wi)) or abs(np.linalg.norm(wi) - 1) > 1e-5:
+        raise ValueError("wi must be one unit vector of shape (3,)")
+    if wi[2] == 0:
+        raise ValueError("wi lies on the horizon (wi.z == 0)")
+    imgs = slice_images(bsdf, wi, resolution)
+    shown = [(k, v) for k, v in imgs.items() if v is not None]
+    rgb = bsdf.channels == 3
+    fig = Figure(figsize=(max(6.0, 5.2 * len(shown)), 5.2), dpi=100, layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, len(shown)))
+    for ax, (side, img) in zip(axes, shown):
+        # each side has its own scale (reflection is often far weaker than transmission)
+        finite = img[np.isfinite(img)]
+        top = float(finite.max()) if finite.size else 0.0
+        floor = top * 1e-4 if top > 0 else 1e-12
+        if rgb:
+            lum = img[np.isfinite(img[..., 0])] @ LUMINANCE
+            norm = float(lum.max()) if lum.size and lum.max() > 0 else 1.0
+            lin = np.clip(np.nan_to_num(img, nan=0.0) / norm, 0.0, 1.0)
+            srgb = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
+            alpha = np.isfinite(img[..., 0]).astype(float)[..., None]
+            ax.imshow(np.concatenate([srgb, alpha], axis=-1), extent=[-1, 1, -1, 1],
+                      origin="lower", interpolation="nearest")
+        elif log:
+            im = ax.imshow(np.log10(np.maximum(img, floor)), extent=[-1, 1, -1, 1],
+                           origin="lower", cmap="inferno", interpolation="nearest",
+                           vmin=math.log10(floor), vmax=math.log10(top) if top > 0 else 0)
+            fig.colorbar(im, ax=ax, shrink=0.8, label=r"$\log_{10} f$ [1/sr]")
+        else:
+            im = ax.imshow(img, extent=[-1, 1, -1, 1], origin="lower", cmap="inferno",
+                           interpolation="nearest", vmin=0.0, vmax=max(top, 1e-12))
+            fig.colorbar(im, ax=ax, shrink=0.8, label=r"$f$ [1/sr]")
+        ax.add_patch(Circle((0, 0), 1.0, fill=False, lw=0.8, color="0.5"))
+        ax.plot([wi[0]], [wi[1]], "x", color="cyan", ms=8, mew=2, label="incident")
+        ax.plot([-wi[0]], [-wi[1]], "+", color="lime", ms=10, mew=2,
+                label="specular" if side == "reflection" else "straight through")
+        ax.set_xlim(-1.05, 1.05)
+        ax.set_ylim(-1.05, 1.05)
+        ax.set_aspect("equal")
+        ax.set_xlabel(r"$\omega_o.x$")
+        ax.set_ylabel(r"$\omega_o.y$")
+        below = (wi[2] > 0) == (side == "transmission")
+        ax.set_title(f"{side} (wo.z {'<' if below else '>'} 0)")
+        ax.legend(loc="lower left", fontsize=7, framealpha=0.6)
+    theta = math.degrees(math.acos(max(-1.0, min(1.0, wi[2]))))
+    phi = math.degrees(math.atan2(wi[1], wi[0]))
+    fig.suptitle((title + "\n" if title else "")
+                 + f"f(wi, wo) on the projected disk; wi: theta = {theta:.1f} deg, "
+                   f"phi = {phi:.1f} deg")
+    return _save(fig, path)

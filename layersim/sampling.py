@@ -1,0 +1,238 @@
+"""Importance sampling of a solved BSDF from its Fourier representation.
+
+``sample(wi, u)`` draws an outgoing direction ``wo`` with a density close to
+``f(wi, wo) |wo.z|`` and returns ``(wo, weight, pdf)``, ``weight = f(wi, wo) |wo.z| / pdf``;
+``pdf(wi, wo)`` is that density (per steradian). Both are vectorised over any batch shape and run
+as Warp kernels (:mod:`layersim.kernels.fourier_sample`) on the CPU or a GPU (``device`` or
+``$LAYERSIM_DEVICE``).
+
+Algorithm (Jakob et al. 2014, sec. 7; layerlab / Mitsuba 0.6 ``BSDFStorage::sample``)
+--------------------------------------------------------------------------------------
+1. Elevation: the marginal density of ``mu_o = |cos theta_o|`` is the azimuthal integral of the
+   cosine-weighted BSDF, ``2 pi |mu_o| f_0(mu_o, mu_i)``, with ``f_0`` the zeroth Fourier order
+   interpolated exactly as ``eval`` interpolates it (cubic splines in both elevations). It is
+   integrated exactly, piece by piece between ordinates, over *both* hemispheres where the
+   stack transmits, so that reflection versus transmission is chosen in proportion to their
+   energies; a uniform variate is mapped through the piecewise integral by Newton-bisection.
+2. Azimuth: given ``mu_o``, the interpolated series ``g(phi) = sum_l g_l cos(l phi)`` is
+   inverted by Newton-bisection on its integral ``g_0 phi + sum_l g_l sin(l phi) / l``.
+
+Where nothing is clamped, the density is exactly ``f_Y(wi, wo) |wo.z| / E(wi)`` (``f_Y`` the
+luminance of ``eval``, ``E`` its cosine-weighted integral over the sphere): a one-channel BSDF
+then has the constant weight ``E(wi)`` (perfect importance sampling of the interpolated BSDF).
+
+Negative values
+---------------
+Cubic interpolation undershoots slightly below zero next to sharp edges of a lobe (``eval`` is not
+clamped; see :mod:`layersim.bsdf`), and truncated series ring. The *sampling* density is kept
+non-negative, and ``pdf`` reports exactly the density that is sampled:
+
+* elevation: in an interval between ordinates where the interpolated ``f_0`` is negative at one
+  of the four nodes involved or the cubic dips below zero, the sampler (and ``pdf``) use the
+  linear interpolant of its two end values clamped to ``>= 0`` instead, and sample the azimuth
+  uniformly there;
+* azimuth elsewhere: the density is ``max(g, 0) / (2 pi g_0)``. Where ``g`` is negative somewhere,
+  inverting its integral follows ``g`` only up to the negative mass, so ``pdf`` integrates to
+  ``1 + `` that mass (measured: 2e-6 for coated gold at 85 degrees, 5e-6 for rough glass at 30
+  degrees, exactly 1 where nothing rings: see ``tests/test_sampling.py``);
+* weights are ``max(f, 0) |wo.z| / pdf`` per channel (never negative).
+
+RGB
+---
+A three-channel BSDF is sampled by luminance (Rec. 709 weights, :data:`layersim.channels.LUMINANCE`,
+as layerlab and Mitsuba do with the ``Y`` channel of ``.bsdf`` files); the weights are returned
+per channel, ``weight[..., c] = f_c |wo.z| / pdf``.
+
+Invalid queries
+---------------
+``wi`` on the horizon, light from below an opaque stack, or an incident direction from which no
+energy leaves give ``pdf = 0``, ``weight = 0`` and ``wo = (0, 0, 0)`` (a renderer drops such
+samples). The unscattered (delta) transmission of media is not part of ``eval`` and is not
+sampled.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+
+import numpy as np
+
+from .bsdf import _azimuth, _directions, spline_weights
+from .channels import luminance_series
+from .kernels import fourier_sample
+from .operator import BLOCKS
+
+_BLOCK_ID = {name: k for k, name in enumerate(BLOCKS)}
+_SAMPLERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def sampler_for(bsdf) -> "FourierSampler":
+    """The (cached) sampler of a BSDF."""
+    s = _SAMPLERS.get(bsdf)
+    if s is None:
+        s = FourierSampler(bsdf)
+        _SAMPLERS[bsdf] = s
+    return s
+
+
+def _uniforms(u) -> np.ndarray:
+    u = np.asarray(u, dtype=float)
+    if u.ndim == 0 or u.shape[-1] != 2:
+        raise ValueError(f"u must have shape (..., 2) (two uniform variates per sample), got "
+                         f"shape {u.shape}")
+    if not np.all(np.isfinite(u)) or np.any(u < 0.0) or np.any(u > 1.0):
+        raise ValueError("u must hold uniform variates within [0, 1]")
+    return u
+
+
+class FourierSampler:
+    """Importance sampling and its density for one :class:`layersim.BSDF` (see module docs).
+
+    Parameters
+    ----------
+    bsdf : layersim.BSDF
+    device : str, optional
+        Warp device for the kernels (default: ``$LAYERSIM_DEVICE`` or the CPU).
+    """
+
+    def __init__(self, bsdf, device=None):
+        self.bsdf = bsdf
+        self.device = device
+        self.mu = np.asarray(bsdf.grid.mu, float)
+        self.h = self.mu.size
+        self.offsets, self.coef = luminance_series(bsdf)
+        counts = np.diff(self.offsets)
+        self.c0 = np.where(counts > 0, self.coef[np.minimum(self.offsets[:-1],
+                                                            max(self.coef.size - 1, 0))], 0.0)
+        op = bsdf.operators[0]
+        self.present = {name: op.blocks[name] is not None for name in BLOCKS}
+
+    # ---- helpers -----------------------------------------------------------------------
+
+    def _base(self, name: str) -> int:
+        return _BLOCK_ID[name] * self.h * self.h if self.present[name] else -1
+
+    def _bases(self, mu_in: np.ndarray):
+        """First pair of the reflection and transmission block for each incident elevation
+        (``-1`` where the block is left out or no light enters)."""
+        top = mu_in > 0
+        base_r = np.where(top, self._base("Rt"), self._base("Rb"))
+        base_t = np.where(top, self._base("Ttb"), self._base("Tbt"))
+        dead = mu_in == 0
+        base_r[dead] = -1
+        base_t[dead] = -1
+        return base_r.astype(np.int64), base_t.astype(np.int64)
+
+    def _incident(self, mu_in: np.ndarray):
+        """Spline taps, block bases and side masses for each incident elevation. The masses
+        depend on ``mu_in`` only (not on the azimuth), so they are computed once per distinct
+        value (a batch sharing one ``wi`` costs one integration)."""
+        in_taps, in_w = spline_weights(self.mu, np.abs(mu_in))
+        base_r, base_t = self._bases(mu_in)
+        keys, first, inverse = np.unique(mu_in, return_index=True, return_inverse=True)
+        masses = fourier_sample.side_masses(self.mu, self.c0, in_taps[first], in_w[first],
+                                            base_r[first], base_t[first], self.device)
+        return in_taps, in_w, base_r, base_t, masses[inverse.ravel()]
+
+    def _pairs(self, base, mu_out, in_taps, in_w):
+        """16 neighbouring pairs and weights (the same spline weights as ``eval``)."""
+        io, wo_ = spline_weights(self.mu, mu_out)
+        h = self.h
+        pair = base[:, None] + (io[:, :, None] * h + in_taps[:, None, :]).reshape(-1, 16)
+        weight = (wo_[:, :, None] * in_w[:, None, :]).reshape(-1, 16)
+        return pair, weight
+
+    # ---- public ------------------------------------------------------------------------
+
+    def sample(self, wi, u):
+        """Draw outgoing directions.
+
+        Parameters
+        ----------
+        wi : array_like, shape (..., 3)
+            Unit directions toward the light (local frame).
+        u : array_like, shape (..., 2)
+            Uniform variates in [0, 1]; ``u[..., 1]`` picks the elevation (and side),
+            ``u[..., 0]`` the azimuth. Broadcast against ``wi``.
+
+        Returns
+        -------
+        wo : ndarray, shape (..., 3)
+            Sampled unit directions toward the viewer (``(0, 0, 0)`` for invalid samples).
+        weight : ndarray, shape (...) or (..., 3)
+            ``max(f(wi, wo), 0) |wo.z| / pdf`` per channel (0 where ``pdf == 0``).
+        pdf : ndarray, shape (...)
+            Solid-angle density of ``wo`` (1/sr), equal to :meth:`pdf` at ``wo``.
+        """
+        wi = _directions("wi", wi)
+        u = _uniforms(u)
+        shape = np.broadcast_shapes(wi.shape[:-1], u.shape[:-1])
+        wi = np.broadcast_to(wi, shape + (3,)).reshape(-1, 3)
+        u = np.broadcast_to(u, shape + (2,)).reshape(-1, 2)
+        Q = wi.shape[0]
+        mu_in = wi[:, 2]
+        in_taps, in_w, base_r, base_t, masses = self._incident(mu_in)
+        mu_o, side, pdf_mu, exact = fourier_sample.sample_elevation(
+            self.mu, self.c0, in_taps, in_w, base_r, base_t, masses, u[:, 1], self.device)
+        ok = side >= 0
+        wo = np.zeros((Q, 3))
+        pdf = np.zeros(Q)
+        if ok.any():
+            sel = np.flatnonzero(ok)
+            base = np.where(side[sel] == 0, base_r[sel], base_t[sel])
+            pair, weight = self._pairs(base, mu_o[sel], in_taps[sel], in_w[sel])
+            dphi, pdf_phi = fourier_sample.sample_azimuth(self.offsets, self.coef, pair, weight,
+                                                          exact[sel], u[sel, 0], self.device)
+            phi_o = _azimuth(wi[sel]) + math.pi + dphi
+            sin_t = np.sqrt(np.maximum(0.0, 1.0 - mu_o[sel] ** 2))
+            sgn = np.sign(mu_in[sel]) * np.where(side[sel] == 0, 1.0, -1.0)
+            wo[sel] = np.stack([sin_t * np.cos(phi_o), sin_t * np.sin(phi_o),
+                                sgn * mu_o[sel]], axis=-1)
+            pdf[sel] = pdf_mu[sel] * pdf_phi
+        good = pdf > 0
+        wo[~good] = 0.0
+        nch = self.bsdf.channels
+        weight = np.zeros((Q, nch))
+        if good.any():
+            g = np.flatnonzero(good)
+            f = self.bsdf.eval(wi[g], wo[g]).reshape(g.size, nch)
+            weight[g] = np.maximum(f, 0.0) * (np.abs(wo[g, 2]) / pdf[g])[:, None]
+        weight = weight[:, 0] if nch == 1 else weight
+        return (wo.reshape(shape + (3,)), weight.reshape(shape + weight.shape[1:]),
+                pdf.reshape(shape))
+
+    def pdf(self, wi, wo) -> np.ndarray:
+        """Solid-angle density (1/sr) with which :meth:`sample` draws ``wo`` given ``wi``.
+
+        Parameters
+        ----------
+        wi, wo : array_like, shape (..., 3)
+            Unit directions (broadcast against each other).
+
+        Returns
+        -------
+        ndarray, shape (...)
+            0 on the horizon, for left-out blocks and for invalid ``wi``.
+        """
+        wi = _directions("wi", wi)
+        wo = _directions("wo", wo)
+        wi, wo = np.broadcast_arrays(wi, wo)
+        shape = wi.shape[:-1]
+        wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+        mu_in = wi[:, 2]
+        in_taps, in_w, base_r, base_t, masses = self._incident(mu_in)
+        same = np.sign(wo[:, 2]) == np.sign(mu_in)
+        side = np.where(same, 0, 1).astype(np.int32)
+        side[(wo[:, 2] == 0) | (mu_in == 0)] = -1
+        mu_o = np.abs(wo[:, 2])
+        pdf, exact = fourier_sample.pdf_elevation(self.mu, self.c0, in_taps, in_w, base_r,
+                                                  base_t, masses, mu_o, side, self.device)
+        ok = np.flatnonzero(pdf > 0)
+        if ok.size:
+            base = np.where(side[ok] == 0, base_r[ok], base_t[ok])
+            pair, weight = self._pairs(base, mu_o[ok], in_taps[ok], in_w[ok])
+            dphi = _azimuth(wo[ok]) - _azimuth(wi[ok]) - math.pi
+            pdf[ok] *= fourier_sample.pdf_azimuth(self.offsets, self.coef, pair, weight,
+                                                  exact[ok], dphi, self.device)
+        return pdf.reshape(shape)

@@ -1,0 +1,181 @@
+"""The export / eval / plot commands and the pictures behind them: the same f from a scene, a
+saved BSDF and an exported .bsdf file; PNGs that show what they claim (slices integrate to the
+albedo on the projected disk, lobes where reflection and Snell's law put them); bad input gives
+one line and exit status 2."""
+
+import re
+
+import matplotlib.image
+import numpy as np
+import pytest
+
+import layersim
+from layersim import plot
+from layersim.cli import main as cli_main
+
+from conftest import unit
+
+GLASS_TOML = """
+[stack]
+name = "glass"
+
+[[layer]]
+kind = "dielectric"
+ior = 1.5
+roughness = 0.3
+
+[discretization]
+n = 48
+md = 64
+"""
+
+RGB_TOML = """
+[[layer]]
+kind = "dielectric"
+ior = 1.5
+roughness = 0.3
+
+[[layer]]
+kind = "conductor"
+ior = [[0.143552, 3.98397], [0.377438, 2.38495], [1.43825, 1.60434]]
+roughness = 0.3
+
+[discretization]
+n = 48
+md = 64
+"""
+
+
+@pytest.fixture(scope="module")
+def glass_files(tmp_path_factory):
+    """Scene files, and the glass and RGB stacks solved once and saved (.lsim)."""
+    d = tmp_path_factory.mktemp("cli")
+    (d / "glass.toml").write_text(GLASS_TOML)
+    (d / "rgb.toml").write_text(RGB_TOML)
+    layersim.solve(layersim.Scene.from_toml(d / "rgb.toml")).save(d / "rgb.lsim")
+    layersim.solve(layersim.Scene.from_toml(d / "glass.toml")).save(d / "glass.lsim")
+    return d
+
+
+@pytest.fixture(scope="module")
+def glass(glass_files):
+    return layersim.BSDF.load(glass_files / "glass.lsim")
+
+
+def _f(out: str) -> np.ndarray:
+    line = [l for l in out.splitlines() if l.startswith("f")][-1]
+    return np.array([float(x) for x in re.findall(r"[-+0-9.eE]+(?= )", line.split("=")[1])])
+
+
+def test_eval_is_the_same_from_a_scene_a_saved_bsdf_and_a_bsdf_file(glass_files, glass,
+                                                                    capsys):
+    d = glass_files
+    assert cli_main(["export", str(d / "glass.toml"), "-o", str(d / "glass.bsdf")]) == 0
+    out = capsys.readouterr().out
+    assert "SCATFUN v1, 50 nodes" in out and f"{(d / 'glass.bsdf').stat().st_size} bytes" in out
+    values = []
+    for src in ("glass.toml", "glass.lsim", "glass.bsdf"):
+        # a negative first component right after --wo must not be taken for an option
+        assert cli_main(["eval", str(d / src), "--wi", "0.3,0.2,0.933", "--wo",
+                         "-0.2,-0.13,-0.97"]) == 0
+        values.append(_f(capsys.readouterr().out))
+    assert values[0].size == 1 and values[0][0] > 0
+    np.testing.assert_allclose(values, values[0][0], rtol=1e-5)
+    wi, wo = np.array([0.3, 0.2, 0.933]), np.array([-0.2, -0.13, -0.97])
+    expected = glass.eval(wi / np.linalg.norm(wi), wo / np.linalg.norm(wo))
+    assert values[0][0] == pytest.approx(float(expected), rel=1e-5)
+
+
+def test_eval_prints_one_value_per_channel(glass_files, capsys):
+    assert cli_main(["eval", str(glass_files / "rgb.lsim"), "--wi", "0,0,1", "--wo",
+                     "0.1,0,0.99"]) == 0
+    out = capsys.readouterr().out
+    assert "f (R G B)" in out
+    f = _f(out)
+    assert f.size == 3 and f[0] > f[2] > 0          # gold: red above blue
+
+
+def test_export_version_2(glass_files, capsys):
+    out_file = glass_files / "glass_v2.bsdf"
+    assert cli_main(["export", str(glass_files / "glass.lsim"), "-o", str(out_file),
+                     "--version", "2", "--alpha", "0.3,0.3"]) == 0
+    assert "SCATFUN v2" in capsys.readouterr().out
+    table = layersim.bsdffile.read(out_file)
+    assert table.version == 2 and table.alpha == pytest.approx((0.3, 0.3))
+
+
+def test_plot_writes_slices_and_blocks(glass_files, capsys):
+    d = glass_files
+    assert cli_main(["plot", str(d / "glass.lsim"), "--wi", "40,30", "-o",
+                     str(d / "slices.png")]) == 0
+    assert cli_main(["plot", str(d / "glass.lsim"), "--blocks", "--order", "1", "-o",
+                     str(d / "blocks.png")]) == 0
+    assert cli_main(["plot", str(d / "rgb.lsim"), "--wi", "20,0", "--log", "-o",
+                     str(d / "rgb.png")]) == 0
+    for name in ("slices.png", "blocks.png", "rgb.png"):
+        img = matplotlib.image.imread(d / name)
+        assert img.ndim == 3 and img.shape[0] > 300 and img.shape[1] > 300
+        assert img[..., :3].std() > 0.05                    # not a blank canvas
+    assert "wrote" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv,words", [
+    (["eval", "{d}/glass.toml", "--wi", "0.3,0.2", "--wo", "0,0,1"], "3 comma-separated"),
+    (["eval", "{d}/glass.toml", "--wi", "0,0,0", "--wo", "0,0,1"], "nonzero"),
+    (["eval", "{d}/missing.toml", "--wi", "0,0,1", "--wo", "0,0,1"], "No such file"),
+    (["export", "{d}/junk.txt"], "not a scene"),
+    (["export", "{d}/junk.bsdf"], "flag 0x01"),
+    (["plot", "{d}/glass.toml", "--wi", "90,0"], "horizon"),
+    (["plot", "{d}/glass.toml"], "exactly one of"),
+    (["plot", "{d}/glass.toml", "--blocks", "--order", "-1"], "order"),
+])
+def test_bad_input_prints_one_line_and_exits_2(glass_files, capsys, argv, words):
+    d = glass_files
+    (d / "junk.txt").write_text("hello")
+    (d / "junk.bsdf").write_bytes(b"SCATFUN\x01" + bytes(80))
+    assert cli_main([a.format(d=d) for a in argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("layersim: error:") and words in err[0]
+
+
+# ---- what the pictures show --------------------------------------------------------------------
+
+def test_slices_integrate_to_the_albedo_and_peak_where_physics_says(glass):
+    wi = unit(40.0, 30.0)
+    res = 200
+    imgs = plot.slice_images(glass, wi, resolution=res)
+    R, T = glass.albedo(wi)
+    pixel = (2.0 / res) ** 2                  # on the projected disk, dA = |cos| d omega
+    assert np.nansum(imgs["reflection"]) * pixel == pytest.approx(float(R), rel=0.02)
+    assert np.nansum(imgs["transmission"]) * pixel == pytest.approx(float(T), rel=0.02)
+    # the transmitted lobe peaks near the refracted direction (Snell: sin = sin 40 / 1.5),
+    # opposite to the incident azimuth; rows are wo.y, columns wo.x
+    t = np.nan_to_num(imgs["transmission"])
+    r_, c_ = np.unravel_index(np.argmax(t), t.shape)
+    x, y = (c_ + 0.5) / res * 2 - 1, (r_ + 0.5) / res * 2 - 1
+    s = np.sin(np.radians(40.0)) / 1.5
+    assert np.hypot(x + s * np.cos(np.radians(30)), y + s * np.sin(np.radians(30))) < 0.06
+
+
+def test_block_images_of_a_lambertian_layer():
+    """f = albedo / (2 pi sum w mu) in Rt only, in order 0 and at every azimuth; order 1 is 0."""
+    bsdf = layersim.solve(layersim.Scene.from_dict({"layer": [{"kind": "diffuse",
+                                                                "albedo": 0.5}]}))
+    f = 0.5 / (2 * np.pi * bsdf.grid.flux_weight.sum())
+    for kwargs in ({"order": 0}, {"phi_d": 1.0}):
+        imgs = plot.block_images(bsdf, samples=20, **kwargs)
+        mu = (np.arange(20) + 0.5) / 20
+        np.testing.assert_allclose(imgs["Rt"], f * np.outer(mu[::-1], mu), rtol=1e-9)
+        for name in ("Rb", "Ttb", "Tbt"):
+            assert np.all(imgs[name] == 0)
+    assert np.all(plot.block_images(bsdf, order=1, samples=10)["Rt"] == 0)
+
+
+def test_block_images_follow_snells_law(glass):
+    """T^tb at phi_d = 0 peaks, for incident mu_i, near the refracted mu_o (for alpha = 0.3 the
+    peak moves toward the normal as the incidence grazes: within 0.04 down to mu_i = 0.6)."""
+    img = plot.block_images(glass, samples=100)["Ttb"]       # [mu_o, mu_i]
+    mu = (np.arange(100) + 0.5) / 100
+    for k in (60, 80, 95):
+        mu_t = np.sqrt(1 - (1 - mu[k] ** 2) / 1.5 ** 2)
+        assert abs(mu[np.argmax(img[:, k])] - mu_t) < 0.04
