@@ -111,11 +111,12 @@ def _sphere_integral(bsdf, wi, k_phi=600):
 def test_pdf_integrates_to_one(request, name, theta):
     """To rounding, plus at most the negative mass of the interpolated eval: where an azimuthal
     series dips below zero, the density max(g, 0) / (2 pi g_0) integrates to 1 + that part of the
-    mass (measured: 1 + 5e-6 for grazing coated gold and for rough glass at 30 degrees, whose
-    eval itself has a negative mass of 3e-4)."""
+    mass (measured: 1 + 5e-6 for grazing coated gold, 1 + 3.5e-5 for rough glass lit from inside
+    at 140 degrees, whose eval has a negative mass of 3.5e-4)."""
     bsdf = request.getfixturevalue(name)
     total, negative = _sphere_integral(bsdf, unit(theta, 25.0))
-    assert 1.0 - 1e-10 <= total <= 1.0 + 1e-10 + min(negative, 1e-5)
+    assert negative < 1e-3
+    assert 1.0 - 1e-10 <= total <= 1.0 + 1e-10 + min(negative, 1e-4)
 
 
 def test_weights_and_pdf_are_consistent_with_eval(rough_glass):
