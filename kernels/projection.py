@@ -17,6 +17,7 @@ so that ``phi = 0`` is the forward (specular or straight-through) direction.
 from __future__ import annotations
 
 import numpy as np
+import scipy.fft
 import warp as wp
 
 from . import physics
@@ -121,42 +122,51 @@ def microfacet_values(mu_i, mu_o, phi, eta, alpha_u, alpha_v, distribution="beck
 def _uniform_eval_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
                          eta: wp.float64, k: wp.float64, au: wp.float64, av: wp.float64,
                          dist: int, f: wp.array2d(dtype=wp.float64)):
+    """f[p, j] = BSDF at phi_j = pi j / M, j = 0..M (M + 1 = f.shape[1]): half a period of the
+    even azimuthal function."""
     p, j = wp.tid()
-    n = f.shape[1]
-    phi = wp.float64(2.0) * wp.float64(wp.pi) * wp.float64(j) / wp.float64(n)
+    M = f.shape[1] - 1
+    phi = wp.float64(wp.pi) * wp.float64(j) / wp.float64(M)
     wi, wo = _pair_directions(mu_i[p], mu_o[p], phi)
     f[p, j] = physics.microfacet_eval(wi, wo, eta, k, au, av, dist)
 
 
 @wp.kernel
-def _cosine_dft_kernel(f: wp.array2d(dtype=wp.float64), table: wp.array(dtype=wp.float64),
+def _cosine_dct_kernel(f: wp.array2d(dtype=wp.float64), table: wp.array(dtype=wp.float64),
                        c: wp.array2d(dtype=wp.float64)):
-    """c[p, l] = (2 - delta_l0) / N sum_j f[p, j] cos(2 pi l j / N), with the cosines read from
-    an exact table (index l j mod N) instead of a recurrence."""
+    """Trapezoidal cosine coefficients from half-period samples (a DCT-I):
+    c[p, l] = (2 - delta_l0) / (2M) [f_0 + (-1)^l f_M + 2 sum_{0<j<M} f_j cos(pi l j / M)],
+    cosines read from an exact table of cos(pi i / M), i < 2M (index l j mod 2M)."""
     p, l = wp.tid()
-    n = f.shape[1]
-    acc = wp.float64(0.0)
-    idx = int(0)
-    for j in range(n):
-        acc += f[p, j] * table[idx]
+    M = f.shape[1] - 1
+    two_m = 2 * M
+    acc = f[p, 0]
+    idx = l
+    for j in range(1, M):
+        if idx >= two_m:
+            idx -= two_m
+        acc += wp.float64(2.0) * f[p, j] * table[idx]
         idx += l
-        if idx >= n:
-            idx -= n
-    scale = wp.float64(2.0) / wp.float64(n)
+    last = f[p, M]
+    if l % 2 == 1:
+        last = -last
+    acc += last
+    scale = wp.float64(1.0) / wp.float64(M)
     if l == 0:
-        scale = wp.float64(1.0) / wp.float64(n)
+        scale = wp.float64(0.5) / wp.float64(M)
     c[p, l] = acc * scale
 
 
 def uniform_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, samples: int,
                           orders: int, device=None) -> np.ndarray:
-    """Cosine coefficients ``f_0 .. f_{orders-1}`` of the BSDF of ordinate pairs from ``samples``
-    uniform azimuths on [0, 2 pi) (trapezoidal rule = DFT; exact up to aliasing of orders beyond
-    ``samples - orders``).
+    """Cosine coefficients ``f_0 .. f_{orders-1}`` of the BSDF of ordinate pairs from the
+    trapezoidal rule with ``samples`` (even) uniform azimuths per period, exact up to aliasing of
+    orders beyond ``samples - orders``. The azimuthal function is even, so only the
+    ``samples / 2 + 1`` azimuths of [0, pi] are evaluated and a DCT-I gives the coefficients.
 
-    On a CUDA device the samples stay on the device: a table-driven DFT kernel computes the
-    requested orders and only those are copied back. On the CPU the kernel samples and numpy's
-    real FFT transforms.
+    On a CUDA device the samples stay on the device: a table-driven DCT kernel computes the
+    requested orders and only those are copied back. On the CPU the kernel samples and scipy's
+    DCT transforms.
     """
     ensure_init()
     dev = device_for(device)
@@ -165,19 +175,22 @@ def uniform_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, sampl
     P = mu_i.size
     if P == 0:
         return np.zeros((0, orders))
+    if samples % 2:
+        raise ValueError("samples must be even")
+    M = samples // 2
     params = _interface_params(eta, alpha_u, alpha_v, distribution)
-    f = wp.empty((P, samples), dtype=wp.float64, device=dev)
-    wp.launch(_uniform_eval_kernel, dim=(P, samples), device=dev,
+    f = wp.empty((P, M + 1), dtype=wp.float64, device=dev)
+    wp.launch(_uniform_eval_kernel, dim=(P, M + 1), device=dev,
               inputs=[wp.array(mu_i, dtype=wp.float64, device=dev),
                       wp.array(mu_o, dtype=wp.float64, device=dev), *params], outputs=[f])
     if dev.is_cuda:
-        table = np.cos(2.0 * np.pi * np.arange(samples) / samples)
+        table = np.cos(np.pi * np.arange(2 * M) / M)
         c = wp.empty((P, orders), dtype=wp.float64, device=dev)
-        wp.launch(_cosine_dft_kernel, dim=(P, orders), device=dev,
+        wp.launch(_cosine_dct_kernel, dim=(P, orders), device=dev,
                   inputs=[f, wp.array(table, dtype=wp.float64, device=dev)], outputs=[c])
         return c.numpy()
-    coef = np.fft.rfft(f.numpy(), axis=1).real[:, :orders] / samples
-    coef[:, 1:] *= 2.0
+    coef = scipy.fft.dct(f.numpy(), type=1, axis=1)[:, :orders] / M
+    coef[:, 0] *= 0.5
     out = np.zeros((P, orders))
     out[:, :coef.shape[1]] = coef
     return out

@@ -22,7 +22,9 @@ wide.
 
 from __future__ import annotations
 
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -65,6 +67,9 @@ def fit_terms(phi_max: np.ndarray, limit: int) -> np.ndarray:
 N_COARSE = 17
 #: Pairs per batch (bounds the temporary memory of the fit: ~Q*L*8 bytes per pair).
 BATCH = 4096
+#: Threads projecting the blocks of an interface concurrently (``$LAYERSIM_BLOCK_WORKERS``;
+#: default: the number of CPU cores).
+BLOCK_WORKERS = int(os.environ.get("LAYERSIM_BLOCK_WORKERS", "0")) or (os.cpu_count() or 1)
 
 
 @dataclass
@@ -85,6 +90,7 @@ class ProjectionStats:
     notes: list = field(default_factory=list)
 
     def merge(self, other: "ProjectionStats") -> None:
+        self.notes.extend(other.notes)
         self.pairs += other.pairs
         self.projected += other.projected
         self.refit += other.refit
@@ -311,23 +317,36 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
     opaque = isinstance(layer, Conductor)
     names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
     series = {}
+    # Blocks are independent: project them concurrently (Warp CPU launches, FFTs and LAPACK
+    # release the GIL), one worker per core up to the number of blocks.
+    def project(name, triangle):
+        own = ProjectionStats()       # one per block: no counters shared between threads
+        chunks = _project_block(grid, name, m, eta, alpha, dist, own, triangle=triangle,
+                                method=method)
+        return chunks, own
+
     if reciprocity:
         # Reflection blocks are symmetric, and Tbt[a, b] = Ttb[b, a] / eta^2 (generalized
         # reciprocity f(wi, wo) / eta_o^2 = f(wo, wi) / eta_i^2, radiance convention).
-        for name in names:
-            if name == "Tbt":
-                series[name] = _mirror(series["Ttb"], 1.0 / eta.real ** 2, skip_diagonal=False)
-            elif name == "Ttb":
-                series[name] = _project_block(grid, name, m, eta, alpha, dist, stats,
-                                              method=method)
-            else:
-                half = _project_block(grid, name, m, eta, alpha, dist, stats, triangle=True,
-                                      method=method)
-                series[name] = half + _mirror(half)
+        jobs = {name: (name, name != "Ttb") for name in names if name != "Tbt"}
     else:
-        for name in names:
-            series[name] = _project_block(grid, name, m, eta, alpha, dist, stats,
-                                          method=method)
+        jobs = {name: (name, False) for name in names}
+    workers = min(len(jobs), BLOCK_WORKERS)
+    if workers > 1:
+        with ThreadPoolExecutor(workers) as pool:
+            done = dict(zip(jobs, pool.map(lambda job: project(*job), jobs.values())))
+    else:
+        done = {name: project(*job) for name, job in jobs.items()}
+    for name in done:
+        done[name], own = done[name]
+        stats.merge(own)
+    for name in names:
+        if name not in done:
+            series[name] = _mirror(done["Ttb"], 1.0 / eta.real ** 2, skip_diagonal=False)
+        elif reciprocity and name != "Ttb":
+            series[name] = done[name] + _mirror(done[name])
+        else:
+            series[name] = done[name]
     if opaque:
         series.update({"Rb": None, "Ttb": None, "Tbt": None})
     stats.seconds += time.perf_counter() - t0

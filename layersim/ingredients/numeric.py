@@ -19,6 +19,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+import scipy.fft
 
 from .. import fourier
 from ..kernels import projection as kproj
@@ -38,7 +39,10 @@ def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, 
                    max_samples, min_samples=16):
     length = fourier.peak_length(q0, qpi, dist, ALIAS_RELERR) + microfacet.L_FIT
     need = m + EXTRA_ORDERS + length
-    N = np.maximum(min_samples, 1 << np.ceil(np.log2(need)).astype(int))
+    # even sample counts whose half (the DCT length) is FFT-friendly, not powers of two: less
+    # oversampling for the same aliasing bound
+    N = 2 * np.array([scipy.fft.next_fast_len(int(x)) for x in
+                      np.maximum(min_samples, need + 1) // 2 + 1])
     aliased = N > max_samples
     stats.aliased += int(np.count_nonzero(aliased))
     N = np.minimum(N, max_samples)
