@@ -43,7 +43,9 @@ def simulate(scene: Scene, wi, particles: int, mu_edges=(0.0, 1.0), phi_edges=(0
     phi_edges : array_like
         Increasing bin edges in ``phi_o`` (radians) within [0, 2 pi].
     backend : {"auto", "warp-cpu", "warp-cuda", "opencl"}
-        Where to run; ``"auto"`` picks CUDA, else OpenCL, else Warp's CPU device.
+        Where to run; ``"auto"`` picks the fastest present: CUDA, else OpenCL on a GPU or on a
+        CPU device with enough compute units, else Warp's CPU device (see
+        :mod:`layersim.montecarlo.backends`).
     seed : int
         0 <= seed < 2^64. The same seed gives bit-identical tallies on the same backend, for any
         ``batch_size`` (the random numbers of particle ``p`` depend only on ``(seed, p)`` and the
