@@ -122,6 +122,28 @@ def _coarse(mu_i, mu_o, eta, au, av, dist, qs):
     return theta0, q0, qpi, bound
 
 
+def coarse_lengths(grid: Grid, layer, eta_above: float, ms: int, relerr: float):
+    """Plan pre-pass: series length in ``phi_d`` (maximum over ``phi_s``, plus the smooth
+    factor's terms) of the significant pairs of every block, and whether both elevations lie
+    within ``layersim.plan.THETA_FULL`` of the normal."""
+    from ..plan import THETA_FULL
+    eta = complex(layer.ior) / eta_above
+    names = ("Rt",) if isinstance(layer, Conductor) else ("Rt", "Rb", "Ttb", "Tbt")
+    fw = grid.flux_weight
+    mu_full = math.cos(math.radians(THETA_FULL))
+    lengths, full = [], []
+    qs = max(8, _qs_for(ms) // 2)
+    for name in names:
+        mu_i, mu_o, o, i = _block_pairs(grid, name, triangle=False)
+        _, q0, qpi, bound = _coarse(mu_i, mu_o, eta, layer.alpha_u, layer.alpha_v,
+                                    layer.distribution, qs)
+        sig = bound * 2.0 * np.pi * np.maximum(fw[i], fw[o]) > ENERGY_DROP
+        n = fourier.peak_length(q0[sig].ravel(), qpi[sig].ravel(), layer.distribution, relerr)
+        lengths.append(n.reshape(-1, q0.shape[1]).max(axis=1) + L_FIT)
+        full.append(np.minimum(np.abs(mu_i[sig]), np.abs(mu_o[sig])) >= mu_full)
+    return np.concatenate(lengths), np.concatenate(full)
+
+
 def _supports(theta0, q0, qpi, dist):
     """Common centre ``theta_c`` and half width of the union of the peaks' supports over the
     phi_s samples of each pair."""
