@@ -2,6 +2,8 @@
 
     layersim plan SCENE              print the discretisation plan (no heavy work)
     layersim solve SCENE [-o FILE]   solve, print plan, timings and albedos; save the BSDF
+    layersim subtract STACK KNOWN --side top|bottom [-o FILE] [--eps EPS] [--noise NOISE]
+                                     recover the unknown layer of a solved two-layer stack
 
 Errors in the input print one line (``layersim: error: ...``) and exit with status 2.
 """
@@ -64,6 +66,30 @@ def cmd_solve(args) -> int:
     return 0
 
 
+# --- subtracting equations (layersim.subtract) ---------------------------------------------
+
+def cmd_subtract(args) -> int:
+    from .bsdf import BSDF
+    from .subtract import subtract
+    stack = BSDF.load(args.stack)
+    known = BSDF.load(args.known)
+    result = subtract(stack, known, side=args.side, eps=args.eps, noise=args.noise)
+    infos = result.info["subtract"]
+    for c, info in enumerate(infos if isinstance(infos, list) else [infos]):
+        tag = f"channel {c}: " if isinstance(infos, list) else ""
+        print(f"{tag}eps = {info['eps']:.3g} ({info['method']}); noise level "
+              f"{info['noise']:.3g} ({info['noise_source']}); re-adding residual "
+              f"{info['residual']:.3g}; visible {100 * info['visible']:.0f} % of the angular "
+              f"components; largest R + T {info['energy_max']:.4f}")
+    print("albedo of the recovered layer (energy fractions):")
+    print(_albedo_table(result, [0.0, 30.0, 60.0, 80.0, 89.0]))
+    out = Path(args.output) if args.output else Path(
+        f"{Path(args.stack).stem}-minus-{Path(args.known).stem}.lsim")
+    result.save(out)
+    print(f"wrote {out} (reload with layersim.BSDF.load)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="layersim", description="Reflectance of layered materials")
     sub = p.add_subparsers(dest="command", required=True)
@@ -75,6 +101,20 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-o", "--output", help="where to save the solved BSDF (default: "
                                            "SCENE_STEM.lsim in the current directory)")
     sp.set_defaults(func=cmd_solve)
+    sp = sub.add_parser("subtract", help="recover the unknown layer of a solved stack "
+                                         "(subtracting equations)")
+    sp.add_argument("stack", help="solved stack (.lsim written by 'layersim solve')")
+    sp.add_argument("known", help="solved known layer, same discretisation (solve it with "
+                                  "layersim.solve(scene, like=stack))")
+    sp.add_argument("--side", choices=("top", "bottom"), required=True,
+                    help="where the known layer sits in the stack")
+    sp.add_argument("-o", "--output", help="where to save the recovered layer (default: "
+                                           "STACK-minus-KNOWN.lsim)")
+    sp.add_argument("--eps", type=float, help="Tikhonov parameter (default: automatic, "
+                                              "discrepancy principle)")
+    sp.add_argument("--noise", type=float, help="relative noise level of the stack (default: "
+                                                "estimated from its reciprocity defect)")
+    sp.set_defaults(func=cmd_subtract)
     return p
 
 

@@ -96,7 +96,7 @@ def _solve(scene, like, threads, verbose) -> BSDF:
         op = like.operators[0]
         scene = replace(scene, discretization=replace(
             scene.discretization, n=op.grid.n, md=op.m, quadrature=op.grid.rule,
-            ms=getattr(op, "ms", None) if getattr(op, "ms", 0) else scene.discretization.ms))
+            ms=like.info.get("ms", getattr(op, "ms", None)) or scene.discretization.ms))
     plan = make_plan(scene)
     if verbose:
         print(plan.report())

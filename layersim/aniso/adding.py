@@ -69,63 +69,57 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations") -> s
         return B
     rest = np.flatnonzero(ident)
     A_ra = A[active]
-    Brhs = B[active] - A_ra[:, rest] @ B[rest]
+    Brhs = (B[active] - A_ra[:, rest] @ B[rest]).tocsc()
     Aaa = A_ra[:, active].tocsr()
+    # Order the active unknowns by (component, Fourier order): components (parity, and cosine
+    # vs sine for mirror-symmetric stacks) never couple, so the matrix is block banded in this
+    # order with the bandwidth of its widest component, and one factorisation serves them all.
+    label = _component_labels(Aaa, active, h, md)
     mode = basis.slot_mode(md)[active // h]
-    parts_r, parts_c, parts_v = [], [], []
-    comps = _components_active(Aaa, active, h, md)
+    order = np.lexsort((active, mode, label))
+    key = label[order] * (md + 1) + mode[order]
+    cuts = np.flatnonzero(np.diff(key)) + 1
+    starts = np.concatenate([[0], cuts, [order.size]])
+    blk_of = np.empty(order.size, np.int64)
+    blk_of[:] = np.searchsorted(starts, np.arange(order.size), side="right") - 1
+    Ao = Aaa[order][:, order].tocsr()
+    Bo = Brhs[order]
+    coo = Ao.tocoo()
+    bw = int(np.abs(blk_of[coo.row] - blk_of[coo.col]).max(initial=0))
+    need = BlockBandedLU.memory_estimate(starts, bw)
     limit = _memory_limit()
-    for comp in comps:
-        idx = comp                                    # positions within `active`, increasing
-        Ac = Aaa[idx][:, idx]
-        Bc = Brhs[idx].tocsc()
-        m = mode[idx]
-        # blocks: one per Fourier order present in the component
-        cuts = np.flatnonzero(np.diff(m)) + 1
-        starts = np.concatenate([[0], cuts, [idx.size]])
-        blk_of = np.searchsorted(starts, np.arange(idx.size), side="right") - 1
-        coo = Ac.tocoo()
-        bw = int(np.abs(blk_of[coo.row] - blk_of[coo.col]).max(initial=0))
-        need = BlockBandedLU.memory_estimate(starts, bw)
-        if need > limit:
-            raise InfeasibleError(
-                f"{what}: the coupled-mode factorisation needs about {need / 2**30:.2f} GiB "
-                f"(limit {limit / 2**30:.2f} GiB, LAYERSIM_MAX_MEMORY): {idx.size} coupled "
-                f"unknowns over {starts.size - 1} Fourier orders with a coupling band of "
-                f"{bw} orders; lower md or ms in [discretization], or n, or make the "
-                "anisotropy milder")
-        Yc = _solve_component(Ac, Bc, starts, blk_of, bw)
-        if Yc is None:
-            Yc = _sparse_lu_solve(Ac, Bc)
-        Yc = Yc.tocoo()
-        parts_r.append(active[idx[Yc.row]])
-        parts_c.append(Yc.col)
-        parts_v.append(Yc.data)
-    # unknowns outside the active set: y = b
+    if need > limit:
+        raise InfeasibleError(
+            f"{what}: the coupled-mode factorisation needs about {need / 2**30:.2f} GiB "
+            f"(limit {limit / 2**30:.2f} GiB, LAYERSIM_MAX_MEMORY): {active.size} coupled "
+            f"unknowns, {starts.size - 1} blocks, a coupling band of {bw} orders; lower md or "
+            "ms in [discretization], or n, or make the anisotropy milder")
+    Yo = _solve_blocks(Ao, Bo, starts, blk_of, bw)
+    if Yo is None:
+        Yo = _sparse_lu_solve(Ao, Bo)
+    Yo = Yo.tocoo()
     Brest = B[rest].tocoo()
-    parts_r.append(rest[Brest.row])
-    parts_c.append(Brest.col)
-    parts_v.append(Brest.data)
-    Y = sps.csr_matrix((np.concatenate(parts_v), (np.concatenate(parts_r),
-                                                   np.concatenate(parts_c))), shape=B.shape)
+    rows = np.concatenate([active[order[Yo.row]], rest[Brest.row]])
+    cols = np.concatenate([Yo.col, Brest.col])
+    vals = np.concatenate([Yo.data, Brest.data])
+    Y = sps.csr_matrix((vals, (rows, cols)), shape=B.shape)
     Y.sum_duplicates()
     return Y
 
 
-def _components_active(Aaa, active, h, md):
-    """Components (as increasing position arrays into ``active``) of the active system."""
+def _component_labels(Aaa, active, h, md):
+    """Connected component of the slot graph for every active unknown."""
     slots = basis.n_slots(md)
     slot = active // h
     coo = Aaa.tocoo()
     g = sps.coo_matrix((np.ones(coo.nnz), (slot[coo.row], slot[coo.col])),
                        shape=(slots, slots)).tocsr()
-    n, labels = csgraph.connected_components(g + g.T, directed=False)
-    lab = labels[slot]
-    return [np.flatnonzero(lab == k) for k in np.unique(lab)]
+    _, labels = csgraph.connected_components(g + g.T, directed=False)
+    return labels[slot]
 
 
-def _solve_component(Ac, Bc, starts, blk_of, bw):
-    """Block-LU solve of one component; None if the factorisation or its residual fails."""
+def _solve_blocks(Ac, Bc, starts, blk_of, bw):
+    """Block-LU solve; None if the factorisation or its residual check fails."""
     try:
         lu = BlockBandedLU(Ac, starts, bw)
     except (np.linalg.LinAlgError, ValueError):
@@ -135,8 +129,9 @@ def _solve_component(Ac, Bc, starts, blk_of, bw):
     if cols.size == 0:
         return sps.csr_matrix(Bc.shape)
     # group columns by the first block they touch (columns of one source order together)
-    first = np.array([blk_of[Bc.indices[Bc.indptr[c]:Bc.indptr[c + 1]].min()] for c in cols])
-    last = np.array([blk_of[Bc.indices[Bc.indptr[c]:Bc.indptr[c + 1]].max()] for c in cols])
+    rb = blk_of[Bc.indices]
+    first = np.minimum.reduceat(rb, Bc.indptr[cols])
+    last = np.maximum.reduceat(rb, Bc.indptr[cols])
     rows_out, cols_out, vals_out = [], [], []
     for g in np.unique(first):
         gcols = cols[first == g]

@@ -131,8 +131,9 @@ class AnisoOperator:
     @classmethod
     def from_iso(cls, op: IsoOperator, md: int | None = None) -> "AnisoOperator":
         """The isotropic operator in the slot basis: block diagonal, ``cos<-cos = sin<-sin =
-        B_l`` (see :mod:`layersim.aniso.basis`). Orders at or beyond ``md`` are dropped,
-        missing ones are zero."""
+        B_l`` (see :mod:`layersim.aniso.basis`). Orders at or beyond ``md`` are dropped;
+        missing ones are zero, except for the unscattered beam of media, which occupies every
+        order."""
         md = op.m if md is None else int(md)
         h = op.h
         blocks = {}
@@ -142,14 +143,15 @@ class AnisoOperator:
                 continue
             diag = [op.block(name, 0)]
             for l in range(1, md):
-                b = op.block(name, l)
+                b = op.block(name, l) if l < op.m or name not in op.delta \
+                    else sps.diags(op.delta[name], format="csr")
                 diag += [b, b]
             blocks[name] = sps.block_diag(diag, format="csr")
         return cls(op.grid, md, blocks, op.eta_top, op.eta_bottom, op.delta, ms=0)
 
     @classmethod
     def identity(cls, grid: Grid, md: int, eta: float) -> "AnisoOperator":
-        return cls.from_iso(IsoOperator.identity(grid, 1, eta), md)
+        return cls.from_iso(IsoOperator.identity(grid, md, eta), md)
 
     def with_md(self, md: int) -> "AnisoOperator":
         """The same operator with ``md`` orders (slots beyond are dropped / zero)."""

@@ -204,6 +204,9 @@ def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, stats, geometry):
     stats.refit += int(hard.sum())
     K = min(int(fourier.peak_length(q0.ravel(), qpi.ravel(), dist, RELERR).max()) + L_FIT + 2,
             md + L_FIT)
+    if hard.any():
+        # a kinked smooth factor has a slowly decaying spectrum: keep every order the plan has
+        K = md + L_FIT
     prod = np.zeros((P, ns, K), complex)
     for sel, direct in ((np.flatnonzero(~hard), False), (np.flatnonzero(hard), True)):
         if sel.size:
@@ -227,7 +230,8 @@ def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, stats, geometry):
     tot = np.einsum("pds,d->p", F * F, wd)
     kep = np.einsum("pds,d->p", kept * kept, wd)
     dropped = np.sqrt(np.maximum(tot - kep, 0.0) / np.maximum(tot, 1e-300))
-    return kept, alias, dropped, tot
+    peak_len = fourier.peak_length(q0.ravel(), qpi.ravel(), dist, RELERR).reshape(P, ns)
+    return kept, alias, dropped, tot, peak_len.max(axis=1)
 
 
 def _product_series(mu_i, mu_o, geometry, phi_s, eta, au, av, dist, K, coef, tau_ab):
@@ -240,6 +244,7 @@ def _product_series(mu_i, mu_o, geometry, phi_s, eta, au, av, dist, K, coef, tau
     theta0, q0, qpi, theta_c, width = geometry
     P, ns = q0.shape
     full = int(fourier.peak_length(q0.ravel(), qpi.ravel(), dist, 1e-16).max()) + L_FIT + 2
+    full = max(full, K)
     N = max(64 if coef is not None else N_KINK, 1 << math.ceil(math.log2(2 * full + 2)))
     half = min(N // 2, int(math.ceil(width.max() * N / (2.0 * np.pi))) + 1)
     idx = np.concatenate([np.arange(half + 1), np.arange(N - half, N)]) if half < N // 2 \
@@ -301,9 +306,12 @@ def _aliases(F, s_all, ms, qs):
     return predicted > S_ALIAS * big
 
 
-def _truncate(F, md, stats):
+def _truncate(F, md, stats, peak_len):
     """Zero coefficients below ``RELERR`` times the pair's largest (this also ends each pair's
-    series in d); taper series cut at ``md`` with Lanczos sigma factors (in d)."""
+    series in d); taper series whose *peak* is cut at ``md`` (a lobe narrower than the orders
+    allow) with Lanczos sigma factors in d, so that they blur instead of ringing. A long tail
+    from a kink of the smooth factor (critical angle) is cut at ``md`` without taper: tapering
+    would blur the whole lobe by ~(d / md)^2 to remove a ringing of the tail's size."""
     mag = np.abs(F)
     big = mag.max(axis=(1, 2), keepdims=True)
     small = mag < RELERR * np.maximum(big, 1e-300)
@@ -312,8 +320,8 @@ def _truncate(F, md, stats):
     length = F.shape[1] - np.argmax(above[:, ::-1], axis=1)
     length[~above.any(axis=1)] = 0
     stats.orders_needed = max(stats.orders_needed, int(length.max(initial=0)))
-    cut = length > md
-    stats.truncated += int(np.count_nonzero(cut))
+    stats.truncated += int(np.count_nonzero(length > md))
+    cut = (length > md) & (peak_len > md)
     F = F[:, :md].copy()
     if cut.any():
         F[cut] *= np.sinc(np.arange(F.shape[1]) / md)[None, :, None]
@@ -355,8 +363,9 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
             sel = order[start:start + n]
             start += n
             geo = (theta0[sel], q0[sel], qpi[sel], theta_c[sel], width[sel])
-            F, alias, dropped, tot = _project_pairs(mu_i[todo[sel]], mu_o[todo[sel]], eta, au,
-                                                    av, dist, ms, md, qs, stats, geo)
+            F, alias, dropped, tot, plen = _project_pairs(mu_i[todo[sel]], mu_o[todo[sel]],
+                                                          eta, au, av, dist, ms, md, qs, stats,
+                                                          geo)
             ok = ~alias if qs < QS_MAX else np.ones(sel.size, bool)
             if (~ok).any():
                 redo.append(todo[sel[~ok]])
@@ -366,7 +375,7 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
                 w = 2.0 * np.pi * fw[i[todo[sel[ok]]]]
                 stats._num += float(np.sum(w * w * dropped[ok] ** 2 * tot[ok]))
                 stats._den += float(np.sum(w * w * tot[ok]))
-                Fk = _truncate(F[ok], md, stats)
+                Fk = _truncate(F[ok], md, stats, plen[ok])
                 chunks.append((o[todo[sel[ok]]], i[todo[sel[ok]]], Fk))
         todo = np.concatenate(redo) if redo else np.zeros(0, np.int64)
         qs *= 2
