@@ -5,6 +5,7 @@ Public entry points (see CONVENTIONS.md)::
     scene = layersim.Scene.from_toml(path)
     bsdf = layersim.solve(scene)
     bsdf.eval(wi, wo); bsdf.albedo(wi); bsdf.bin_energies(wi, mu_edges, phi_edges)
+    stack = layersim.add(top, bottom); layer = layersim.subtract(stack, known, side="top")
 """
 from .errors import LayersimError, SceneError, InfeasibleError, OperatorError, FileFormatError
 from .scene import Scene, Dielectric, Conductor, Medium, Diffuse, Discretization
@@ -13,5 +14,6 @@ from .bsdf import BSDF
 from . import bsdffile
 from .bsdffile import FourierTable
 from .solver import solve, add
+from .subtract import subtract
 
 __version__ = "0.1.0"

@@ -34,6 +34,9 @@ from .kernels import fourier_eval
 from .operator import BLOCKS, IsoOperator, order_weight
 
 FORMAT_VERSION = 1
+#: Files holding anisotropic (coupled-mode) operators are written as version 2; isotropic ones
+#: stay version 1, readable by older layersim versions.
+FORMAT_VERSION_ANISO = 2
 _BLOCK_ID = {name: k for k, name in enumerate(BLOCKS)}
 
 
@@ -210,9 +213,18 @@ class BSDF:
     def grid(self):
         return self.operators[0].grid
 
-    def _table(self, c: int) -> _SeriesTable:
+    @property
+    def anisotropic(self) -> bool:
+        """True if the operators couple Fourier modes (see :mod:`layersim.aniso`)."""
+        return getattr(self.operators[0], "representation", "isotropic") == "anisotropic"
+
+    def _table(self, c: int):
         if c not in self._tables:
-            self._tables[c] = _SeriesTable(self.operators[c])
+            if self.anisotropic:  # --- anisotropic stacks (layersim.aniso.bsdf) ---
+                from .aniso.bsdf import SeriesTable2D
+                self._tables[c] = SeriesTable2D(self.operators[c])
+            else:
+                self._tables[c] = _SeriesTable(self.operators[c])
         return self._tables[c]
 
     def _per_channel(self, fn):
@@ -246,6 +258,10 @@ class BSDF:
         wi, wo = np.broadcast_arrays(wi, wo)
         shape = wi.shape[:-1]
         wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+        if self.anisotropic:  # --- anisotropic stacks (layersim.aniso.bsdf) ---
+            from .aniso import bsdf as aniso_bsdf
+            return self._per_channel(lambda c: aniso_bsdf.eval_channel(self, c, wi, wo)
+                                     .reshape(shape))
         mu_in, mu_out = wi[:, 2], -wo[:, 2]
         dphi = _azimuth(wo) - _azimuth(wi) - np.pi
         return self._per_channel(lambda c: self._eval_channel(c, mu_in, mu_out, dphi)
@@ -316,6 +332,10 @@ class BSDF:
         wi = self._incident(wi)
         shape = wi.shape[:-1]
         mu = wi.reshape(-1, 3)[:, 2]
+        if self.anisotropic:  # --- anisotropic stacks (layersim.aniso.bsdf) ---
+            from .aniso import bsdf as aniso_bsdf
+            return self._per_channel(lambda c: tuple(
+                x.reshape(shape) for x in aniso_bsdf.albedo_channel(self, c, wi.reshape(-1, 3))))
 
         def one(c):
             idx, w = hat_weights(self.grid.mu, np.abs(mu))
@@ -361,6 +381,10 @@ class BSDF:
                              f"{wi.shape}")
         mu_edges = _edges("mu_edges", mu_edges, 0.0, 1.0)
         phi_edges = _edges("phi_edges", phi_edges, 0.0, 2.0 * np.pi)
+        if self.anisotropic:  # --- anisotropic stacks (layersim.aniso.bsdf) ---
+            from .aniso import bsdf as aniso_bsdf
+            return self._per_channel(lambda c: aniso_bsdf.bins_channel(self, c, wi, mu_edges,
+                                                                       phi_edges))
         return self._per_channel(lambda c: self._bins_channel(c, wi, mu_edges, phi_edges))
 
     def _bins_channel(self, c, wi, mu_edges, phi_edges) -> dict:
@@ -427,7 +451,8 @@ class BSDF:
         """Write the solved operators and metadata to ``path`` (numpy ``.npz`` container;
         reload with :meth:`BSDF.load`)."""
         path = Path(path)
-        arrays = {"format": np.array("layersim-bsdf"), "version": np.array(FORMAT_VERSION),
+        version = FORMAT_VERSION_ANISO if self.anisotropic else FORMAT_VERSION
+        arrays = {"format": np.array("layersim-bsdf"), "version": np.array(version),
                   "channels": np.array(self.channels),
                   "info": np.array(json.dumps(self.info, default=str))}
         for c, op in enumerate(self.operators):
@@ -445,10 +470,11 @@ class BSDF:
                 if str(d.get("format", "")) != "layersim-bsdf":
                     raise FileFormatError(f"{path}: not a layersim BSDF file")
                 version = int(d["version"])
-                if version > FORMAT_VERSION:
+                if version > FORMAT_VERSION_ANISO:
                     raise FileFormatError(f"{path}: format version {version} is newer than "
-                                          f"this layersim ({FORMAT_VERSION}); upgrade layersim")
-                ops = [IsoOperator.from_arrays(d, prefix=f"c{c}_")
+                                          f"this layersim ({FORMAT_VERSION_ANISO}); upgrade "
+                                          "layersim")
+                ops = [_operator_from_arrays(d, prefix=f"c{c}_")
                        for c in range(int(d["channels"]))]
                 info = json.loads(str(d["info"]))
         except FileFormatError:
@@ -459,8 +485,17 @@ class BSDF:
 
     def __repr__(self) -> str:
         op = self.operators[0]
-        return (f"BSDF({self.info.get('scene', '?')}: n={op.grid.n}, md={op.m}, "
+        ms = f", ms={op.ms}" if self.anisotropic else ""
+        return (f"BSDF({self.info.get('scene', '?')}: n={op.grid.n}, md={op.m}{ms}, "
                 f"{self.channels} channel(s), {'opaque' if self.opaque else 'transmissive'})")
+
+
+def _operator_from_arrays(d, prefix: str):
+    """An isotropic or (version 2 files) anisotropic operator from saved arrays."""
+    if str(d.get(f"{prefix}representation", "isotropic")) == "anisotropic":
+        from .aniso.operator import AnisoOperator
+        return AnisoOperator.from_arrays(d, prefix=prefix)
+    return IsoOperator.from_arrays(d, prefix=prefix)
 
 
 def _edges(name, edges, lo, hi) -> np.ndarray:

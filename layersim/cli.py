@@ -8,6 +8,8 @@
     layersim export SRC [-o F.bsdf]  write a tabulated Fourier BSDF file (layerlab/Mitsuba/pbrt)
     layersim eval SRC --wi X,Y,Z --wo X,Y,Z     print f(wi, wo) (per channel for RGB)
     layersim plot SRC (--wi THETA,PHI | --blocks) [-o F.png]   draw slices or operator blocks
+    layersim subtract STACK KNOWN --side top|bottom [-o FILE] [--eps EPS] [--noise NOISE]
+                                     recover the unknown layer of a solved two-layer stack
 
 SRC is a scene (``.toml``, solved on the fly), a saved BSDF (``.lsim`` from ``solve -o``) or a
 ``.bsdf`` file.
@@ -208,6 +210,27 @@ def cmd_plot(args) -> int:
         out = Path(args.output) if args.output else Path(name + "_slices.png")
         plot.plot_slices(_load(args.source), wi, out, log=args.log, title=name)
     print(f"wrote {out}")
+# --- subtracting equations (layersim.subtract) ---------------------------------------------
+
+def cmd_subtract(args) -> int:
+    from .bsdf import BSDF
+    from .subtract import subtract
+    stack = BSDF.load(args.stack)
+    known = BSDF.load(args.known)
+    result = subtract(stack, known, side=args.side, eps=args.eps, noise=args.noise)
+    infos = result.info["subtract"]
+    for c, info in enumerate(infos if isinstance(infos, list) else [infos]):
+        tag = f"channel {c}: " if isinstance(infos, list) else ""
+        print(f"{tag}eps = {info['eps']:.3g} ({info['method']}); noise level "
+              f"{info['noise']:.3g} ({info['noise_source']}); re-adding residual "
+              f"{info['residual']:.3g}; visible {100 * info['visible']:.0f} % of the angular "
+              f"components; largest R + T {info['energy_max']:.4f}")
+    print("albedo of the recovered layer (energy fractions):")
+    print(_albedo_table(result, [0.0, 30.0, 60.0, 80.0, 89.0]))
+    out = Path(args.output) if args.output else Path(
+        f"{Path(args.stack).stem}-minus-{Path(args.known).stem}.lsim")
+    result.save(out)
+    print(f"wrote {out} (reload with layersim.BSDF.load)")
     return 0
 
 
@@ -267,6 +290,20 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-o", "--output", help="PNG file (default: SOURCE_STEM_slices.png or "
                                            "_blocks.png)")
     sp.set_defaults(func=cmd_plot)
+    sp = sub.add_parser("subtract", help="recover the unknown layer of a solved stack "
+                                         "(subtracting equations)")
+    sp.add_argument("stack", help="solved stack (.lsim written by 'layersim solve')")
+    sp.add_argument("known", help="solved known layer, same discretisation (solve it with "
+                                  "layersim.solve(scene, like=stack))")
+    sp.add_argument("--side", choices=("top", "bottom"), required=True,
+                    help="where the known layer sits in the stack")
+    sp.add_argument("-o", "--output", help="where to save the recovered layer (default: "
+                                           "STACK-minus-KNOWN.lsim)")
+    sp.add_argument("--eps", type=float, help="Tikhonov parameter (default: automatic, "
+                                              "discrepancy principle)")
+    sp.add_argument("--noise", type=float, help="relative noise level of the stack (default: "
+                                                "estimated from its reciprocity defect)")
+    sp.set_defaults(func=cmd_subtract)
     return p
 
 

@@ -19,6 +19,11 @@ The plan is made before any heavy work, and says what it chose and why:
   Media add the reach of their phase function.
 * **What is left out**: transmission blocks below an opaque base, index-matched interfaces and
   empty media (exact no-ops), anisotropic coupling (``ms = 0``) for isotropic stacks.
+* **Representation** (see :mod:`layersim.aniso`): isotropic stacks use the cosine series of
+  :class:`~layersim.operator.IsoOperator`. A stack with an anisotropic interface
+  (``alpha_u != alpha_v``) uses coupled modes; each anisotropic layer is projected with the
+  ``ms`` its roughness ratio needs (:func:`layersim.aniso.plan.ms_for_ratio`), isotropic layers
+  keep their cheaper operators and runs of them are added isotropically before conversion.
 * **Memory**: estimated from the same pre-pass (coefficients actually stored) and refused up front
   when it exceeds the limit (``LAYERSIM_MAX_MEMORY`` bytes, default: half the available RAM).
 
@@ -74,6 +79,7 @@ class LayerPlan:
     detail: str = ""
     width: float | None = None   # narrowest lobe width (radians) when it drives n
     orders: int = 1              # Fourier orders this layer needs
+    ms: int = 0                  # mode coupling (anisotropic interfaces)
 
 
 @dataclass
@@ -104,7 +110,7 @@ class Plan:
                else "(complex exponential series, coupled modes)"),
             f"ordinates: n = {self.n}{src('n')}, {self.rule}{src('quadrature')} "
             f"({self.n // 2} per hemisphere)",
-            f"Fourier orders: md = {self.md}{src('md')}" + (f", ms = {self.ms}"
+            f"Fourier orders: md = {self.md}{src('md')}" + (f", ms = {self.ms}{src('ms')}"
                                                           if self.representation != "isotropic"
                                                           else ", ms = 0"),
             f"estimated memory: {self.memory_bytes / 2**20:.1f} MiB",
@@ -151,10 +157,7 @@ def make_plan(scene: Scene) -> Plan:
     plans: list[LayerPlan] = []
     left_out: list[str] = []
     notes: list[str] = []
-    if scene.anisotropic:
-        raise InfeasibleError(
-            "anisotropic roughness needs the coupled-mode (anisotropic) solver, which is not "
-            "available yet; use alpha_u == alpha_v, or layersim.montecarlo for a reference")
+    from .aniso import plan as aplan
     mono = scene.channel(0)
     widths = []
     media_orders = 1
@@ -176,6 +179,16 @@ def make_plan(scene: Scene) -> Plan:
                     "which handles smooth interfaces exactly")
             width, what = _interface_widths(layer, eta_rel)
             widths.append((width, i, kind, what))
+            if layer.anisotropic:  # --- anisotropic interfaces (layersim.aniso.plan) ---
+                ratio = aplan.anisotropy_ratio(layer)
+                lms = aplan.ms_for_ratio(ratio)
+                rot = f", rotated {math.degrees(layer.rotation):g} deg" if layer.rotation else ""
+                plans.append(LayerPlan(
+                    i, kind, "project (coupled modes)",
+                    f"{layer.distribution} alpha=({layer.alpha_u:g}, {layer.alpha_v:g}){rot}, "
+                    f"relative index {_fmt_eta(eta_rel)}; ratio {ratio:.3g} -> ms = {lms}",
+                    width=width, ms=lms))
+                continue
             plans.append(LayerPlan(i, kind, "project",
                                    f"{layer.distribution} alpha={layer.alpha_u:g}, relative "
                                    f"index {_fmt_eta(eta_rel)}", width=width))
@@ -198,7 +211,20 @@ def make_plan(scene: Scene) -> Plan:
     if scene.opaque:
         left_out.append("transmission blocks (Ttb, Tbt) and bottom reflection: the base is "
                         "opaque")
-    left_out.append("anisotropic coupling (ms = 0): every layer is isotropic")
+    ms_needed = max((lp.ms for lp in plans), default=0)
+    anisotropic = ms_needed > 0
+    if not anisotropic:
+        left_out.append("anisotropic coupling (ms = 0): every layer is isotropic")
+    else:
+        iso = [lp for lp in plans if lp.action not in ("left out", "project (coupled modes)")]
+        if iso:
+            left_out.append("coupling in the isotropic layers (" + ", ".join(
+                f"{lp.index}" for lp in iso) + "): they keep cosine-series operators and are "
+                "converted (block diagonal) only when added to an anisotropic one")
+        driver = max((lp for lp in plans if lp.ms), key=lambda lp: lp.ms)
+        notes.append(f"coupled modes: ms = {ms_needed} set by layer {driver.index} "
+                     f"({driver.kind}), roughness ratio -> ms = ceil({aplan.MS_SLOPE} r "
+                     f"{aplan.MS_OFFSET:+g}) (seed 000 eq. (25); benchmarks/ms_study.py)")
 
     # ---- ordinates -------------------------------------------------------------------
     overridden = {}
@@ -232,10 +258,14 @@ def make_plan(scene: Scene) -> Plan:
     prepass = []
     md_needed = media_orders
     for lp in plans:
-        if lp.action != "project":
+        if not lp.action.startswith("project"):
             continue
         layer = mono.layers[lp.index]
-        lengths, full = _interface_prepass(grid, layer, mono.ior_above(lp.index))
+        if lp.ms:
+            lengths, full = aplan.interface_prepass(grid, layer, mono.ior_above(lp.index),
+                                                    lp.ms, SERIES_RELERR)
+        else:
+            lengths, full = _interface_prepass(grid, layer, mono.ior_above(lp.index))
         lp.orders = int(lengths[full].max()) if full.any() else 1
         md_needed = max(md_needed, lp.orders)
         prepass.append((lp, lengths))
@@ -247,6 +277,17 @@ def make_plan(scene: Scene) -> Plan:
                          "need: lobes are truncated in azimuth (ringing)")
     else:
         md = max(1, md_needed)
+    if disc.ms is not None:
+        overridden["ms"] = disc.ms
+        if anisotropic and disc.ms < ms_needed:
+            notes.append(f"ms = {disc.ms} from the scene is below the {ms_needed} the "
+                         "anisotropy needs (relative L2 error above 1 %)")
+        for lp in plans:
+            if lp.ms:
+                lp.ms = max(1, disc.ms) if anisotropic else 0
+        ms = disc.ms if anisotropic else 0
+    else:
+        ms = ms_needed
     stored = 0
     for lp, lengths in prepass:
         stored += int(np.minimum(lengths, md).sum())
@@ -264,15 +305,23 @@ def make_plan(scene: Scene) -> Plan:
     # the stack itself (assume as dense as the densest ingredient, at most dense) plus adding
     # temporaries: per order per thread ~12 dense h x h arrays
     stored_bytes = int(12 * min(stored * 2, 4 * md * h * h)) + 12 * 8 * h * h * 8
+    if anisotropic:  # --- coupled modes (layersim.aniso.plan) ---
+        entries = sum(aplan.operator_entries(lengths, md, lp.ms) for lp, lengths in prepass
+                      if lp.ms)
+        # operators alive during adding (layer, partial stack, product, result) + factors
+        stored_bytes = 12 * 4 * entries + aplan.factor_bytes(h, md, 2 * ms)
     memory = stored_bytes * max(1, scene.channels if scene.channels > 1 else 1)
     limit = memory_limit()
     if memory > limit:
         raise InfeasibleError(
-            f"the plan (n = {n}, md = {md}) needs about {memory / 2**30:.2f} GiB, over the "
-            f"limit of {limit / 2**30:.2f} GiB (LAYERSIM_MAX_MEMORY); lower n or md in "
-            "[discretization], or increase the roughness of the smoothest interface")
-    return Plan(rule=rule, n=n, md=md, layers=plans, left_out=left_out, notes=notes,
-                memory_bytes=memory, overridden=overridden)
+            f"the plan (n = {n}, md = {md}{f', ms = {ms}' if anisotropic else ''}) needs about "
+            f"{memory / 2**30:.2f} GiB, over the limit of {limit / 2**30:.2f} GiB "
+            "(LAYERSIM_MAX_MEMORY); lower n or md" + (" or ms" if anisotropic else "")
+            + " in [discretization], or increase the roughness of the smoothest interface"
+            + (" or reduce the anisotropy" if anisotropic else ""))
+    return Plan(rule=rule, n=n, md=md, ms=ms, layers=plans, left_out=left_out, notes=notes,
+                memory_bytes=memory, overridden=overridden,
+                representation="anisotropic" if anisotropic else "isotropic")
 
 
 def _fmt_eta(eta: complex) -> str:

@@ -1,0 +1,15 @@
+"""Coupled-mode (anisotropic) layer calculus (seed 000, sec. 3-4).
+
+* :mod:`.basis` -- the real slot basis and its relation to the complex exponential basis of
+  seed 000 eq. (7)-(10) (and to the isotropic cosine basis);
+* :mod:`.operator` -- :class:`AnisoOperator`, the four banded-block scattering matrices;
+* :mod:`.banded` -- block-banded LU with pruned block substitution (the solver of the adding
+  and subtracting equations);
+* :mod:`.adding` -- the adding equations (seed 000 eq. (11)-(12)) on coupled operators.
+
+Isotropic layers and stacks keep the cheaper :class:`~layersim.operator.IsoOperator`; they are
+converted (block diagonal, no coupling) only when combined with an anisotropic one.
+"""
+from .operator import AnisoOperator, as_aniso, reciprocity_error
+
+__all__ = ["AnisoOperator", "as_aniso", "reciprocity_error"]

@@ -1,0 +1,256 @@
+"""Evaluation, energy fractions and bin energies of solved anisotropic stacks.
+
+:class:`layersim.bsdf.BSDF` delegates here when its operators are
+:class:`~layersim.aniso.operator.AnisoOperator`. Conventions are those of
+:mod:`layersim.bsdf` (one place converts public directions to the solver's): ``mu_in = wi.z``,
+``mu_out = -wo.z``, and the *propagation* azimuths ``phi_i = atan2(-wi.y, -wi.x)``,
+``phi_o = atan2(wo.y, wo.x)`` in the stack frame, ``phi_d = phi_o - phi_i``,
+``phi_s = phi_o + phi_i``.
+
+* ``eval``: cubic spline interpolation of the coefficients between ordinates (as for isotropic
+  stacks) and the 2-D series of seed 000 eq. (7) (:mod:`layersim.kernels.fourier_eval2d`).
+* ``albedo``: the discretisation's own quadrature. A collimated beam from node ``i`` at
+  azimuth ``phi_i`` delivers ``sum_b E[b, i] v_b(phi_i)`` (``v = (1, 2 cos k phi,
+  2 sin k phi)``, :meth:`AnisoOperator.albedo_slots`): the directional albedo of an anisotropic
+  stack depends on the incident azimuth through the orders ``|k| <= 2 ms`` coupled to order 0.
+  Linear interpolation in the incident elevation, as for isotropic stacks.
+* ``bin_energies``: spline interpolant integrated exactly in elevation and analytically in
+  azimuth, scaled to the quadrature's energy of the same (smooth) part; the unscattered beam goes
+  to the forward bin.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..kernels import fourier_eval2d
+from ..operator import BLOCKS
+from . import basis
+
+_BLOCK_ID = {name: k for k, name in enumerate(BLOCKS)}
+
+
+class SeriesTable2D:
+    """All blocks of one operator as per-pair runs of complex ``f_{d,s}`` (layout of
+    :mod:`layersim.kernels.fourier_eval2d`), unscattered deltas removed."""
+
+    def __init__(self, op):
+        h = op.h
+        md = op.md
+        self.h = h
+        mode = basis.slot_mode(md)
+        is_sin = basis.slot_is_sin(md)
+        fw = op.grid.flux_weight
+        P, L, K, RE, IM = [], [], [], [], []
+        for b_id, name in enumerate(BLOCKS):
+            if op.blocks[name] is None:
+                continue
+            G = op.coefficients(name).tocoo()
+            g = G.data.copy()
+            if name in op.delta:
+                diag = G.row == G.col
+                g[diag] -= op.delta[name][G.row[diag] % h] / (2.0 * np.pi * fw[G.row[diag] % h])
+            a, b = G.row // h, G.col // h
+            o, i = G.row % h, G.col % h
+            pair = b_id * h * h + o * h + i
+            la, lb, sa, sb = mode[a], mode[b], is_sin[a], is_sin[b]
+            half = 0.5 * g
+            m = (la > 0) & (lb > 0)
+            # (l, k)
+            re = np.where(sa == sb, half, 0.0)
+            im = np.where(~sa & sb, half, np.where(sa & ~sb, -half, 0.0))
+            P.append(pair[m]); L.append(la[m]); K.append(lb[m]); RE.append(re[m]); IM.append(im[m])
+            # (l, -k)
+            re = np.where(~sa & ~sb, half, np.where(sa & sb, -half, 0.0))
+            im = np.where(sa != sb, -half, 0.0)
+            P.append(pair[m]); L.append(la[m]); K.append(-lb[m]); RE.append(re[m]); IM.append(im[m])
+            m = (la > 0) & (lb == 0)
+            P.append(pair[m]); L.append(la[m]); K.append(lb[m])
+            RE.append(np.where(sa[m], 0.0, half[m])); IM.append(np.where(sa[m], -half[m], 0.0))
+            m = (la == 0) & (lb > 0)
+            P.append(pair[m]); L.append(la[m]); K.append(lb[m])
+            RE.append(np.where(sb[m], 0.0, g[m])); IM.append(np.where(sb[m], g[m], 0.0))
+            m = (la == 0) & (lb == 0)
+            P.append(pair[m]); L.append(la[m]); K.append(lb[m])
+            RE.append(0.5 * g[m]); IM.append(np.zeros(int(m.sum())))   # f_00 stored halved
+        p = np.concatenate(P) if P else np.zeros(0, np.int64)
+        l = np.concatenate(L).astype(np.int64) if L else np.zeros(0, np.int64)
+        k = np.concatenate(K).astype(np.int64) if K else np.zeros(0, np.int64)
+        re = np.concatenate(RE) if RE else np.zeros(0)
+        im = np.concatenate(IM) if IM else np.zeros(0)
+        d, s = (l + k) // 2, (l - k) // 2
+        keep = (re != 0.0) | (im != 0.0)
+        p, d, s, re, im = p[keep], d[keep], s[keep], re[keep], im[keep]
+        span = 2 * md + 1
+        key = (p * span + (s + md)) * span + (d + md)
+        ukey, inv = np.unique(key, return_inverse=True)
+        cre = np.zeros(ukey.size)
+        cim = np.zeros(ukey.size)
+        np.add.at(cre, inv, re)
+        np.add.at(cim, inv, im)
+        up = ukey // (span * span)
+        us = (ukey // span) % span - md
+        ud = ukey % span - md
+        # runs: one per (pair, s), dense in d (gaps filled with zeros)
+        ps = up * span + (us + md)
+        brk = np.flatnonzero(np.diff(ps)) + 1
+        first = np.concatenate([[0], brk]) if ukey.size else np.zeros(0, np.int64)
+        last = np.concatenate([brk, [ukey.size]]) - 1 if ukey.size else np.zeros(0, np.int64)
+        self.run_s = us[first].astype(np.int32)
+        self.run_d0 = ud[first].astype(np.int32)
+        self.run_len = (ud[last] - ud[first] + 1).astype(np.int32)
+        self.run_start = np.zeros(first.size, np.int64)
+        if first.size:
+            np.cumsum(self.run_len[:-1], out=self.run_start[1:])
+        total = int(self.run_len.sum()) if first.size else 0
+        self.coef_re = np.zeros(total)
+        self.coef_im = np.zeros(total)
+        run_of = np.repeat(np.arange(first.size), last - first + 1)
+        pos = self.run_start[run_of] + (ud - self.run_d0[run_of])
+        self.coef_re[pos] = cre
+        self.coef_im[pos] = cim
+        n_pairs = len(BLOCKS) * h * h
+        self.run_offsets = np.searchsorted(up[first], np.arange(n_pairs + 1)).astype(np.int64)
+
+    def base(self, name: str) -> int:
+        return _BLOCK_ID[name] * self.h * self.h
+
+
+def _prop_azimuths(wi, wo):
+    phi_i = np.arctan2(-wi[:, 1], -wi[:, 0])
+    phi_o = np.arctan2(wo[:, 1], wo[:, 0])
+    return phi_i, phi_o
+
+
+def eval_channel(bsdf, c: int, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """f(wi, wo) (1/sr) for flattened directions (Q, 3) of channel ``c``."""
+    from ..bsdf import spline_weights
+    op = bsdf.operators[c]
+    table = bsdf._table(c)
+    h = op.h
+    mu_in, mu_out = wi[:, 2], -wo[:, 2]
+    phi_i, phi_o = _prop_azimuths(wi, wo)
+    out = np.zeros(mu_in.size)
+    names = np.where(mu_in > 0, np.where(mu_out < 0, "Rt", "Ttb"),
+                     np.where(mu_out > 0, "Rb", "Tbt"))
+    valid = (mu_in != 0) & (mu_out != 0)
+    for name in BLOCKS:
+        sel = np.flatnonzero(valid & (names == name))
+        if sel.size == 0 or op.blocks[name] is None:
+            continue
+        io, wo_ = spline_weights(op.grid.mu, np.abs(mu_out[sel]))
+        ii, wi_ = spline_weights(op.grid.mu, np.abs(mu_in[sel]))
+        pair = table.base(name) + (io[:, :, None] * h + ii[:, None, :]).reshape(sel.size, 16)
+        weight = (wo_[:, :, None] * wi_[:, None, :]).reshape(sel.size, 16)
+        out[sel] = fourier_eval2d.eval_series2d(table, pair, weight,
+                                                 phi_o[sel] - phi_i[sel],
+                                                 phi_o[sel] + phi_i[sel])
+    return out
+
+
+def _v(md: int, phi) -> np.ndarray:
+    """Incident weights ``v_b(phi)`` = (1, 2 cos k phi, 2 sin k phi), shape (S,) + phi.shape."""
+    phi = np.asarray(phi, float)
+    mode = basis.slot_mode(md)
+    is_sin = basis.slot_is_sin(md)
+    arg = mode.reshape((-1,) + (1,) * phi.ndim) * phi[None]
+    v = np.where(is_sin.reshape((-1,) + (1,) * phi.ndim), 2.0 * np.sin(arg), 2.0 * np.cos(arg))
+    v[0] = 1.0
+    return v
+
+
+def node_energy(op, name: str, phi_in: np.ndarray) -> np.ndarray:
+    """Energy fraction through block ``name`` for a beam from each node at propagation azimuth
+    ``phi_in`` (per query): shape (Q, h)."""
+    E = op.albedo_slots()[name]                          # (S, h)
+    return np.einsum("sh,sq->qh", E, _v(op.md, phi_in))
+
+
+def albedo_channel(bsdf, c: int, wi: np.ndarray):
+    """(R, T) for flattened incident directions (Q, 3)."""
+    from ..bsdf import hat_weights
+    op = bsdf.operators[c]
+    mu = wi[:, 2]
+    phi_in = np.arctan2(-wi[:, 1], -wi[:, 0])
+    idx, w = hat_weights(op.grid.mu, np.abs(mu))
+    R = np.zeros(mu.size)
+    T = np.zeros(mu.size)
+    top = mu > 0
+    for sel, rname, tname in ((top, "Rt", "Ttb"), (~top, "Rb", "Tbt")):
+        if not sel.any():
+            continue
+        q = np.flatnonzero(sel)
+        if op.blocks[rname] is not None:
+            e = node_energy(op, rname, phi_in[q])
+            R[q] = np.sum(w[q] * np.take_along_axis(e, idx[q], axis=1), axis=1)
+        if op.blocks[tname] is not None:
+            e = node_energy(op, tname, phi_in[q])
+            T[q] = np.sum(w[q] * np.take_along_axis(e, idx[q], axis=1), axis=1)
+    return R, T
+
+
+def bins_channel(bsdf, c: int, wi: np.ndarray, mu_edges: np.ndarray,
+                 phi_edges: np.ndarray) -> dict:
+    """Bin energies of channel ``c`` for one incident direction (see
+    :meth:`layersim.bsdf.BSDF.bin_energies`)."""
+    from ..bsdf import _bin_quadrature, hat_weights, spline_weights
+    op = bsdf.operators[c]
+    grid = op.grid
+    h, md, S = op.h, op.md, op.slots
+    fw = grid.flux_weight
+    mu_in = wi[2]
+    phi_in_prop = math.atan2(-wi[1], -wi[0])
+    ii, wi_ = hat_weights(grid.mu, np.array([abs(mu_in)]))
+    ii, wi_ = ii[0], wi_[0]
+    v = _v(md, np.array(phi_in_prop))                      # (S,)
+    pts, gw, bin_of = _bin_quadrature(grid.mu, mu_edges)
+    io, wo_ = spline_weights(grid.mu, pts)
+    full_pts, full_w, _ = _bin_quadrature(grid.mu, np.array([0.0, 1.0]))
+    full_io, full_wo = spline_weights(grid.mu, full_pts)
+    # azimuth integrals of u_a(phi_o) = 1, cos l phi, sin l phi over each phi bin
+    mode = basis.slot_mode(md)[:, None].astype(float)
+    is_sin = basis.slot_is_sin(md)[:, None]
+    e0, e1 = phi_edges[None, :-1], phi_edges[None, 1:]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ci = (np.sin(mode * e1) - np.sin(mode * e0)) / mode
+        si = (np.cos(mode * e0) - np.cos(mode * e1)) / mode
+    phi_int = np.where(is_sin, si, ci)
+    phi_int[0] = (e1 - e0)[0]
+    top_from = ("Rt", "Ttb") if mu_in > 0 else ("Tbt", "Rb")
+    out = {}
+    for side, name in zip(("top", "bottom"), top_from):
+        E = np.zeros((mu_edges.size - 1, phi_edges.size - 1))
+        blk = op.blocks[name]
+        if blk is not None:
+            G = op.coefficients(name)
+            F = np.zeros((S, h))
+            delta = op.delta.get(name)
+            for tap, wt in zip(ii, wi_):
+                if wt == 0.0:
+                    continue
+                cols = np.arange(S) * h + tap
+                sub = G[:, cols].toarray()                         # (S h, S)
+                if delta is not None:
+                    for a in range(S):
+                        sub[a * h + tap, a] -= delta[tap] / (2.0 * np.pi * fw[tap])
+                F += wt * (sub @ v).reshape(S, h)
+            vals = np.einsum("pk,apk->ap", wo_, F[:, io])           # (S, points)
+            M = np.zeros((S, mu_edges.size - 1))
+            np.add.at(M.T, bin_of, (vals * (gw * pts)[None, :]).T)
+            E = M.T @ phi_int
+            interp = 2.0 * np.pi * np.sum(np.einsum("pk,pk->p", full_wo, F[0][full_io])
+                                          * full_w * full_pts)
+            quad = 2.0 * np.pi * np.sum(F[0] * fw)
+            if interp != 0.0:
+                E *= quad / interp
+            if delta is not None:
+                energy = float(np.dot(wi_, delta[ii]))
+                kmu = np.searchsorted(mu_edges, abs(mu_in), side="right") - 1
+                phi_out = (math.atan2(wi[1], wi[0]) + np.pi) % (2 * np.pi)
+                kphi = np.searchsorted(phi_edges, phi_out, side="right") - 1
+                if 0 <= kmu < E.shape[0] and 0 <= kphi < E.shape[1]:
+                    E[kmu, kphi] += energy
+        out[side] = E
+    return out

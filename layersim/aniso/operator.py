@@ -1,0 +1,300 @@
+"""Scattering operators with coupled Fourier modes (anisotropic layers and stacks).
+
+An :class:`AnisoOperator` holds the four blocks ``Rt, Rb, Ttb, Tbt`` of seed 000 sec. 3.2 (same
+meaning and solver convention as :class:`~layersim.operator.IsoOperator`: ``mu > 0`` propagates
+down, blocks indexed ``[outgoing, incident]``) as real sparse matrices of shape ``(S h, S h)`` in
+the slot basis of :mod:`layersim.aniso.basis` (``S = 2 md - 1`` real slots of ``h`` ordinates).
+Row/column ``slot * h + node``. The block coupling Fourier mode ``k`` to ``l`` holds
+``B_{l,k} = 2 pi f_{(l+k)/2, (l-k)/2} w |mu|`` (seed 000 eq. (10)); ``ms`` records the largest
+coupling ``|l - k| / 2`` present (0: block diagonal, i.e. isotropic).
+
+Unscattered transmission through media (a delta in direction) sits on the diagonal of the
+transmission blocks in every slot, and is recorded per node in ``delta`` exactly as for
+isotropic operators.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sps
+
+from ..errors import FileFormatError, OperatorError
+from ..operator import BLOCKS, DROP_TOLERANCE, Grid, IsoOperator
+from . import basis
+
+
+class AnisoOperator:
+    """Operator of an anisotropic layer or stack in the real slot basis (module docstring).
+
+    Parameters
+    ----------
+    grid : Grid
+    md : int
+        Fourier orders (modes ``-(md-1) .. md-1``).
+    blocks : dict
+        ``{"Rt": csr (S h, S h), ...}``; ``None`` or missing marks a block left out (opaque
+        operators keep ``Rt`` only).
+    eta_top, eta_bottom : float
+        Absolute indices of the media above and below (``eta_bottom`` None when opaque).
+    delta : dict, optional
+        Unscattered transmission per node, ``{"Ttb": (h,), "Tbt": (h,)}``.
+    ms : int, optional
+        Largest mode coupling present (computed from the blocks when omitted).
+    """
+
+    representation = "anisotropic"
+
+    def __init__(self, grid: Grid, md: int, blocks: dict, eta_top: float = 1.0,
+                 eta_bottom: float | None = 1.0, delta: dict | None = None,
+                 ms: int | None = None):
+        self.grid = grid
+        self.md = int(md)
+        N = basis.n_slots(self.md) * grid.h
+        self.blocks = {}
+        for name in BLOCKS:
+            mat = blocks.get(name)
+            if mat is not None:
+                mat = sps.csr_matrix(mat)
+                if mat.shape != (N, N):
+                    raise OperatorError(f"block {name} has shape {mat.shape}, expected ({N}, {N})"
+                                        f" for md = {self.md} and h = {grid.h}")
+            self.blocks[name] = mat
+        if self.blocks["Rt"] is None:
+            raise OperatorError("an operator needs an Rt block")
+        self.eta_top = float(eta_top)
+        self.eta_bottom = None if self.opaque else float(eta_bottom)
+        self.delta = {} if self.opaque or not delta else {
+            k: np.asarray(v, float) for k, v in delta.items() if v is not None}
+        self.ms = self._coupling() if ms is None else int(ms)
+
+    # ---- structure ---------------------------------------------------------------------
+
+    @property
+    def opaque(self) -> bool:
+        return self.blocks["Ttb"] is None
+
+    @property
+    def h(self) -> int:
+        return self.grid.h
+
+    @property
+    def m(self) -> int:
+        """Number of Fourier orders (alias of ``md``, for code shared with IsoOperator)."""
+        return self.md
+
+    @property
+    def slots(self) -> int:
+        return basis.n_slots(self.md)
+
+    @property
+    def size(self) -> int:
+        return self.slots * self.h
+
+    def _coupling(self) -> int:
+        mode = basis.slot_mode(self.md)
+        worst = 0
+        for mat in self.blocks.values():
+            if mat is None or mat.nnz == 0:
+                continue
+            coo = mat.tocoo()
+            lo, li = mode[coo.row // self.h], mode[coo.col // self.h]
+            # |l - k| / 2 over the complex modes +-lo, +-li that the real entry stands for
+            worst = max(worst, int(np.abs(lo - li).max()) // 2)
+        return worst
+
+    def block(self, name: str) -> sps.csr_matrix:
+        mat = self.blocks[name]
+        if mat is None:
+            raise OperatorError(f"block {name} was left out of this operator (opaque)")
+        return mat
+
+    def nnz(self) -> int:
+        return sum(m.nnz for m in self.blocks.values() if m is not None)
+
+    def memory_bytes(self) -> int:
+        return sum(m.data.nbytes + m.indices.nbytes + m.indptr.nbytes
+                   for m in self.blocks.values() if m is not None)
+
+    def density(self) -> float:
+        """Fraction of nonzero entries over the present blocks, counted on the complex
+        operator of seed 000 (modes ``-(md-1)..md-1``, the same count as the real one)."""
+        present = sum(1 for m in self.blocks.values() if m is not None)
+        return self.nnz() / max(1, present * self.size * self.size)
+
+    def __repr__(self) -> str:
+        return (f"AnisoOperator(n={self.grid.n}, rule={self.grid.rule}, md={self.md}, "
+                f"ms={self.ms}, {'opaque' if self.opaque else 'transmissive'}, "
+                f"nnz={self.nnz()}, density={100 * self.density():.3g}%)")
+
+    # ---- construction ------------------------------------------------------------------
+
+    @classmethod
+    def from_iso(cls, op: IsoOperator, md: int | None = None) -> "AnisoOperator":
+        """The isotropic operator in the slot basis: block diagonal, ``cos<-cos = sin<-sin =
+        B_l`` (see :mod:`layersim.aniso.basis`). Orders at or beyond ``md`` are dropped;
+        missing ones are zero, except for the unscattered beam of media, which occupies every
+        order."""
+        md = op.m if md is None else int(md)
+        h = op.h
+        blocks = {}
+        for name in BLOCKS:
+            if op.blocks[name] is None:
+                blocks[name] = None
+                continue
+            diag = [op.block(name, 0)]
+            for l in range(1, md):
+                b = op.block(name, l) if l < op.m or name not in op.delta \
+                    else sps.diags(op.delta[name], format="csr")
+                diag += [b, b]
+            blocks[name] = sps.block_diag(diag, format="csr")
+        return cls(op.grid, md, blocks, op.eta_top, op.eta_bottom, op.delta, ms=0)
+
+    @classmethod
+    def identity(cls, grid: Grid, md: int, eta: float) -> "AnisoOperator":
+        return cls.from_iso(IsoOperator.identity(grid, md, eta), md)
+
+    def with_md(self, md: int) -> "AnisoOperator":
+        """The same operator with ``md`` orders (slots beyond are dropped / zero)."""
+        if md == self.md:
+            return self
+        n_new = basis.n_slots(md) * self.h
+        n_old = self.size
+        blocks = {}
+        for name, mat in self.blocks.items():
+            if mat is None:
+                blocks[name] = None
+            elif md < self.md:
+                blocks[name] = mat[:n_new, :n_new].tocsr()
+            else:
+                # new orders are empty, except for the unscattered beam, which occupies every
+                # order (the diagonal of the transmission blocks)
+                extra = np.tile(self.delta[name], 2 * (md - self.md)) if name in self.delta \
+                    else np.zeros(n_new - n_old)
+                blocks[name] = sps.block_diag([mat, sps.diags(extra)], format="csr")
+        return AnisoOperator(self.grid, md, blocks, self.eta_top, self.eta_bottom, self.delta)
+
+    def rotated(self, angle: float) -> "AnisoOperator":
+        """The operator of this layer rotated by ``angle`` (radians) about the normal:
+        ``Rot(angle) B Rot(-angle)``, i.e. ``f_{d,s} exp(-2 i s angle)``."""
+        if angle == 0.0:
+            return self
+        rot = basis.rotation_matrix(self.md, self.h, angle)
+        inv = basis.rotation_matrix(self.md, self.h, -angle)
+        blocks = {name: None if mat is None else prune(rot @ mat @ inv)
+                  for name, mat in self.blocks.items()}
+        return AnisoOperator(self.grid, self.md, blocks, self.eta_top, self.eta_bottom,
+                             self.delta)
+
+    # ---- coefficients ------------------------------------------------------------------
+
+    def coefficients(self, name: str) -> sps.csr_matrix:
+        """``G = B / (2 pi w_i |mu_i|)`` of block ``name`` (1/sr), same layout as the block:
+        ``f = sum_{a,b} G[a h + o, b h + i] u_a(phi_o) v_b(phi_i)`` (see
+        :mod:`layersim.aniso.basis`)."""
+        fw = np.tile(self.grid.flux_weight, self.slots)
+        return sps.csr_matrix(self.block(name) @ sps.diags(1.0 / (2.0 * np.pi * fw)))
+
+    def albedo_slots(self) -> dict:
+        """Energy fractions per incident slot and node: ``{"Rt": (S, h), ...}``.
+
+        ``E[b, i] = sum_o B[0 h + o, b h + i] w_o mu_o / (w_i mu_i)``: a collimated beam from
+        node ``i`` at propagation azimuth ``phi_i`` delivers ``sum_b E[b, i] v_b(phi_i)``
+        (``v = (1, 2 cos k phi, 2 sin k phi)``) through the block's side; slot 0 alone is the
+        energy for azimuthally uniform illumination.
+        """
+        fw = self.grid.flux_weight
+        h = self.h
+        out = {}
+        for name, mat in self.blocks.items():
+            if mat is None:
+                continue
+            row0 = mat[:h]
+            out[name] = ((row0.T @ fw) / np.tile(fw, self.slots)).reshape(self.slots, h)
+        return out
+
+    # ---- persistence -------------------------------------------------------------------
+
+    def to_arrays(self, prefix: str = "") -> dict:
+        d = {f"{prefix}representation": np.array("anisotropic"),
+             f"{prefix}rule": np.array(self.grid.rule), f"{prefix}n": np.array(self.grid.n),
+             f"{prefix}md": np.array(self.md), f"{prefix}ms": np.array(self.ms),
+             f"{prefix}eta_top": np.array(self.eta_top),
+             f"{prefix}eta_bottom": np.array(np.nan if self.eta_bottom is None
+                                             else self.eta_bottom)}
+        for name, vec in self.delta.items():
+            d[f"{prefix}delta_{name}"] = vec
+        for name, mat in self.blocks.items():
+            if mat is None:
+                continue
+            d[f"{prefix}{name}_data"] = mat.data
+            d[f"{prefix}{name}_indices"] = mat.indices.astype(np.int32)
+            d[f"{prefix}{name}_indptr"] = mat.indptr.astype(np.int64)
+        return d
+
+    @classmethod
+    def from_arrays(cls, d, prefix: str = "") -> "AnisoOperator":
+        try:
+            grid = Grid.make(str(d[f"{prefix}rule"]), int(d[f"{prefix}n"]))
+            md, ms = int(d[f"{prefix}md"]), int(d[f"{prefix}ms"])
+            eb = float(d[f"{prefix}eta_bottom"])
+            N = basis.n_slots(md) * grid.h
+            blocks = {}
+            for name in BLOCKS:
+                key = f"{prefix}{name}_data"
+                if key not in d:
+                    blocks[name] = None
+                    continue
+                blocks[name] = sps.csr_matrix((d[key], d[f"{prefix}{name}_indices"],
+                                               d[f"{prefix}{name}_indptr"]), shape=(N, N))
+            delta = {name: np.asarray(d[f"{prefix}delta_{name}"]) for name in ("Ttb", "Tbt")
+                     if f"{prefix}delta_{name}" in d}
+            op = cls(grid, md, blocks, float(d[f"{prefix}eta_top"]),
+                     None if np.isnan(eb) else eb, delta, ms=ms)
+        except (KeyError, ValueError, TypeError, OperatorError) as exc:
+            raise FileFormatError(f"not a layersim anisotropic operator ({exc})") from None
+        return op
+
+
+def as_aniso(op, md: int | None = None) -> AnisoOperator:
+    """``op`` as an :class:`AnisoOperator` with ``md`` orders (isotropic operators are
+    converted: block diagonal, no coupling)."""
+    if isinstance(op, AnisoOperator):
+        return op if md is None else op.with_md(md)
+    if isinstance(op, IsoOperator):
+        return AnisoOperator.from_iso(op, md)
+    raise TypeError(f"expected an IsoOperator or AnisoOperator, got {type(op).__name__}")
+
+
+def prune(mat, tolerance: float = DROP_TOLERANCE) -> sps.csr_matrix:
+    """Drop entries below ``tolerance`` times the largest magnitude of ``mat`` (CSR copy)."""
+    mat = sps.csr_matrix(mat)
+    if mat.nnz:
+        cut = tolerance * np.abs(mat.data).max()
+        mat.data[np.abs(mat.data) < cut] = 0.0
+        mat.eliminate_zeros()
+    return mat
+
+
+def reciprocity_error(op: AnisoOperator) -> float:
+    """Largest violation of reciprocity, relative to the largest coefficient.
+
+    In the complex basis reciprocity reads ``f_{d,s}(o <- i) = f_{-d,s}(i <- o)`` (reversing
+    both propagation directions turns ``phi_i, phi_o`` into ``phi_o + pi, phi_i + pi``), i.e.
+    ``G_{l,k}[o,i] = conj(G_{k,l}[i,o])``; in the real basis ``G^T = D^-1 G D`` with
+    ``D = diag(1, 2, 2, ...)`` per slot (:func:`basis.slot_scale`). Transmission obeys the
+    radiance-convention version ``G_tb / eta_b^2 = (G_bt / eta_t^2)^T``.
+    """
+    scale_slot = basis.slot_scale(op.md)
+    D = sps.diags(np.repeat(scale_slot, op.h))
+    Dinv = sps.diags(1.0 / np.repeat(scale_slot, op.h))
+    G = {name: op.coefficients(name) for name, m in op.blocks.items() if m is not None}
+    big = max(abs(g).max() for g in G.values()) + 1e-300
+    worst = 0.0
+    for name in ("Rt", "Rb"):
+        if name in G:
+            g = G[name]
+            worst = max(worst, abs(g.T - Dinv @ g @ D).max() / big)
+    if "Ttb" in G:
+        diff = (G["Ttb"] / op.eta_bottom ** 2).T - Dinv @ (G["Tbt"] / op.eta_top ** 2) @ D
+        worst = max(worst, abs(diff).max() / big)
+    return float(worst)
