@@ -102,6 +102,8 @@ def cmd_bench(args) -> int:
     if fails:
         print(f"stability failures: {', '.join(fails)}", file=sys.stderr)
         return 1
+    return 0
+
 
 # ---- export / eval / plot ---------------------------------------------------------------
 
@@ -210,6 +212,9 @@ def cmd_plot(args) -> int:
         out = Path(args.output) if args.output else Path(name + "_slices.png")
         plot.plot_slices(_load(args.source), wi, out, log=args.log, title=name)
     print(f"wrote {out}")
+    return 0
+
+
 # --- subtracting equations (layersim.subtract) ---------------------------------------------
 
 def cmd_subtract(args) -> int:

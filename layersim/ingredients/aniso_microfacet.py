@@ -49,7 +49,9 @@ from ..aniso.operator import AnisoOperator
 from ..kernels import projection as kproj
 from ..operator import Grid
 from ..scene import Conductor
-from .microfacet import ENERGY_DROP, RELERR, SUPPORT_TOLERANCE, ProjectionStats, _block_pairs
+from .microfacet import L_FIT as ISO_L_FIT
+from .microfacet import (ENERGY_DROP, RELERR, SUPPORT_TOLERANCE, TAPER_THRESHOLD,
+                         ProjectionStats, _block_pairs)
 
 #: Smallest number of phi_s samples (a power of two; mirror symmetry samples half + 1 of them).
 QS_MIN = 16
@@ -230,7 +232,10 @@ def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, stats, geometry):
     tot = np.einsum("pds,d->p", F * F, wd)
     kep = np.einsum("pds,d->p", kept * kept, wd)
     dropped = np.sqrt(np.maximum(tot - kep, 0.0) / np.maximum(tot, 1e-300))
-    peak_len = fourier.peak_length(q0.ravel(), qpi.ravel(), dist, RELERR).reshape(P, ns)
+    # taper decision shared with the isotropic paths (microfacet.needs_taper): the analytic
+    # length of the peak series at TAPER_THRESHOLD, plus the smooth factor's orders
+    peak_len = (fourier.peak_length(q0.ravel(), qpi.ravel(), dist, TAPER_THRESHOLD)
+                + ISO_L_FIT).reshape(P, ns)
     return kept, alias, dropped, tot, peak_len.max(axis=1)
 
 
@@ -308,10 +313,11 @@ def _aliases(F, s_all, ms, qs):
 
 def _truncate(F, md, stats, peak_len):
     """Zero coefficients below ``RELERR`` times the pair's largest (this also ends each pair's
-    series in d); taper series whose *peak* is cut at ``md`` (a lobe narrower than the orders
-    allow) with Lanczos sigma factors in d, so that they blur instead of ringing. A long tail
-    from a kink of the smooth factor (critical angle) is cut at ``md`` without taper: tapering
-    would blur the whole lobe by ~(d / md)^2 to remove a ringing of the tail's size."""
+    series in d); taper series whose *peak* is cut at ``md`` (``peak_len``: the rule of
+    :func:`layersim.ingredients.microfacet.needs_taper`, shared by all projection paths) with
+    Lanczos sigma factors in d, so that they blur instead of ringing. A long tail from a kink of
+    the smooth factor (critical angle) is cut at ``md`` without taper: tapering would blur the
+    whole lobe by ~(d / md)^2 to remove a ringing of the tail's size."""
     mag = np.abs(F)
     big = mag.max(axis=(1, 2), keepdims=True)
     small = mag < RELERR * np.maximum(big, 1e-300)
@@ -321,7 +327,7 @@ def _truncate(F, md, stats, peak_len):
     length[~above.any(axis=1)] = 0
     stats.orders_needed = max(stats.orders_needed, int(length.max(initial=0)))
     stats.truncated += int(np.count_nonzero(length > md))
-    cut = (length > md) & (peak_len > md)
+    cut = peak_len > md
     F = F[:, :md].copy()
     if cut.any():
         F[cut] *= np.sinc(np.arange(F.shape[1]) / md)[None, :, None]

@@ -36,9 +36,12 @@ from ..scene import Conductor, Dielectric
 
 #: Relative truncation of each pair's cosine series (|f_l| < RELERR |f_0| are dropped).
 RELERR = 1e-7
-#: A series cut at m orders is tapered (Lanczos sigma factors) only if the first discarded
-#: coefficients exceed this fraction of f_0: smaller tails ring far less than the taper would
-#: blur every order (sigma factors change order l by ~(pi l / m)^2 / 6).
+#: A series cut at m orders is tapered (Lanczos sigma factors) only if the lobe still has
+#: coefficients above this fraction of f_0 at order m: smaller tails ring far less than the taper
+#: would blur every order (sigma factors change order l by ~(pi l / m)^2 / 6). The decision uses
+#: the analytically known length of the pair's peak series (:func:`fourier.peak_length`), not
+#: the computed tail, so that numerical noise in the tail cannot trigger it and both projection
+#: paths taper the same pairs.
 TAPER_THRESHOLD = 1e-4
 #: The smooth factor is fitted where the peak factor exceeds this fraction of its maximum.
 SUPPORT_TOLERANCE = 1e-14
@@ -257,23 +260,25 @@ def pair_series(mu_i, mu_o, eta: complex, alpha: float, dist: str, m: int, q0=No
     stats.orders_needed = max(stats.orders_needed, int(length.max(initial=0)))
     cut = length > m
     stats.truncated += int(np.count_nonzero(cut))
-    tail = np.abs(series[:, m:]).max(axis=1, initial=0.0) if series.shape[1] > m else \
-        np.zeros(series.shape[0])
     out = np.zeros((series.shape[0], m))
     keep = min(m, series.shape[1])
     out[:, :keep] = series[:, :keep]
     out[np.arange(m)[None, :] >= length[:, None]] = 0.0
     if taper:
-        apply_taper(out, tail, stats)
+        apply_taper(out, needs_taper(q0, qpi, dist, m), stats)
     return out, length
 
 
-def apply_taper(series: np.ndarray, tail: np.ndarray, stats: ProjectionStats) -> None:
-    """Lanczos sigma factors (in place) on rows whose discarded tail (largest coefficient at or
-    beyond m) exceeds :data:`TAPER_THRESHOLD` of f_0: blur instead of Gibbs ringing. Order 0,
-    hence energy, is unchanged."""
+def needs_taper(q0, qpi, dist: str, m: int) -> np.ndarray:
+    """Pairs whose lobe still has Fourier coefficients above :data:`TAPER_THRESHOLD` of f_0 at
+    order ``m`` (from the peak series' analytic length plus the smooth factor's few orders)."""
+    return fourier.peak_length(q0, qpi, dist, TAPER_THRESHOLD) + L_FIT > m
+
+
+def apply_taper(series: np.ndarray, rows: np.ndarray, stats: ProjectionStats) -> None:
+    """Lanczos sigma factors (in place) on the selected rows: blur instead of Gibbs ringing.
+    Order 0, hence energy, is unchanged."""
     m = series.shape[1]
-    rows = tail > TAPER_THRESHOLD * np.abs(series[:, 0])
     if rows.any():
         series[rows] *= np.sinc(np.arange(m) / m)[None, :]
         stats.tapered += int(np.count_nonzero(rows))

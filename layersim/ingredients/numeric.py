@@ -61,10 +61,9 @@ def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, 
     stats.truncated += int(np.count_nonzero(cut))
     stats.orders_needed = max(stats.orders_needed, int(length.max(initial=0)))
     length_m = np.where(cut, m, extra - np.argmax(above[:, ::-1], axis=1))
-    tail = np.abs(series[:, m:]).max(axis=1)
     series = series[:, :m]
     series[np.arange(m)[None, :] >= length_m[:, None]] = 0.0
-    microfacet.apply_taper(series, tail, stats)
+    microfacet.apply_taper(series, microfacet.needs_taper(q0, qpi, dist, m), stats)
     return o, i, series
 
 
