@@ -48,6 +48,9 @@ N_MIN, N_MAX = 64, 4096
 MD_MAX = 20_000
 #: Lobes with both elevations within this angle of the normal keep all their Fourier orders.
 THETA_FULL = 80.0
+#: Lower bound on the orders a lobe of roughness alpha needs: md >= this / alpha (half the
+#: estimate for a Beckmann lobe at THETA_FULL), used to refuse before the pre-pass.
+MD_LOWER_PER_INV_ALPHA = 10.0
 #: Relative truncation of the Fourier series (same as the projection's).
 SERIES_RELERR = 1e-7
 DEFAULT_RULE = "gauss-lobatto"
@@ -253,6 +256,24 @@ def make_plan(scene: Scene) -> Plan:
         n = 3 * math.ceil((n - 1) / 3) + 1
         n += 3 * (n % 2)
     grid = Grid.make(rule, n)
+
+    # ---- early refusal: a cheap lower bound, before the pre-pass ------------------------
+    # A Beckmann lobe at 80 deg needs ~22.8 / alpha orders (K ~ sqrt(2 B ln(1/eps)), B =
+    # tan^2(theta) / (2 alpha^2)); half of that is a safe lower bound on md. For coupled modes
+    # the block-LU factors of the adding equations then bound the memory from below: refuse
+    # there, without paying for a pre-pass that would itself grow like n^2 ms.
+    if ms_needed > 0 and disc.md is None:
+        alpha_min = min(min(mono.layers[lp.index].alpha_u, mono.layers[lp.index].alpha_v)
+                        for lp in plans if lp.action.startswith("project"))
+        md_lower = max(media_orders, math.ceil(MD_LOWER_PER_INV_ALPHA / alpha_min))
+        lower = aplan.factor_bytes(grid.h, md_lower, 2 * (disc.ms or ms_needed))
+        if lower > memory_limit():
+            raise InfeasibleError(
+                f"the plan (n = {n}, md >= {md_lower}, ms = {disc.ms or ms_needed}) needs at "
+                f"least {lower / 2**30:.1f} GiB, over the limit of "
+                f"{memory_limit() / 2**30:.2f} GiB (LAYERSIM_MAX_MEMORY); increase the "
+                "roughness of the smoothest interface, reduce the anisotropy, or lower n, md "
+                "or ms in [discretization]")
 
     # ---- Fourier orders and memory (pre-pass over the interfaces' pairs) ---------------
     prepass = []

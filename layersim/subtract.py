@@ -268,6 +268,25 @@ def _subtract_op(stack, known, side, eps, noise):
     return op, info
 
 
+def relative_error(a, b) -> float:
+    """Relative Frobenius error of operator ``a`` against ``b`` over all blocks, in the energy
+    basis (entries scaled by ``sqrt(w mu)`` of the outgoing over the incident ordinate, where a
+    clear layer is the identity): the distance used to judge a recovered layer."""
+    from .aniso.operator import as_aniso
+    a, b = as_aniso(a), as_aniso(b)
+    w = np.tile(np.sqrt(a.grid.flux_weight), a.slots)
+    W, Wi = sps.diags(w), sps.diags(1.0 / w)
+    num = den = 0.0
+    for k, blk in b.blocks.items():
+        if blk is None:
+            if a.blocks[k] is not None:
+                raise ValueError(f"block {k} is present in one operator only")
+            continue
+        num += (W @ (a.blocks[k] - blk) @ Wi).power(2).sum()
+        den += (W @ blk @ Wi).power(2).sum()
+    return float(np.sqrt(num / den))
+
+
 def _raise_diffusing(side, vis, e, noise_level, source, h):
     noise = "" if noise_level is None else f", noise level {noise_level:.2g} ({source})"
     raise InfeasibleError(

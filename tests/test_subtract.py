@@ -7,6 +7,7 @@ import pytest
 import scipy.sparse as sps
 
 import layersim
+from layersim.subtract import relative_error
 from layersim import adding
 from layersim.aniso import AnisoOperator, adding as aniso_adding
 from layersim.errors import InfeasibleError, OperatorError
@@ -23,18 +24,7 @@ M = 24
 
 def energy_error(a, b):
     """Relative Frobenius error of all blocks in the energy basis (sqrt(w mu) scaling)."""
-    from layersim.aniso.operator import as_aniso
-    a, b = as_aniso(a), as_aniso(b)
-    w = np.tile(np.sqrt(a.grid.flux_weight), a.slots)
-    W, Wi = sps.diags(w), sps.diags(1.0 / w)
-    num = den = 0.0
-    for k, blk in b.blocks.items():
-        if blk is None:
-            assert a.blocks[k] is None
-            continue
-        num += (W @ (a.blocks[k] - blk) @ Wi).power(2).sum()
-        den += (W @ blk @ Wi).power(2).sum()
-    return float(np.sqrt(num / den))
+    return relative_error(a, b)
 
 
 def noisy(op, level, seed):

@@ -54,17 +54,21 @@ class Case:
     discretization: dict = field(default_factory=dict)
     top_ior: float = 1.0
     mc_particles: int = 200_000
+    small: dict = field(default_factory=dict)
+    """Discretisation overrides for the test suite's small-size run (the full run plans)."""
 
-    def scene(self) -> Scene:
+    def scene(self, small: bool = False) -> Scene:
         data = {"stack": {"name": self.name, "top_ior": self.top_ior}, "layer": self.layers}
-        if self.discretization:
-            data["discretization"] = dict(self.discretization)
+        disc = dict(self.discretization)
+        if small:
+            disc.update(self.small)
+        if disc:
+            data["discretization"] = disc
         return Scene.from_dict(data)
 
 
-def cases() -> list[Case]:
-    """The named cases of issue 5 that do not need the anisotropic solver or subtraction
-    (those are added by their modules: see :func:`register`)."""
+def cases() -> list:
+    """The named cases of issue 5 (and any added with :func:`register`)."""
     diel = lambda eta, a: {"kind": "dielectric", "ior": eta, "roughness": a}
     cond = lambda ior, a: {"kind": "conductor", "ior": ior, "roughness": a}
     med = lambda albedo, tau, g=0.0: {"kind": "medium", "albedo": albedo, "tau": tau, "g": g}
@@ -89,12 +93,95 @@ def cases() -> list[Case]:
              angles=(89.0,)),
         Case("grazing_89.9", [diel(1.5, 0.1), cond(GOLD, 0.1)], "coated gold lit at 89.9 deg",
              angles=(89.9,)),
+        Case("anisotropy_1to10", [cond(GOLD, [0.05, 0.5])], "gold, alpha (0.05, 0.5)",
+             small={"n": 32, "md": 48}),
+        Case("anisotropy_1to30", [cond(GOLD, [0.0167, 0.5])], "gold, alpha (0.0167, 0.5)",
+             small={"n": 32, "md": 48}),
+        Case("anisotropy_1to100", [cond(GOLD, [0.005, 0.5])], "gold, alpha (0.005, 0.5)"),
+        SubtractCase("subtract_blurring", "remove a thick HG slab (tau 10) from above a metal: "
+                     "the slab hides the metal", blurring=True),
+        SubtractCase("subtract_noise_1pct", "remove thin dust from above a rough glass interface, "
+                     "1 % multiplicative noise on every stack entry", noise=0.01),
     ]
     out.extend(_registered)
     return out
 
 
-_registered: list[Case] = []
+_registered: list = []
+
+
+@dataclass
+class SubtractCase:
+    """A subtraction case (seed 000 sec. 3.4): build ``add(top, bottom)``, optionally perturb
+    it with multiplicative noise, and recover ``bottom`` with automatic regularisation. Passes
+    if the result is finite, conserves energy, has no negative lobes deeper than the noise, and
+    is within ``tolerance`` of the truth (:func:`layersim.subtract.relative_error`); an
+    ill-posed removal must be refused."""
+
+    name: str
+    what: str
+    noise: float = 0.0
+    blurring: bool = False
+    tolerance: float = 0.15
+
+    def run(self) -> dict:
+        from ..adding import add
+        from ..errors import InfeasibleError
+        from ..ingredients import medium_operator
+        from ..ingredients.numeric import numeric_interface_operator
+        from ..operator import Grid, IsoOperator
+        from ..scene import Conductor, Dielectric
+        from ..subtract import _negativity, relative_error, subtract
+
+        grid, m = Grid.make("gauss-lobatto", 48), 24
+        if self.blurring:
+            top = medium_operator(grid, m, 0.9, 0.3, 10.0, 1.0)
+            bottom = numeric_interface_operator(
+                grid, m, Conductor(ior=complex(0.2, 3.0), alpha_u=0.2, alpha_v=0.2), 1.0)
+        else:
+            top = medium_operator(grid, m, 0.9, 0.6, 0.2, 1.0)
+            bottom = numeric_interface_operator(
+                grid, m, Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3), 1.0)
+        stack = add(top, bottom)
+        if self.noise:
+            rng = np.random.default_rng(3)
+            blocks = {k: None if v is None else
+                      [b.multiply(1 + self.noise * rng.standard_normal(b.shape)).tocsr()
+                       for b in v] for k, v in stack.blocks.items()}
+            stack = IsoOperator(stack.grid, blocks, stack.eta_top, stack.eta_bottom,
+                                stack.delta)
+        try:
+            got = subtract(stack, top, side="top")
+        except InfeasibleError as exc:
+            outcome = "refused" if self.blurring else "fail"
+            return {"name": self.name, "what": self.what, "outcome": outcome,
+                    "detail": str(exc), "seconds": 0.0}
+        if self.blurring:
+            return {"name": self.name, "what": self.what, "outcome": "fail",
+                    "detail": "an ill-posed removal was not detected", "seconds": 0.0}
+        alb = got.albedo_nodes()
+        err = relative_error(got, bottom)
+        total = max(float(np.max(alb["Rt"] + alb["Ttb"])), float(np.max(alb["Rb"] + alb["Tbt"])))
+        neg = _negativity(got)
+        info = got.info.get("subtract", {}) if hasattr(got, "info") else {}
+        problems = []
+        if not all(np.all(np.isfinite(v)) for v in alb.values()):
+            problems.append("non-finite result")
+        if total > 1 + self.noise * 3 + ENERGY_SLACK:
+            problems.append(f"R + T = {total:.4f}")
+        if neg > 1.5 * self.noise + 1e-12:
+            problems.append(f"negative lobes {neg:.2e} deeper than the noise")
+        if err > self.tolerance:
+            problems.append(f"relative error {err:.3f} > {self.tolerance}")
+        detail = (f"eps {info.get('eps', float('nan')):.2e} ({info.get('method', '?')}), noise "
+                  f"estimate {info.get('noise', float('nan')):.2e}; relative error of the "
+                  f"recovered layer {err:.3f} (energy basis); "
+                  f"deepest negative lobe {neg:.1e}; max R + T {total:.4f}")
+        return {"name": self.name, "what": self.what,
+                "outcome": "fail" if problems else "pass",
+                "detail": "; ".join(problems) + ("; " if problems else "") + detail,
+                "numbers": {"energy_error": err, "negativity": neg, "eps": info.get("eps")},
+                "seconds": 0.0}
 
 
 def register(case: Case) -> None:
@@ -130,14 +217,20 @@ def _reciprocity(bsdf, scene: Scene, rng) -> float:
     return worst / max(scale, 1e-300)
 
 
-def run_case(case: Case, mc=None, solve=None) -> dict:
+def run_case(case: Case, mc=None, solve=None, small: bool = False) -> dict:
     """Run one case; ``mc(scene, wi, particles)`` (optional) returns an object with
-    ``reflectance, transmittance, reflectance_stderr, transmittance_stderr``."""
+    ``reflectance, transmittance, reflectance_stderr, transmittance_stderr``. ``small`` applies
+    the case's small discretisation (test suite)."""
+    if isinstance(case, SubtractCase):
+        t0 = time.perf_counter()
+        result = case.run()
+        result["seconds"] = time.perf_counter() - t0
+        return result
     if solve is None:
         from ..solver import solve
     t0 = time.perf_counter()
     try:
-        scene = case.scene()
+        scene = case.scene(small)
         bsdf = solve(scene)
     except LayersimError as exc:
         return {"name": case.name, "what": case.what, "outcome": "refused",
