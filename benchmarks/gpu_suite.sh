@@ -7,7 +7,7 @@
 # OpenCL on the GPU, warp-cpu, PoCL if present), projection_paths_gpu.{json,txt} (numeric
 # projection on the GPU against the host semi-analytic path) and, unless --quick is given to skip
 # it, report/ (the full `layersim bench` with the GPU Monte Carlo backends).
-set -euo pipefail
+set -uo pipefail   # each step runs even if an earlier one fails; logs say which
 out=${1:?usage: gpu_suite.sh OUTDIR [--quick]}
 mkdir -p "$out"
 export PYTHONUNBUFFERED=1

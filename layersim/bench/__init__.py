@@ -52,7 +52,12 @@ def run(out, quick: bool = False, stability: bool = False, backends=("auto",),
         files = [f for f in files if f.stem in wanted]
     settings = runner.Settings.quick() if quick else runner.Settings()
     settings.backends = tuple(backends)
-    results_scenes = [runner.run_scene(f, settings, log=log) for f in files]
+    machine = report.machine_info(command or " ".join(["layersim"] + sys.argv[1:]))
+    results_scenes = []
+    for f in files:
+        results_scenes.append(runner.run_scene(f, settings, log=log))
+        # rewrite the report after every scene, so that an interrupted run leaves its results
+        report.write(Path(out), machine, results_scenes, [], settings)
     results_stability = []
     if stability:
         mc = runner.montecarlo_module()
@@ -68,5 +73,5 @@ def run(out, quick: bool = False, stability: bool = False, backends=("auto",),
             r = stab.run_case(case, mc=check)
             log(f"  stability {r['name']:28s} {r['outcome']:8s} {r['detail'][:100]}")
             results_stability.append(r)
-    machine = report.machine_info(command or " ".join(["layersim"] + sys.argv[1:]))
+            report.write(Path(out), machine, results_scenes, results_stability, settings)
     return report.write(Path(out), machine, results_scenes, results_stability, settings)
