@@ -210,10 +210,10 @@ def _solve_groups(lu, Bc, starts, blk_pos) -> sps.csr_matrix:
 
 
 def _map(fn, items):
-    """``map`` over a thread pool (the substitutions of the groups are independent; BLAS and
-    LAPACK release the GIL)."""
-    from ..ingredients.aniso_microfacet import _map as pool_map
-    return pool_map(fn, items)
+    """:func:`layersim.threads.parallel_map`: the substitutions of the groups are independent
+    (numpy matmul only; see that module about scipy.linalg)."""
+    from ..threads import parallel_map
+    return parallel_map(fn, items)
 
 
 def _sparse_lu_solve(Ac, Bc):

@@ -37,9 +37,7 @@ reciprocity. The operator of a rotated interface is the projected one rotated
 from __future__ import annotations
 
 import math
-import os
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,8 +51,6 @@ from ..operator import Grid
 from ..scene import Conductor
 from .microfacet import ENERGY_DROP, RELERR, SUPPORT_TOLERANCE, ProjectionStats, _block_pairs
 
-#: Worker threads for batches of pairs ($LAYERSIM_PROJECTION_THREADS, default: the cores).
-THREADS = int(os.environ.get("LAYERSIM_PROJECTION_THREADS", os.cpu_count() or 1))
 #: Smallest number of phi_s samples (a power of two; mirror symmetry samples half + 1 of them).
 QS_MIN = 16
 QS_MAX = 256
@@ -420,12 +416,9 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
 
 
 def _map(fn, items):
-    """``map`` over a thread pool of :data:`THREADS` workers (numpy, FFT, LAPACK and Warp release
-    the GIL for the heavy parts of a batch)."""
-    if THREADS <= 1 or len(items) <= 1:
-        return [fn(x) for x in items]
-    with ThreadPoolExecutor(min(THREADS, len(items))) as pool:
-        return list(pool.map(fn, items))
+    """:func:`layersim.threads.parallel_map` (batches release the GIL in numpy and Warp)."""
+    from ..threads import parallel_map
+    return parallel_map(fn, items)
 
 
 def _mirror(chunks, scale: float = 1.0, skip_diagonal: bool = True):

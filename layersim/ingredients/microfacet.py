@@ -38,8 +38,9 @@ L_HARD, Q_IN_HARD, Q_OUT_HARD = 48, 192, 32
 FIT_RESIDUAL = 1e-4
 #: Coarse azimuths used to bound the smooth factor before projecting a pair.
 N_COARSE = 17
-#: Pairs per batch (bounds the temporary memory of the fit: ~Q*L*8 bytes per pair).
-BATCH = 4096
+#: Pairs per batch (bounds the temporary memory of the fit: ~Q*L*8 bytes per pair; small
+#: enough that a block gives the thread pool several batches).
+BATCH = 1024
 
 
 @dataclass
@@ -97,11 +98,18 @@ def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, di
     kest = fourier.peak_length(q0[keep], qpi[keep], dist, RELERR)
     order = keep[np.argsort(kest, kind="stable")]
     kest = np.sort(kest)
-    for start in range(0, order.size, BATCH):
+    # batches run on a thread pool (layersim.threads), each with its own statistics
+    def work(start):
+        part = ProjectionStats()
         sel = order[start:start + BATCH]
         K = int(min(kest[start:start + BATCH].max(), m + L_HARD))
-        chunks.append(_project_pairs(mu_i[sel], mu_o[sel], o[sel], i[sel], q0[sel], qpi[sel],
-                                     K, m, eta, alpha, dist, stats))
+        return _project_pairs(mu_i[sel], mu_o[sel], o[sel], i[sel], q0[sel], qpi[sel], K, m,
+                              eta, alpha, dist, part), part
+
+    from ..threads import parallel_map
+    for chunk, part in parallel_map(work, range(0, order.size, BATCH)):
+        chunks.append(chunk)
+        stats.merge(part)
     stats.projected += keep.size
     return chunks
 
