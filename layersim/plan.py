@@ -291,7 +291,8 @@ def make_plan(scene: Scene) -> Plan:
         ms = ms_needed
     stored = 0
     for lp, lengths in prepass:
-        stored += int(np.minimum(lengths, md).sum())
+        if not lp.ms:   # anisotropic layers are estimated below (layersim.aniso.plan)
+            stored += int(np.minimum(lengths, md).sum())
         trunc = int(np.count_nonzero(lengths > md))
         if trunc:
             notes.append(f"layer {lp.index}: {trunc} ordinate pairs beyond {THETA_FULL:g} deg "
@@ -307,10 +308,9 @@ def make_plan(scene: Scene) -> Plan:
     # temporaries: per order per thread ~12 dense h x h arrays
     stored_bytes = int(12 * min(stored * 2, 4 * md * h * h)) + 12 * 8 * h * h * 8
     if anisotropic:  # --- coupled modes (layersim.aniso.plan) ---
-        entries = sum(aplan.operator_entries(lengths, md, lp.ms) for lp, lengths in prepass
-                      if lp.ms)
-        # operators alive during adding (layer, partial stack, product, result) + factors
-        stored_bytes = 12 * 4 * entries + aplan.factor_bytes(h, md, 2 * ms)
+        entries = [aplan.operator_entries(lengths, md, lp.ms) for lp, lengths in prepass
+                   if lp.ms]
+        stored_bytes = aplan.solve_bytes(entries) + stored_bytes
     memory = stored_bytes * max(1, scene.channels if scene.channels > 1 else 1)
     limit = memory_limit()
     if memory > limit:
