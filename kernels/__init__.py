@@ -1,6 +1,7 @@
 """Warp kernels (installed as ``layersim.kernels``): the per-interface and per-medium physics
 (:mod:`.physics`), BSDF sampling for Fourier projection (:mod:`.projection`), evaluation of
-tabulated Fourier series (:mod:`.fourier_eval`) and the particle random walk used by
+tabulated Fourier series (:mod:`.fourier_eval`, 2-D series of anisotropic stacks:
+:mod:`.fourier_eval2d`) and the particle random walk used by
 :mod:`layersim.montecarlo`. Kernels run on Warp's CPU device and on CUDA."""
 
 from .runtime import ensure_init as _ensure_init

@@ -107,7 +107,7 @@ class Plan:
         lines = [
             f"representation: {self.representation} "
             + ("(cosine series in the azimuth difference)" if self.representation == "isotropic"
-               else "(complex exponential series, coupled modes)"),
+               else "(Fourier series in phi_d and phi_s, coupled modes, seed 000 eq. (7)-(10))"),
             f"ordinates: n = {self.n}{src('n')}, {self.rule}{src('quadrature')} "
             f"({self.n // 2} per hemisphere)",
             f"Fourier orders: md = {self.md}{src('md')}" + (f", ms = {self.ms}{src('ms')}"
