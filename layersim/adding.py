@@ -34,7 +34,6 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sps
 import scipy.sparse.linalg as spla
 
@@ -145,7 +144,9 @@ def _add_order_dense(b1, b2, opaque, coupled, h):
         rhs = np.hstack([Ttb1, Rb1 @ Tbt2])
     if coupled:
         A = np.eye(h) - Rb1 @ Rt2
-        Y = sla.lu_solve(sla.lu_factor(A, check_finite=False), rhs, check_finite=False)
+        # numpy.linalg, not scipy.linalg: orders may run on threads (threads=), and scipy's
+        # LAPACK wrappers returned corrupted results when called concurrently (layersim.threads)
+        Y = np.linalg.solve(A, rhs)
     else:
         Y = rhs
     Y1 = Y[:, :h]

@@ -110,7 +110,7 @@ class Plan:
         lines = [
             f"representation: {self.representation} "
             + ("(cosine series in the azimuth difference)" if self.representation == "isotropic"
-               else "(complex exponential series, coupled modes)"),
+               else "(Fourier series in phi_d and phi_s, coupled modes, seed 000 eq. (7)-(10))"),
             f"ordinates: n = {self.n}{src('n')}, {self.rule}{src('quadrature')} "
             f"({self.n // 2} per hemisphere)",
             f"Fourier orders: md = {self.md}{src('md')}" + (f", ms = {self.ms}{src('ms')}"
@@ -184,7 +184,7 @@ def make_plan(scene: Scene) -> Plan:
             widths.append((width, i, kind, what))
             if layer.anisotropic:  # --- anisotropic interfaces (layersim.aniso.plan) ---
                 ratio = aplan.anisotropy_ratio(layer)
-                lms = aplan.ms_for_ratio(ratio)
+                lms = aplan.ms_for_layer(layer)
                 rot = f", rotated {math.degrees(layer.rotation):g} deg" if layer.rotation else ""
                 plans.append(LayerPlan(
                     i, kind, "project (coupled modes)",
@@ -227,7 +227,8 @@ def make_plan(scene: Scene) -> Plan:
         driver = max((lp for lp in plans if lp.ms), key=lambda lp: lp.ms)
         notes.append(f"coupled modes: ms = {ms_needed} set by layer {driver.index} "
                      f"({driver.kind}), roughness ratio -> ms = ceil({aplan.MS_SLOPE} r "
-                     f"{aplan.MS_OFFSET:+g}) (seed 000 eq. (25); benchmarks/ms_study.py)")
+                     f"{aplan.MS_OFFSET:+g}) (seed 000 eq. (25)), +1 above alpha "
+                     f"{aplan.MS_ROUGH:g} (benchmarks/ms_study.py): relative L2 error < 1 %")
 
     # ---- ordinates -------------------------------------------------------------------
     overridden = {}
@@ -311,7 +312,8 @@ def make_plan(scene: Scene) -> Plan:
         ms = ms_needed
     stored = 0
     for lp, lengths in prepass:
-        stored += int(np.minimum(lengths, md).sum())
+        if not lp.ms:   # anisotropic layers are estimated below (layersim.aniso.plan)
+            stored += int(np.minimum(lengths, md).sum())
         trunc = int(np.count_nonzero(lengths > md))
         if trunc:
             notes.append(f"layer {lp.index}: {trunc} ordinate pairs beyond {THETA_FULL:g} deg "
@@ -327,10 +329,9 @@ def make_plan(scene: Scene) -> Plan:
     # temporaries: per order per thread ~12 dense h x h arrays
     stored_bytes = int(12 * min(stored * 2, 4 * md * h * h)) + 12 * 8 * h * h * 8
     if anisotropic:  # --- coupled modes (layersim.aniso.plan) ---
-        entries = sum(aplan.operator_entries(lengths, md, lp.ms) for lp, lengths in prepass
-                      if lp.ms)
-        # operators alive during adding (layer, partial stack, product, result) + factors
-        stored_bytes = 12 * 4 * entries + aplan.factor_bytes(h, md, 2 * ms)
+        entries = [aplan.operator_entries(lengths, md, lp.ms) for lp, lengths in prepass
+                   if lp.ms]
+        stored_bytes = aplan.solve_bytes(entries) + stored_bytes
     memory = stored_bytes * max(1, scene.channels if scene.channels > 1 else 1)
     limit = memory_limit()
     if memory > limit:

@@ -71,8 +71,10 @@ def _check_energy(op: IsoOperator, i: int, layer, plan: Plan) -> None:
     if worst > 1.0 + ENERGY_REFUSE:
         raise InfeasibleError(
             f"layer {i} ({layer.kind}): with n = {plan.n} ordinates the discrete operator "
-            f"reflects and transmits {worst:.4g} times the incident energy: its lobes "
-            f"(roughness {layer.alpha_u:g}) are narrower than the ordinate spacing; raise n in "
+            f"reflects and transmits {worst:.7g} times the incident energy: its lobes "
+            f"(roughness {layer.alpha_u:g}" + (f", {layer.alpha_v:g}" if layer.anisotropic
+                                               else "")
+            + ") are narrower than the ordinate spacing; raise n in "
             "[discretization] (or remove the override and let the planner choose)")
     if hasattr(op, "albedo_slots"):
         if worst > 1.0 + 1e-6:

@@ -228,7 +228,8 @@ def test_coupled_adding_of_isotropic_operators_is_isotropic_adding():
         assert coupled.ms == 0
         for name, blk in iso.blocks.items():
             if blk is not None:
-                assert abs(coupled.blocks[name] - blk).max() < 1e-11 * abs(blk).max()
+                # (the substitution prunes below PRUNE = 1e-10 of a group's right-hand side)
+                assert abs(coupled.blocks[name] - blk).max() < 1e-9 * abs(blk).max()
 
 
 @pytest.fixture(scope="module")
@@ -251,10 +252,10 @@ def test_coupled_adding_matches_a_dense_solve_and_is_associative(coupled_layers)
     Rb1, Rt2 = d.blocks["Rb"].toarray(), bottom.blocks["Rt"].toarray()
     Y = np.linalg.solve(np.eye(d.size) - Rb1 @ Rt2, d.blocks["Ttb"].toarray())
     dense = d.blocks["Rt"].toarray() + d.blocks["Tbt"].toarray() @ Rt2 @ Y
-    assert np.abs(stack.blocks["Rt"].toarray() - dense).max() < 1e-11 * np.abs(dense).max()
+    assert np.abs(stack.blocks["Rt"].toarray() - dense).max() < 1e-9 * np.abs(dense).max()
     other = aniso_adding.add(aniso_adding.add(d, hg), c)
-    assert energy_weighted_error(other, stack) < 1e-11
-    assert reciprocity_error(stack) < 1e-10
+    assert energy_weighted_error(other, stack) < 1e-9
+    assert reciprocity_error(stack) < 1e-8
 
 
 def test_coupled_stack_never_creates_energy_and_is_reciprocal(coupled_layers):
@@ -268,7 +269,7 @@ def test_coupled_stack_never_creates_energy_and_is_reciprocal(coupled_layers):
     for r, t in (("Rt", "Ttb"), ("Rb", "Tbt")):
         total = node_energy(slab, r, phi) + node_energy(slab, t, phi)
         assert np.all(total <= 1.0) and np.all(total > 0.5)
-    assert reciprocity_error(slab) < 1e-10
+    assert reciprocity_error(slab) < 1e-8
     clear = AnisoOperator.identity(G32, 16, 1.0)
     assert energy_weighted_error(aniso_adding.add(clear, slab), slab) < 1e-13
 

@@ -3,19 +3,19 @@
 The adding and subtracting equations need ``Y = A^-1 B`` for ``A = I - K`` (or
 ``T^T T + eps^2 I``) where ``K`` couples Fourier mode ``k`` only to modes ``k +- 2s``,
 ``|s| <= ms`` (seed 000 eq. (10)): ordered by mode, ``A`` is block banded. Seed 000 factors it
-once with UMFPACK and runs custom sparse-sparse substitutions (sec. 3.3). Here:
+once with UMFPACK and runs custom sparse-sparse substitutions (sec. 3.3). Here
+(:func:`layersim.aniso.adding.banded_solve` drives it):
 
 1. **Components.** Mode parity is conserved, and for mirror-symmetric stacks (aligned layers)
-   the cosine and sine slots decouple too; :func:`layersim.aniso.adding.banded_solve` splits
-   the unknowns into the connected components of the slot graph, solved independently (4 for
-   aligned stacks).
+   the cosine and sine slots decouple too; unknowns are ordered by (component, Fourier order),
+   which keeps the matrix block banded with the bandwidth of its widest component.
 2. **Active unknowns.** Rows of ``K`` that are empty (no scattering into that mode and
    ordinate, e.g. high orders at steep angles) give ``y = b`` directly and are eliminated.
 3. **Block LU.** :class:`BlockBandedLU` factors the remaining matrix with dense blocks (one per
-   Fourier order, the active ordinates of its slots), LAPACK partial pivoting inside the
-   diagonal blocks and no pivoting across them. ``A = I - K`` with ``K`` a contraction of
-   energy is block diagonally dominant in practice; the result is verified by its residual
-   (:func:`solve`) and the caller falls back to sparse LU if it is not small.
+   Fourier order and component, its active ordinates), stored as dense block rows over the
+   band, LAPACK partial pivoting inside the diagonal blocks and no pivoting across them.
+   ``A = I - K`` with ``K`` a contraction of energy is block diagonally dominant in practice;
+   the caller verifies the residual and falls back to sparse LU if it is not small.
 4. **Pruned block substitution.** Right-hand sides are processed in groups (the columns of one
    source order); forward and backward substitution visit blocks outward from the source and
    stop after ``b`` consecutive blocks whose entries are below ``PRUNE`` times the group's
@@ -32,70 +32,71 @@ import scipy.sparse as sps
 
 #: Relative magnitude below which blocks of the solution are treated as zero (and the
 #: substitution stops after ``b`` such blocks in a row).
-PRUNE = 1e-13
+PRUNE = 1e-10
 
 
 class BlockBandedLU:
-    """LU factorisation of a block-banded matrix.
+    """LU factorisation of a block-banded matrix given by its dense block rows.
 
     Parameters
     ----------
-    A : sparse matrix (n, n)
-        Unknowns ordered so that block ``j`` is ``starts[j]:starts[j+1]``.
+    rows : list of ndarray
+        ``rows[i]`` has shape ``(r_i, c_i)``: block row ``i`` over the column blocks
+        ``lo(i) .. hi(i) - 1`` with ``lo(i) = max(0, i - b)``, ``hi(i) = min(J, i + b + 1)``
+        (overwritten by the factors).
     starts : int ndarray (J + 1,)
+        Block boundaries of the unknowns.
     bandwidth : int
-        ``A[block i, block j] = 0`` for ``|i - j| > bandwidth``.
     """
 
-    def __init__(self, A, starts, bandwidth: int):
+    def __init__(self, rows: list, starts, bandwidth: int):
         self.starts = np.asarray(starts, np.int64)
         self.J = J = self.starts.size - 1
         self.b = b = int(bandwidth)
-        blk = _dense_blocks(A, self.starts, b)
-        size = lambda j: int(self.starts[j + 1] - self.starts[j])
-        self.L: dict = {}
-        self.U: dict = {}
+        self.R = rows
         self.D: list = [None] * J
         for j in range(J):
-            D = blk.pop((j, j), None)
-            if D is None:
-                D = np.zeros((size(j), size(j)))
-            self.D[j] = sla.lu_factor(D, check_finite=False)
+            Rj = self.R[j]
+            cj = self._cols(j, j, j + 1)
+            self.D[j] = sla.lu_factor(Rj[:, cj], check_finite=False)
             hi = min(J, j + b + 1)
-            lower = []
+            if hi == j + 1:
+                continue
+            U = Rj[:, self._cols(j, j + 1, hi)]
             for i in range(j + 1, hi):
-                a = blk.pop((i, j), None)
-                if a is not None:
-                    # L_ij = A_ij D_j^-1: solve D_j^T X^T = A_ij^T
-                    self.L[i, j] = sla.lu_solve(self.D[j], a.T, trans=1, check_finite=False).T
-                    lower.append(i)
-            upper = []
-            for k in range(j + 1, hi):
-                a = blk.pop((j, k), None)
-                if a is not None:
-                    self.U[j, k] = a
-                    upper.append(k)
-            for i in lower:
-                Lij = self.L[i, j]
-                for k in upper:
-                    upd = Lij @ self.U[j, k]
-                    if (i, k) in blk:
-                        blk[i, k] -= upd
-                    else:
-                        blk[i, k] = -upd
+                Ri = self.R[i]
+                ci = self._cols(i, j, j + 1)
+                Lij = sla.lu_solve(self.D[j], Ri[:, ci].T, trans=1, check_finite=False).T
+                Ri[:, ci] = Lij
+                Ri[:, self._cols(i, j + 1, hi)] -= Lij @ U
         if not all(np.all(np.isfinite(d[0])) for d in self.D):
             raise np.linalg.LinAlgError("singular diagonal block in the block LU")
+        # Explicit inverses of the diagonal blocks for the substitutions: those run in worker
+        # threads, and scipy.linalg's LAPACK wrappers gave corrupted results when called
+        # concurrently on the CI machine (numpy's matmul does not).
+        self.Dinv = [sla.lu_solve(d, np.eye(d[0].shape[0]), check_finite=False)
+                     for d in self.D]
+
+    def _lo(self, i: int) -> int:
+        return max(0, i - self.b)
+
+    def _cols(self, i: int, a: int, z: int) -> slice:
+        """Columns of block row ``i`` holding column blocks ``a .. z-1``."""
+        base = self.starts[self._lo(i)]
+        return slice(int(self.starts[a] - base), int(self.starts[z] - base))
+
+    @staticmethod
+    def band_shape(starts, bandwidth: int, i: int) -> tuple:
+        J = len(starts) - 1
+        lo, hi = max(0, i - bandwidth), min(J, i + bandwidth + 1)
+        return int(starts[i + 1] - starts[i]), int(starts[hi] - starts[lo])
 
     @staticmethod
     def memory_estimate(starts, bandwidth: int) -> int:
-        """Bytes of the dense factors (band fully filled)."""
-        r = np.diff(np.asarray(starts, np.int64))
-        J = r.size
-        total = 0
-        for j in range(J):
-            lo, hi = max(0, j - bandwidth), min(J, j + bandwidth + 1)
-            total += int(r[j]) * int(r[lo:hi].sum())
-        return 8 * total
+        """Bytes of the dense block rows."""
+        J = len(starts) - 1
+        return 8 * sum(int(np.prod(BlockBandedLU.band_shape(starts, bandwidth, i)))
+                       for i in range(J))
 
     def solve(self, rhs: dict, lo: int, hi: int, tol: float = PRUNE) -> dict:
         """Solve for one group of right-hand sides.
@@ -117,15 +118,26 @@ class BlockBandedLU:
         scale = max((float(np.abs(v).max()) for v in rhs.values() if v.size), default=0.0)
         if scale == 0.0:
             return {}
+        ncols = next(iter(rhs.values())).shape[1]
         cut = tol * scale
+        size = lambda j: int(self.starts[j + 1] - self.starts[j])
+
+        def stacked(store, a, z):
+            """Vertical stack of store[a..z-1] (zeros where missing), or None."""
+            if not any(k in store for k in range(a, z)):
+                return None
+            return np.vstack([store[k] if k in store else np.zeros((size(k), ncols))
+                              for k in range(a, z)])
+
         Z: dict = {}
         quiet = 0
         for j in range(lo, J):
             t = rhs.get(j)
-            for i in range(max(lo, j - b), j):
-                if i in Z and (j, i) in self.L:
-                    u = self.L[j, i] @ Z[i]
-                    t = -u if t is None else t - u
+            a = max(lo, j - b)
+            prev = stacked(Z, a, j) if j > a else None
+            if prev is not None:
+                u = self.R[j][:, self._cols(j, a, j)] @ prev
+                t = -u if t is None else t - u
             if t is not None and np.abs(t).max() > cut:
                 Z[j] = t
                 quiet = 0
@@ -139,12 +151,13 @@ class BlockBandedLU:
         quiet = 0
         for j in range(max(Z), -1, -1):
             t = Z.get(j)
-            for k in range(j + 1, min(J, j + b + 1)):
-                if k in Y and (j, k) in self.U:
-                    u = self.U[j, k] @ Y[k]
-                    t = -u if t is None else t - u
+            z = min(J, j + b + 1)
+            nxt = stacked(Y, j + 1, z) if z > j + 1 else None
+            if nxt is not None:
+                u = self.R[j][:, self._cols(j, j + 1, z)] @ nxt
+                t = -u if t is None else t - u
             if t is not None:
-                y = sla.lu_solve(self.D[j], t, check_finite=False)
+                y = self.Dinv[j] @ t
                 if np.abs(y).max() > cut:
                     Y[j] = y
                     quiet = 0
@@ -153,27 +166,3 @@ class BlockBandedLU:
             if j < lo and quiet >= b:
                 break
         return Y
-
-
-def _dense_blocks(A, starts, b) -> dict:
-    """Dense blocks ``{(i, j): array}`` of a sparse matrix within the band."""
-    A = sps.coo_matrix(A)
-    if A.nnz == 0:
-        return {}
-    br = np.searchsorted(starts, A.row, side="right") - 1
-    bc = np.searchsorted(starts, A.col, side="right") - 1
-    if np.any(np.abs(br - bc) > b):
-        raise ValueError("matrix has entries outside the stated block bandwidth")
-    J = starts.size - 1
-    key = br * J + bc
-    order = np.argsort(key, kind="stable")
-    key, row, col, val = key[order], A.row[order], A.col[order], A.data[order]
-    bounds = np.flatnonzero(np.diff(key)) + 1
-    out = {}
-    for seg_r, seg_c, seg_v, k in zip(np.split(row, bounds), np.split(col, bounds),
-                                      np.split(val, bounds), key[np.r_[0, bounds]]):
-        i, j = divmod(int(k), J)
-        blk = np.zeros((starts[i + 1] - starts[i], starts[j + 1] - starts[j]))
-        np.add.at(blk, (seg_r - starts[i], seg_c - starts[j]), seg_v)
-        out[i, j] = blk
-    return out

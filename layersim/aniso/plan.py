@@ -3,11 +3,13 @@ Fourier orders of anisotropic interfaces, and memory estimates.
 
 ``ms`` (coupling half-width, modes ``s in [-ms, ms]`` of the azimuth sum) grows with the
 roughness ratio ``r = max(alpha_u / alpha_v, alpha_v / alpha_u)``. Seed 000 eq. (25) fits
-``ms = ceil(2.58 r - 1.82)`` as the smallest ``ms`` with a relative L2 error below 1 %; our own
-study (``benchmarks/ms_study.py``: cosine-weighted L2 norm of the truncated ``f_{d,s}`` of
-Beckmann and GGX conductors and dielectrics, relative to the untruncated series) is summarised
-by :data:`MS_SLOPE`, :data:`MS_OFFSET`. Isotropic layers (``r = 1``) need ``ms = 0``, and a stack
-pays for coupling only if one of its layers is anisotropic.
+``ms = ceil(2.58 r - 1.82)`` as the smallest ``ms`` with a relative L2 error below 1 %. Our
+study (``benchmarks/ms_study.py``: relative cosine-weighted L2 norm of the dropped ``f_{d,s}``
+of Beckmann and GGX conductors and Beckmann dielectrics, r = 1.5 ... 6, alpha_min = 0.1 and
+0.2) confirms it where ``max(alpha) <= 0.5`` (errors 0.1-0.7 % at the paper's ms) and finds that
+rougher layers need one more mode (1.0-1.3 % at the paper's ms, below 1 % with one more):
+:func:`ms_for_layer` adds it. Isotropic layers (``r = 1``) need ``ms = 0``, and a stack pays
+for coupling only if one of its layers is anisotropic.
 """
 
 from __future__ import annotations
@@ -16,8 +18,10 @@ import math
 
 import numpy as np
 
-#: ms = ceil(MS_SLOPE * r + MS_OFFSET) for r > 1 (see module docstring).
+#: ms = ceil(MS_SLOPE * r + MS_OFFSET) for r > 1 (seed 000 eq. (25); see module docstring),
+#: plus one mode when the roughest axis exceeds MS_ROUGH.
 MS_SLOPE, MS_OFFSET = 2.58, -1.82
+MS_ROUGH = 0.5
 #: Target of the ms rule: relative (cosine-weighted) L2 error of the dropped coefficients.
 MS_TARGET = 0.01
 
@@ -37,6 +41,15 @@ def ms_for_ratio(r: float) -> int:
     return max(1, math.ceil(MS_SLOPE * r + MS_OFFSET))
 
 
+def ms_for_layer(layer) -> int:
+    """Coupling half-width of an interface: :func:`ms_for_ratio` of its roughness ratio, plus
+    one mode if its roughest axis exceeds :data:`MS_ROUGH` (``benchmarks/ms_study.py``)."""
+    ms = ms_for_ratio(anisotropy_ratio(layer))
+    if ms and max(layer.alpha_u, layer.alpha_v) > MS_ROUGH:
+        ms += 1
+    return ms
+
+
 def interface_prepass(grid, layer, eta_above: float, ms: int, relerr: float):
     """Series lengths (in ``phi_d``) of the significant ordinate pairs of an anisotropic
     interface (maximum over ``phi_s``) and whether both elevations are within the plan's
@@ -46,17 +59,35 @@ def interface_prepass(grid, layer, eta_above: float, ms: int, relerr: float):
     return coarse_lengths(grid, layer, eta_above, ms, relerr)
 
 
+#: Measured fraction of the (d, s) coefficients of a pair's rectangle that survive pruning
+#: (Table 2 of seed 000: 0.41 for gold (0.05, 0.15), 0.55 for glass (0.3, 0.1)).
+FILL = 0.5
+#: Peak bytes of a solve per nonzero of its lowest anisotropic operator (its reflection is
+#: multiplied with the layers above in the adding equations) and per nonzero of the others,
+#: fitted on Table 2 of seed 000 (peak resident memory minus the interpreter's ~300 MiB).
+BYTES_LOWEST, BYTES_OTHER = 130, 45
+
+
 def operator_entries(lengths: np.ndarray, md: int, ms: int) -> int:
     """Estimated nonzeros of an anisotropic interface operator in the slot basis: per pair
-    ``(2 min(len, md) - 1) (2 ms + 1)`` complex coefficients, about one real entry each."""
-    return int(np.sum((2 * np.minimum(lengths, md) - 1) * (2 * ms + 1)))
+    ``(2 min(len, md) - 1) (2 ms + 1)`` coefficients, :data:`FILL` of them nonzero."""
+    return int(FILL * np.sum((2 * np.minimum(lengths, md) - 1) * (2 * ms + 1)))
 
 
 def factor_bytes(h: int, md: int, ms_total: int) -> int:
-    """Upper estimate of the dense block-LU factors of the adding equations: two components
-    per parity (cosine and sine) of ``md / 2`` orders, a band of ``ms_total`` orders each side,
-    blocks of at most ``h`` active ordinates (half of them on average: high orders only
-    scatter near grazing)."""
+    """Dense block-LU factors of the adding equations at ``md`` orders: two components per
+    parity (cosine and sine) of ``md / 2`` orders, a band of ``ms_total`` orders each side,
+    blocks of ``h / 2`` active ordinates on average (high orders only scatter near grazing).
+    With a lower bound on ``md`` it bounds the memory of a plan from below before its pre-pass
+    (:func:`layersim.plan.make_plan`)."""
     blocks = max(1, md // 2)
     band = 2 * ms_total + 1
     return int(4 * blocks * band * (0.5 * h) ** 2 * 8)
+
+
+def solve_bytes(entries: list) -> int:
+    """Estimated peak memory of solving a stack whose anisotropic operators (top to bottom)
+    have ``entries`` nonzeros (see :data:`BYTES_LOWEST`)."""
+    if not entries:
+        return 0
+    return int(BYTES_LOWEST * entries[-1] + BYTES_OTHER * sum(entries[:-1]))

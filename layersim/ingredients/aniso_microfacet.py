@@ -59,14 +59,24 @@ QS_MAX = 256
 #: phi_s aliasing criterion: the predicted coefficients at |s| >= Q_s - ms (which fold onto the
 #: kept |s| <= ms) must stay below this fraction of the pair's largest (see _aliases).
 S_ALIAS = 1e-6
-#: Smooth-factor fit: Chebyshev terms and Gauss-Legendre nodes on the support.
+#: Smooth-factor fit: Chebyshev terms and Gauss-Legendre nodes on the support; pairs whose
+#: residual exceeds FIT_RESIDUAL are refitted once with L_REFIT terms on Q_REFIT nodes (smooth
+#: but structured factors: grazing shadowing, wide supports).
 L_FIT, Q_IN = 24, 64
-#: Pairs whose fit residual exceeds FIT_RESIDUAL (a Fresnel kink at the critical angle, a
-#: shadowing edge inside a broad lobe) are not refitted with more polynomial terms (which
-#: converges slowly across a kink: ~5e-2 residual at 40 terms for internal reflection at
-#: alpha 0.4) but sampled directly at the FFT nodes, with at least N_KINK nodes per period.
+L_REFIT, Q_REFIT = 48, 128
+#: Pairs still above FIT_RESIDUAL have a kink (the Fresnel edge at the critical angle, a
+#: shadowing edge inside a broad lobe): refitting with more polynomial terms converges slowly
+#: across it (~5e-2 residual at 40 terms for internal reflection at alpha 0.4), so their smooth
+#: factor is sampled directly at the FFT nodes, with at least N_KINK nodes per period (the
+#: series of a square-root kink decays like k^-1.5: aliasing ~N_KINK^-1.5 of the kink's size).
 FIT_RESIDUAL = 1e-5
-N_KINK = 1024
+N_KINK = 512
+#: Orders kept for the tail of a kinked smooth factor (beyond the peak's own length): the
+#: truncated series of a square-root kink rings by ~K^-1/2 of the kink's size next to it
+#: (measured on internal reflection at alpha 0.3: 3 % at 96 orders, 1.2 % at 200, 0.16 % at
+#: 1000), so the kink limits the accuracy there at any practical md; more orders cost storage
+#: and time in every later operation (kinked pairs are 20-45 % of a rough dielectric's).
+K_KINK = 160
 #: Coarse samples used to bound the BSDF of a pair before projecting it.
 N_COARSE_D = 17
 #: Bound on (pairs x (phi_s samples + fit terms) x FFT length) per batch: the temporaries take
@@ -83,7 +93,8 @@ class AnisoProjectionStats(ProjectionStats):
     s_dropped: float = 0.0
     """Largest relative L2 norm (over all d, s of a pair) of the coefficients with |s| > ms."""
     s_dropped_energy: float = 0.0
-    """Energy-weighted relative L2 norm of the dropped coefficients over all pairs."""
+    """Relative cosine-weighted L2 norm of the dropped coefficients over all pairs: the error
+    of truncating at ms, in the sense of seed 000 eq. (25)."""
     _num: float = 0.0
     _den: float = 0.0
 
@@ -193,7 +204,7 @@ def _fit_smooth(mu_i, mu_o, theta_c, width, tau_ab, q_pars, phi_s, eta, au, av, 
     return series.fit_restricted(x, wt, s.transpose(0, 2, 1), rel, L)
 
 
-def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, stats, geometry):
+def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, geometry):
     """Coefficients ``F[p, d, ms + s] = f_{d,s}`` (d >= 0, |s| <= ms) of a batch of pairs,
     the pairs whose phi_s sampling aliases, the dropped |s| > ms fraction and the total L2."""
     theta0, q0, qpi, theta_c, width = geometry
@@ -203,12 +214,24 @@ def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, stats, geometry):
     coef, resid = _fit_smooth(mu_i, mu_o, theta_c, width, tau_ab, (theta0, q0, qpi), phi_s,
                               eta, au, av, dist, L_FIT, Q_IN)
     hard = np.any(resid > FIT_RESIDUAL, axis=1)
-    stats.refit += int(hard.sum())
-    K = min(int(fourier.peak_length(q0.ravel(), qpi.ravel(), dist, RELERR).max()) + L_FIT + 2,
+    if hard.any():
+        redo = np.flatnonzero(hard)
+        c2, r2 = _fit_smooth(mu_i[redo], mu_o[redo], theta_c[redo], width[redo],
+                             (tau_ab[0][redo], tau_ab[1][redo]),
+                             (theta0[redo], q0[redo], qpi[redo]), phi_s, eta, au, av, dist,
+                             L_REFIT, Q_REFIT)
+        wide = np.zeros((P, L_REFIT, ns))
+        wide[:, :L_FIT] = coef
+        wide[redo] = c2
+        coef = wide
+        hard[redo] = np.any(r2 > FIT_RESIDUAL, axis=1)
+    L = coef.shape[1]
+    K = min(int(fourier.peak_length(q0.ravel(), qpi.ravel(), dist, RELERR).max()) + L + 2,
             md + L_FIT)
     if hard.any():
-        # a kinked smooth factor has a slowly decaying spectrum: keep every order the plan has
-        K = md + L_FIT
+        # a kinked smooth factor has a slowly decaying spectrum (~k^-1.5): keep its tail up
+        # to K_KINK orders (and at least the peak's)
+        K = max(K, min(md, K_KINK) + L_FIT)
     prod = np.zeros((P, ns, K), complex)
     for sel, direct in ((np.flatnonzero(~hard), False), (np.flatnonzero(hard), True)):
         if sel.size:
@@ -236,7 +259,7 @@ def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, stats, geometry):
     # length of the peak series at TAPER_THRESHOLD, plus the smooth factor's orders
     peak_len = (fourier.peak_length(q0.ravel(), qpi.ravel(), dist, TAPER_THRESHOLD)
                 + ISO_L_FIT).reshape(P, ns)
-    return kept, alias, dropped, tot, peak_len.max(axis=1)
+    return kept, alias, dropped, tot, peak_len.max(axis=1), int(hard.sum())
 
 
 def _product_series(mu_i, mu_o, geometry, phi_s, eta, au, av, dist, K, coef, tau_ab):
@@ -248,7 +271,8 @@ def _product_series(mu_i, mu_o, geometry, phi_s, eta, au, av, dist, K, coef, tau
     coefficient) and at least :data:`N_KINK` for directly sampled pairs."""
     theta0, q0, qpi, theta_c, width = geometry
     P, ns = q0.shape
-    full = int(fourier.peak_length(q0.ravel(), qpi.ravel(), dist, 1e-16).max()) + L_FIT + 2
+    full = int(fourier.peak_length(q0.ravel(), qpi.ravel(), dist, 1e-16).max()) + \
+        (coef.shape[1] if coef is not None else L_FIT) + 2
     full = max(full, K)
     N = max(64 if coef is not None else N_KINK, 1 << math.ceil(math.log2(2 * full + 2)))
     half = min(N // 2, int(math.ceil(width.max() * N / (2.0 * np.pi))) + 1)
@@ -358,6 +382,7 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
         order = np.argsort(kest, kind="stable")
         redo = []
         ns = q0.shape[1]
+        batches = []
         start = 0
         while start < order.size:
             # largest batch (sorted by series length) whose temporaries fit BATCH_ELEMENTS
@@ -366,28 +391,40 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
             while n > 1 and (ns + L_FIT) * n * 4 * (kest[order[start + n - 1]] + L_FIT) \
                     > BATCH_ELEMENTS:
                 n = max(1, n // 2)
-            sel = order[start:start + n]
+            batches.append(order[start:start + n])
             start += n
+
+        def work(sel, qs=qs):
             geo = (theta0[sel], q0[sel], qpi[sel], theta_c[sel], width[sel])
-            F, alias, dropped, tot, plen = _project_pairs(mu_i[todo[sel]], mu_o[todo[sel]],
-                                                          eta, au, av, dist, ms, md, qs, stats,
-                                                          geo)
+            return _project_pairs(mu_i[todo[sel]], mu_o[todo[sel]], eta, au, av, dist, ms, md,
+                                  qs, geo)
+
+        for sel, (F, alias, dropped, tot, plen, nrefit) in zip(batches, _map(work, batches)):
+            stats.refit += nrefit
             ok = ~alias if qs < QS_MAX else np.ones(sel.size, bool)
             if (~ok).any():
                 redo.append(todo[sel[~ok]])
             if ok.any():
+                pp = todo[sel[ok]]
                 stats.qs_max = max(stats.qs_max, qs)
                 stats.s_dropped = max(stats.s_dropped, float(dropped[ok].max()))
-                w = 2.0 * np.pi * fw[i[todo[sel[ok]]]]
-                stats._num += float(np.sum(w * w * dropped[ok] ** 2 * tot[ok]))
-                stats._den += float(np.sum(w * w * tot[ok]))
+                # cosine-weighted L2 norm of the BSDF (Parseval over both azimuths)
+                w = fw[i[pp]] * fw[o[pp]]
+                stats._num += float(np.sum(w * dropped[ok] ** 2 * tot[ok]))
+                stats._den += float(np.sum(w * tot[ok]))
                 Fk = _truncate(F[ok], md, stats, plen[ok])
-                chunks.append((o[todo[sel[ok]]], i[todo[sel[ok]]], Fk))
+                chunks.append((o[pp], i[pp], Fk))
         todo = np.concatenate(redo) if redo else np.zeros(0, np.int64)
         qs *= 2
     if stats._den:
         stats.s_dropped_energy = math.sqrt(stats._num / stats._den)
     return chunks
+
+
+def _map(fn, items):
+    """:func:`layersim.threads.parallel_map` (batches release the GIL in numpy and Warp)."""
+    from ..threads import parallel_map
+    return parallel_map(fn, items)
 
 
 def _mirror(chunks, scale: float = 1.0, skip_diagonal: bool = True):
@@ -407,9 +444,11 @@ def _assemble(grid: Grid, md: int, ms: int, chunks) -> sps.csr_matrix:
     h = grid.h
     N = basis.n_slots(md) * h
     fw = grid.flux_weight
-    rows, cols, vals = [], [], []
     s = np.arange(-ms, ms + 1)
-    for o, i, F in chunks:
+
+    def entries(chunk):
+        o, i, F = chunk
+        rows, cols, vals = [], [], []
         K = F.shape[1]
         for sign in (1, -1):
             if sign > 0:
@@ -432,6 +471,13 @@ def _assemble(grid: Grid, md: int, ms: int, chunks) -> sps.csr_matrix:
             rows.append(rs[nz] * h + o[pp[src[nz]]])
             cols.append(cs[nz] * h + i[pp[src[nz]]])
             vals.append(v[nz])
+        return rows, cols, vals
+
+    rows, cols, vals = [], [], []
+    for r, c, v in _map(entries, chunks):
+        rows += r
+        cols += c
+        vals += v
     if not rows:
         return sps.csr_matrix((N, N))
     mat = sps.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),

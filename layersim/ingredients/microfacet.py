@@ -68,10 +68,11 @@ def fit_terms(phi_max: np.ndarray, limit: int) -> np.ndarray:
     return np.clip(1 + np.floor(8.0 / np.maximum(ratio, 1e-12)), 3, limit).astype(int)
 #: Coarse azimuths used to bound the smooth factor before projecting a pair.
 N_COARSE = 17
-#: Pairs per batch (bounds the temporary memory of the fit: ~Q*L*8 bytes per pair).
-BATCH = 4096
+#: Pairs per batch (bounds the temporary memory of the fit: ~Q*L*8 bytes per pair; small
+#: enough that a block gives the thread pool several batches).
+BATCH = 1024
 #: Threads projecting the blocks of an interface concurrently (``$LAYERSIM_BLOCK_WORKERS``;
-#: default: the number of CPU cores).
+#: default: the number of CPU cores). Batches within a block run on :mod:`layersim.threads`.
 BLOCK_WORKERS = int(os.environ.get("LAYERSIM_BLOCK_WORKERS", "0")) or (os.cpu_count() or 1)
 
 
@@ -143,11 +144,18 @@ def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, di
     kest = fourier.peak_length(q0[keep], qpi[keep], dist, RELERR)
     order = keep[np.argsort(kest, kind="stable")]
     kest = np.sort(kest)
-    for start in range(0, order.size, BATCH):
+    # batches run on a thread pool (layersim.threads), each with its own statistics
+    def work(start):
+        part = ProjectionStats()
         sel = order[start:start + BATCH]
         K = int(min(kest[start:start + BATCH].max(), m + L_HARD))
-        chunks.append(method(mu_i[sel], mu_o[sel], o[sel], i[sel], q0[sel], qpi[sel],
-                             K, m, eta, alpha, dist, stats))
+        return method(mu_i[sel], mu_o[sel], o[sel], i[sel], q0[sel], qpi[sel], K, m,
+                      eta, alpha, dist, part), part
+
+    from ..threads import parallel_map
+    for chunk, part in parallel_map(work, range(0, order.size, BATCH)):
+        chunks.append(chunk)
+        stats.merge(part)
     stats.projected += keep.size
     return chunks
 
