@@ -277,41 +277,58 @@ class IsoOperator:
         return cls(grid, blocks, eta_top, None if np.isnan(eb) else eb, delta)
 
 
+#: Largest dense (orders x h x h) scratch array _orders_to_csr uses (entries; 128 MiB).
+DENSE_ASSEMBLY_MAX = 1 << 24
+
+
 def _orders_to_csr(chunks, m: int, grid: Grid) -> list:
-    """Per-order CSR blocks ``B_l = c_l f_l w_i mu_i`` from per-pair series chunks, built
-    directly from sorted index arrays (one sort for all orders), pruned per order."""
+    """Per-order CSR blocks ``B_l = c_l f_l w_i mu_i`` from per-pair series chunks, pruned per
+    order (:data:`DROP_TOLERANCE` relative to the order's largest entry).
+
+    Small operators are scattered into a dense ``(m, h, h)`` array whose nonzeros come out
+    already in (order, row, column) order: no sort, several times faster than sorting the
+    triplets (the assembly dominated the numeric projection on a GPU). Larger ones sort one
+    combined integer key.
+    """
     h = grid.h
-    rows, cols, orders, vals = [], [], [], []
-    for o, i, c in chunks:
-        c = c[:, :m]
-        p, l = np.nonzero(c)
-        rows.append(o[p])
-        cols.append(i[p])
-        orders.append(l)
-        vals.append(c[p, l])
-    empty = [sps.csr_matrix((h, h)) for _ in range(m)]
-    if not rows:
-        return empty
-    o, i = np.concatenate(rows), np.concatenate(cols)
-    l, v = np.concatenate(orders), np.concatenate(vals)
-    if o.size == 0:
-        return empty
-    v = v * grid.flux_weight[i] * order_weight(l)
-    order = np.lexsort((i, o, l))
-    o, i, l, v = o[order], i[order], l[order], v[order]
+    chunks = [(o, i, c[:, :m]) for o, i, c in chunks if o.size]
+    if not chunks:
+        return [sps.csr_matrix((h, h)) for _ in range(m)]
+    weight = order_weight(np.arange(m))
+    if m * h * h <= DENSE_ASSEMBLY_MAX:
+        dense = np.zeros((m, h, h))
+        for o, i, c in chunks:
+            dense[:, o, i] = (c * grid.flux_weight[i][:, None]).T
+        dense *= weight[:, None, None]
+        flat = dense.reshape(m, h * h)
+        cut = DROP_TOLERANCE * np.abs(flat).max(axis=1)
+        flat[np.abs(flat) < cut[:, None]] = 0.0
+        l, pos = np.nonzero(flat)
+        v = flat[l, pos]
+        o, i = np.divmod(pos, h)
+    else:
+        rows, cols, orders, vals = [], [], [], []
+        for o, i, c in chunks:
+            p, l = np.nonzero(c)
+            rows.append(o[p])
+            cols.append(i[p])
+            orders.append(l)
+            vals.append(c[p, l] * grid.flux_weight[i[p]] * weight[l])
+        o, i = np.concatenate(rows), np.concatenate(cols)
+        l, v = np.concatenate(orders), np.concatenate(vals)
+        order = np.argsort((l.astype(np.int64) * h + o) * h + i, kind="stable")
+        o, i, l, v = o[order], i[order], l[order], v[order]
+        amax = np.zeros(m)
+        np.maximum.at(amax, l, np.abs(v))
+        keep = np.abs(v) >= DROP_TOLERANCE * amax[l]
+        o, i, l, v = o[keep], i[keep], l[keep], v[keep]
     bounds = np.searchsorted(l, np.arange(m + 1))
     mats = []
     for k in range(m):
         a, b = bounds[k], bounds[k + 1]
-        if a == b:
-            mats.append(sps.csr_matrix((h, h)))
-            continue
-        ok, ik, vk = o[a:b], i[a:b], v[a:b]
-        keep = np.abs(vk) >= DROP_TOLERANCE * np.abs(vk).max()
-        ok, ik, vk = ok[keep], ik[keep], vk[keep]
         indptr = np.zeros(h + 1, np.int64)
-        np.cumsum(np.bincount(ok, minlength=h), out=indptr[1:])
-        mats.append(sps.csr_matrix((vk, ik.astype(np.int32), indptr), shape=(h, h)))
+        np.cumsum(np.bincount(o[a:b], minlength=h), out=indptr[1:])
+        mats.append(sps.csr_matrix((v[a:b], i[a:b].astype(np.int32), indptr), shape=(h, h)))
     return mats
 
 

@@ -302,3 +302,35 @@ def test_energy_limiter_removes_overcounting_and_keeps_reciprocity():
     top, bot = node_energy(d, np.ones(GRID.h), np.ones(GRID.h))
     assert max(top.max(), bot.max()) <= 1.0 + 1e-12
     assert reciprocity_error(d) < 1e-10
+
+
+def test_operator_assembly_dense_and_sorted_paths_agree(monkeypatch):
+    """_orders_to_csr scatters small operators into a dense array and sorts the triplets of
+    large ones: both must give the same pruned per-order blocks (sorted by row, then column)."""
+    from layersim import operator as opmod
+    grid = opmod.Grid.make("gauss-legendre", 24)
+    rng = np.random.default_rng(3)
+    h, m = grid.h, 7
+    chunks = []
+    for _ in range(3):
+        o, i = rng.integers(0, h, 40), rng.integers(0, h, 40)
+        c = rng.normal(size=(40, m + 2)) * (rng.random((40, m + 2)) > 0.3)
+        c[0, 1] = 1e-15  # below the drop tolerance of its order
+        chunks.append((o, i, c))
+    # pairs must be unique across chunks, as the projection produces them
+    seen, unique = set(), []
+    for o, i, c in chunks:
+        keep = [k for k in range(o.size) if (o[k], i[k]) not in seen and not seen.add((o[k], i[k]))]
+        unique.append((o[keep], i[keep], c[keep]))
+    dense = opmod._orders_to_csr(unique, m, grid)
+    monkeypatch.setattr(opmod, "DENSE_ASSEMBLY_MAX", 0)
+    srt = opmod._orders_to_csr(unique, m, grid)
+    for l in range(m):
+        assert dense[l].has_sorted_indices and srt[l].has_sorted_indices
+        assert dense[l].nnz == srt[l].nnz
+        np.testing.assert_allclose(dense[l].toarray(), srt[l].toarray(), rtol=1e-15)
+        ref = np.zeros((h, h))
+        for o, i, c in unique:
+            ref[o, i] = c[:, l] * grid.flux_weight[i] * opmod.order_weight(l)
+        ref[np.abs(ref) < opmod.DROP_TOLERANCE * np.abs(ref).max()] = 0.0
+        np.testing.assert_allclose(dense[l].toarray(), ref, rtol=1e-15)
