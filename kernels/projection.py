@@ -139,6 +139,11 @@ def _cosine_dct_kernel(f: wp.array2d(dtype=wp.float64), table: wp.array(dtype=wp
     cosines read from an exact table of cos(pi i / M), i < 2M (index l j mod 2M)."""
     p, l = wp.tid()
     M = f.shape[1] - 1
+    if l > M:
+        # beyond the Nyquist order the samples carry no information (the CPU path's DCT
+        # returns M + 1 orders and zero-pads the rest)
+        c[p, l] = wp.float64(0.0)
+        return
     two_m = 2 * M
     acc = f[p, 0]
     idx = l
@@ -158,7 +163,7 @@ def _cosine_dct_kernel(f: wp.array2d(dtype=wp.float64), table: wp.array(dtype=wp
 
 
 def uniform_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, samples: int,
-                          orders: int, device=None) -> np.ndarray:
+                          orders: int, device=None, dct_kernel: bool | None = None) -> np.ndarray:
     """Cosine coefficients ``f_0 .. f_{orders-1}`` of the BSDF of ordinate pairs from the
     trapezoidal rule with ``samples`` (even) uniform azimuths per period, exact up to aliasing of
     orders beyond ``samples - orders``. The azimuthal function is even, so only the
@@ -166,7 +171,8 @@ def uniform_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, sampl
 
     On a CUDA device the samples stay on the device: a table-driven DCT kernel computes the
     requested orders and only those are copied back. On the CPU the kernel samples and scipy's
-    DCT transforms.
+    DCT transforms. ``dct_kernel`` forces either transform (default: the kernel on CUDA only).
+    Orders past ``samples / 2`` are zero.
     """
     ensure_init()
     dev = device_for(device)
@@ -183,7 +189,7 @@ def uniform_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, sampl
     wp.launch(_uniform_eval_kernel, dim=(P, M + 1), device=dev,
               inputs=[wp.array(mu_i, dtype=wp.float64, device=dev),
                       wp.array(mu_o, dtype=wp.float64, device=dev), *params], outputs=[f])
-    if dev.is_cuda:
+    if dev.is_cuda if dct_kernel is None else dct_kernel:
         table = np.cos(np.pi * np.arange(2 * M) / M)
         c = wp.empty((P, orders), dtype=wp.float64, device=dev)
         wp.launch(_cosine_dct_kernel, dim=(P, orders), device=dev,

@@ -125,3 +125,15 @@ def test_numeric_projection_reports_aliasing():
                                Conductor(ior=complex(0.2, 3.0), alpha_u=0.02, alpha_v=0.02), 1.0,
                                stats, max_samples=64)
     assert stats.aliased > 0
+
+
+def test_dct_kernel_matches_scipy_dct_including_orders_past_nyquist():
+    """The table-driven DCT kernel (the CUDA transform, run here on the CPU device) equals
+    scipy's DCT-I of the same samples, and orders past samples / 2 are zero (they alias)."""
+    mu_i = np.array([0.3, 0.7, 0.95])
+    mu_o = np.array([0.5, 0.2, 0.9])
+    args = (mu_i, mu_o, 1.5, 0.3, 0.3, "beckmann", 16, 12)
+    ref = kproj.uniform_cosine_series(*args, device="cpu", dct_kernel=False)
+    got = kproj.uniform_cosine_series(*args, device="cpu", dct_kernel=True)
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-14 * np.abs(ref).max())
+    assert np.all(got[:, 9:] == 0.0) and np.abs(got[:, :9]).max() > 0

@@ -31,8 +31,10 @@ import numpy as np
 
 from .. import fourier
 from ..kernels import projection as kproj
+from ..kernels.runtime import device_for
 from ..operator import Grid, IsoOperator
 from ..scene import Conductor, Dielectric
+from ..threads import parallel_map
 
 #: Relative truncation of each pair's cosine series (|f_l| < RELERR |f_0| are dropped).
 RELERR = 1e-7
@@ -91,6 +93,9 @@ class ProjectionStats:
     """Truncated pairs whose discarded tail was large enough to taper."""
     orders_needed: int = 0
     seconds: float = 0.0
+    series_seconds: float = 0.0
+    """Time spent computing series of pairs (the ``method`` calls, summed over threads); the
+    rest of ``seconds`` is pair selection, mirroring and assembly, shared by both paths."""
     notes: list = field(default_factory=list)
 
     def merge(self, other: "ProjectionStats") -> None:
@@ -103,6 +108,7 @@ class ProjectionStats:
         self.tapered += other.tapered
         self.orders_needed = max(self.orders_needed, other.orders_needed)
         self.seconds += other.seconds
+        self.series_seconds += other.series_seconds
 
 
 def _block_pairs(grid: Grid, name: str, triangle: bool):
@@ -121,18 +127,21 @@ def _block_pairs(grid: Grid, name: str, triangle: bool):
 
 
 def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, dist: str,
-                   stats: ProjectionStats, triangle: bool = False, method=None):
+                   stats: ProjectionStats, triangle: bool = False, method=None,
+                   batch: int = BATCH, device=None):
     """Project the significant pairs of one block, in batches of similar series length.
 
     ``method(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats) -> (o, i, series)``
-    computes the series of a batch (default: the semi-analytic :func:`pair_series`).
+    computes the series of a batch (default: the semi-analytic :func:`pair_series`) of at
+    most ``batch`` pairs; ``device`` runs the coarse sampling that bounds each pair's energy.
     """
     method = method or _project_pairs
     mu_i, mu_o, o, i = _block_pairs(grid, name, triangle)
     stats.pairs += mu_i.size
     fw = grid.flux_weight
     coarse = np.broadcast_to(np.linspace(0.0, np.pi, N_COARSE), (mu_i.size, N_COARSE))
-    s_c, q_c = kproj.microfacet_split(mu_i, mu_o, coarse, eta, alpha, alpha, dist)
+    s_c, q_c = kproj.microfacet_split(mu_i, mu_o, coarse, eta, alpha, alpha, dist,
+                                      device=device)
     q0, qpi = q_c[:, 0], q_c[:, -1]
     # Bound on f over phi: peak <= peak(q0); S bounded by its coarse maximum (x10 margin).
     bound = 10.0 * fourier.peak_values(q0, dist) * np.abs(s_c).max(axis=1)
@@ -147,17 +156,26 @@ def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, di
     # batches run on a thread pool (layersim.threads), each with its own statistics
     def work(start):
         part = ProjectionStats()
-        sel = order[start:start + BATCH]
-        K = int(min(kest[start:start + BATCH].max(), m + L_HARD))
-        return method(mu_i[sel], mu_o[sel], o[sel], i[sel], q0[sel], qpi[sel], K, m,
-                      eta, alpha, dist, part), part
+        sel = order[start:start + batch]
+        K = int(min(kest[start:start + batch].max(), m + L_HARD))
+        t0 = time.perf_counter()
+        out = method(mu_i[sel], mu_o[sel], o[sel], i[sel], q0[sel], qpi[sel], K, m,
+                     eta, alpha, dist, part)
+        part.series_seconds += time.perf_counter() - t0
+        return out, part
 
-    from ..threads import parallel_map
-    for chunk, part in parallel_map(work, range(0, order.size, BATCH)):
+    starts = range(0, order.size, batch)
+    # one launch already fills a GPU: batches for it run in the calling thread
+    results = [work(x) for x in starts] if _on_gpu(device) else parallel_map(work, starts)
+    for chunk, part in results:
         chunks.append(chunk)
         stats.merge(part)
     stats.projected += keep.size
     return chunks
+
+
+def _on_gpu(device) -> bool:
+    return device_for(device).is_cuda
 
 
 def _mirror(chunks, scale: float = 1.0, skip_diagonal: bool = True):
@@ -299,7 +317,8 @@ def _project_pairs(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats):
 
 def interface_operator(grid: Grid, m: int, layer, eta_above: float,
                        stats: ProjectionStats | None = None,
-                       reciprocity: bool = True, method=None) -> IsoOperator:
+                       reciprocity: bool = True, method=None, batch: int = BATCH,
+                       device=None) -> IsoOperator:
     """Operator of an isotropic rough interface.
 
     Parameters
@@ -320,6 +339,11 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
     method : callable, optional
         Series of a batch of pairs (default semi-analytic; see
         :mod:`layersim.ingredients.numeric` for the sampled/FFT path).
+    batch : int
+        Pairs per call of ``method``.
+    device : str, optional
+        Warp device of the coarse sampling; a CUDA device also makes the blocks run one after
+        the other (each launch already fills the GPU).
     """
     if layer.anisotropic or layer.smooth:
         raise ValueError("interface_operator projects isotropic rough interfaces only")
@@ -335,7 +359,7 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
     def project(name, triangle):
         own = ProjectionStats()       # one per block: no counters shared between threads
         chunks = _project_block(grid, name, m, eta, alpha, dist, own, triangle=triangle,
-                                method=method)
+                                method=method, batch=batch, device=device)
         return chunks, own
 
     if reciprocity:
@@ -344,7 +368,7 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
         jobs = {name: (name, name != "Ttb") for name in names if name != "Tbt"}
     else:
         jobs = {name: (name, False) for name in names}
-    workers = min(len(jobs), BLOCK_WORKERS)
+    workers = 1 if _on_gpu(device) else min(len(jobs), BLOCK_WORKERS)
     if workers > 1:
         with ThreadPoolExecutor(workers) as pool:
             done = dict(zip(jobs, pool.map(lambda job: project(*job), jobs.values())))

@@ -33,6 +33,8 @@ MAX_SAMPLES = 1 << 14
 ALIAS_RELERR = 1e-12
 #: Orders computed past m to decide truncation.
 EXTRA_ORDERS = 8
+#: Pairs per batch on a GPU.
+GPU_BATCH = 1 << 20
 
 
 def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, device,
@@ -79,5 +81,9 @@ def numeric_interface_operator(grid: Grid, m: int, layer, eta_above: float,
     """
     method = functools.partial(_numeric_batch, device=device, max_samples=max_samples,
                                min_samples=min_samples)
+    # on a GPU a whole block is one batch (a few launches, one per sample count); on the CPU
+    # the semi-analytic path's batches keep the temporaries small and the thread pool busy
+    batch = GPU_BATCH if microfacet._on_gpu(device) else microfacet.BATCH
     return microfacet.interface_operator(grid, m, layer, eta_above, stats,
-                                         reciprocity=reciprocity, method=method)
+                                         reciprocity=reciprocity, method=method, batch=batch,
+                                         device=device)
