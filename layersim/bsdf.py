@@ -431,10 +431,9 @@ class BSDF:
                     E *= quad / interp
                 if delta is not None:
                     energy = float(np.dot(wi_, delta[ii]))
-                    kmu = np.searchsorted(mu_edges, abs(mu_in), side="right") - 1
-                    phi_out = (phi_in + np.pi) % (2 * np.pi)
-                    kphi = np.searchsorted(phi_edges, phi_out, side="right") - 1
-                    if 0 <= kmu < E.shape[0] and 0 <= kphi < E.shape[1]:
+                    kmu = closed_bin(mu_edges, abs(mu_in))
+                    kphi = closed_bin(phi_edges, (phi_in + np.pi) % (2 * np.pi))
+                    if kmu is not None and kphi is not None:
                         E[kmu, kphi] += energy
             out[side] = E
         return out
@@ -496,6 +495,15 @@ def _operator_from_arrays(d, prefix: str):
         from .aniso.operator import AnisoOperator
         return AnisoOperator.from_arrays(d, prefix=prefix)
     return IsoOperator.from_arrays(d, prefix=prefix)
+
+
+def closed_bin(edges: np.ndarray, x: float) -> int | None:
+    """Index of the bin ``[edges[k], edges[k + 1])`` holding ``x``, the last bin closed (so that
+    normal incidence, mu = 1, lands in the top elevation bin); None outside the edges."""
+    if x == edges[-1]:
+        return edges.size - 2
+    k = int(np.searchsorted(edges, x, side="right")) - 1
+    return k if 0 <= k < edges.size - 1 else None
 
 
 def _edges(name, edges, lo, hi) -> np.ndarray:

@@ -36,6 +36,29 @@ def test_stability_checks_can_fail():
     assert result["outcome"] == "fail" and "R + T" in result["detail"]
 
 
+def test_stability_monte_carlo_check_allows_stopped_walks_only_upwards():
+    """Walks stopped at max_steps take their energy out of the estimate: the solver may lie above
+    it by the stopped fraction, never below it (beyond the standard errors)."""
+    from types import SimpleNamespace
+    import layersim
+
+    case = stability.Case("slab", [{"kind": "medium", "albedo": 1.0, "tau": 1.0}],
+                          "conservative slab", conservative=True, angles=(0.0,))
+    wi = stability._direction(0.0, 30.0)
+    R, T = (float(x) for x in layersim.solve(case.scene()).albedo(wi))
+
+    def fake_mc(shift, stopped):
+        return lambda scene, wi, n: SimpleNamespace(
+            reflectance=R - shift, transmittance=T - shift, reflectance_stderr=1e-5,
+            transmittance_stderr=1e-5, truncated=int(stopped * 1000), particles=1000)
+
+    assert stability.run_case(case, mc=fake_mc(0.01, 0.02))["outcome"] == "pass"
+    result = stability.run_case(case, mc=fake_mc(0.01, 0.0))
+    assert result["outcome"] == "fail" and "Monte Carlo" in result["detail"]
+    result = stability.run_case(case, mc=fake_mc(-0.01, 0.02))      # solver below: no excuse
+    assert result["outcome"] == "fail" and "Monte Carlo" in result["detail"]
+
+
 def test_quick_bench_writes_results_report_and_plots(tmp_path):
     results = bench.run(tmp_path, quick=True, scenes=["vandehulst_slab"], log=lambda *a: None)
     data = json.loads((tmp_path / "results.json").read_text())

@@ -83,19 +83,21 @@ def test_lambertian_bins_follow_the_cosine_law():
     np.testing.assert_allclose(bins, exact, rtol=1e-12)
 
 
-def test_unscattered_light_lands_in_the_forward_bin():
+@pytest.mark.parametrize("theta, phi, forward", [(35.0, 60.0, (8, 8)), (0.0, 0.0, (9, 6))])
+def test_unscattered_light_lands_in_the_forward_bin(theta, phi, forward):
     scene = layersim.Scene.from_dict({"layer": [{"kind": "medium", "albedo": 0.5,
                                                  "tau": 0.3}]})
     bsdf = layersim.solve(scene)
-    wi = unit(35.0, 60.0)
+    wi = unit(theta, phi)
     R, T = bsdf.albedo(wi)
-    direct = np.exp(-0.3 / np.cos(np.radians(35.0)))
+    direct = np.exp(-0.3 / np.cos(np.radians(theta)))
     assert T > direct
     bins = bsdf.bin_energies(wi, np.linspace(0, 1, 11), np.linspace(0, 2 * np.pi, 13))
     assert bins["bottom"].sum() == pytest.approx(float(T), rel=1e-12)
-    # the forward bin holds the delta: mu = cos 35 in [0.8, 0.9), phi = 240 deg in [240, 270)
-    assert bins["bottom"][8, 8] > direct
-    assert bins["bottom"][8, 8] - direct < 0.05
+    # the forward bin holds the delta: mu = cos 35 in [0.8, 0.9), phi = 240 deg in [240, 270);
+    # at normal incidence mu = 1 (the closed top edge), phi = 180 deg in [180, 210)
+    assert bins["bottom"][forward] > direct
+    assert bins["bottom"][forward] - direct < 0.05
 
 
 def test_rgb_scenes_carry_a_channel_axis():

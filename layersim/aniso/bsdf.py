@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from ..bsdf import closed_bin
 from ..kernels import fourier_eval2d
 from ..operator import BLOCKS
 from . import basis
@@ -247,10 +248,9 @@ def bins_channel(bsdf, c: int, wi: np.ndarray, mu_edges: np.ndarray,
                 E *= quad / interp
             if delta is not None:
                 energy = float(np.dot(wi_, delta[ii]))
-                kmu = np.searchsorted(mu_edges, abs(mu_in), side="right") - 1
-                phi_out = (math.atan2(wi[1], wi[0]) + np.pi) % (2 * np.pi)
-                kphi = np.searchsorted(phi_edges, phi_out, side="right") - 1
-                if 0 <= kmu < E.shape[0] and 0 <= kphi < E.shape[1]:
+                kmu = closed_bin(mu_edges, abs(mu_in))
+                kphi = closed_bin(phi_edges, (math.atan2(wi[1], wi[0]) + np.pi) % (2 * np.pi))
+                if kmu is not None and kphi is not None:
                     E[kmu, kphi] += energy
         out[side] = E
     return out

@@ -6,7 +6,11 @@ Every case must end in one of three outcomes:
     the solver returned a result that is finite, non-negative where physics says so, conserves
     energy (R + T <= 1 + 1e-6 at every tested incidence, and R + T = 1 within the stated
     tolerance when nothing absorbs), is reciprocal to the stated tolerance, and agrees with Monte
-    Carlo (albedos within 4 standard errors) where a Monte Carlo backend is available;
+    Carlo where a Monte Carlo backend is available: albedos within 4 standard errors plus
+    :data:`MC_SOLVER_TOL` (the solver's own discretisation error, which a nearly deterministic
+    walk, e.g. a k = 10 conductor with sigma ~ 4e-7, would otherwise be held to), and, where
+    walks were stopped at ``max_steps`` (thick conservative slabs), up to the stopped fraction
+    above the estimate (their energy is missing from both R and T);
 ``refused``
     the solver raised a :class:`layersim.LayersimError` before heavy work, whose message names
     the limit that was hit and what to change;
@@ -35,6 +39,7 @@ ENERGY_SLACK = 1e-6          # R + T <= 1 + ENERGY_SLACK
 CONSERVATION_TOL = 1e-6      # |R + T - 1| when nothing absorbs
 RECIPROCITY_TOL = 1e-6       # max |f(wi,wo)/eta_o^2 - f(wo,wi)/eta_i^2| / max f
 MC_SIGMAS = 4.0
+MC_SOLVER_TOL = 1e-4         # absolute allowance for the solver's discretisation error
 
 
 @dataclass
@@ -91,8 +96,12 @@ def cases() -> list:
         Case("conductor_k10", [cond([0.2, 10.0], 0.1)], "conductor with k = 10"),
         Case("grazing_89", [diel(1.5, 0.1), cond(GOLD, 0.1)], "coated gold lit at 89 deg",
              angles=(89.0,)),
-        Case("grazing_89.9", [diel(1.5, 0.1), cond(GOLD, 0.1)], "coated gold lit at 89.9 deg",
-             angles=(89.9,)),
+        # 89.9 deg lies beyond the first ordinate of the default plan (n = 196: 89.5 deg), where
+        # incident directions take that ordinate's values (0.75 % low here; README limits):
+        # the case checks a plan that resolves it
+        Case("grazing_89.9", [diel(1.5, 0.1), cond(GOLD, 0.1)],
+             "coated gold lit at 89.9 deg, n = 800 (first ordinate at 89.8 deg)",
+             angles=(89.9,), discretization={"n": 800}, small={"n": 196}),
         Case("anisotropy_1to10", [cond(GOLD, [0.05, 0.5])], "gold, alpha (0.05, 0.5)",
              small={"n": 32, "md": 48}),
         Case("anisotropy_1to30", [cond(GOLD, [0.0167, 0.5])], "gold, alpha (0.0167, 0.5)",
@@ -258,15 +267,22 @@ def run_case(case: Case, mc=None, solve=None, small: bool = False) -> dict:
             problems.append(f"|R + T - 1| = {abs(R + T - 1):.2e} at {theta:g} deg")
         if mc is not None:
             res = mc(scene.channel(0) if scene.channels > 1 else scene, wi, case.mc_particles)
+            # walks stopped at max_steps carried at most their unit weight out of R and T
+            stopped = float(np.max(np.asarray(res.truncated) / np.asarray(res.particles)))
+            numbers[key]["mc_stopped"] = stopped
             for name, ours, est, err in (("R", R, res.reflectance, res.reflectance_stderr),
                                          ("T", T, res.transmittance, res.transmittance_stderr)):
                 est, err = float(np.mean(est)), float(np.mean(err))
-                z = abs(ours - est) / max(err, 1e-12)
+                # distance to the interval [est, est + stopped] the true value lies in
+                gap = max(est - ours, ours - (est + stopped), 0.0)
+                z = gap / max(err, 1e-12)
                 numbers[key][f"{name}_mc"] = est
                 numbers[key][f"{name}_sigma"] = z
-                if z > MC_SIGMAS and abs(ours - est) > 1e-6:
-                    problems.append(f"{name} differs from Monte Carlo by {z:.1f} sigma at "
-                                    f"{theta:g} deg ({ours:.5f} vs {est:.5f} +- {err:.1e})")
+                if gap > MC_SIGMAS * err + MC_SOLVER_TOL:
+                    problems.append(
+                        f"{name} differs from Monte Carlo by {z:.1f} sigma at {theta:g} deg "
+                        f"({ours:.5f} vs {est:.5f} +- {err:.1e}"
+                        + (f", {stopped:.1e} of the walks stopped" if stopped else "") + ")")
     rec = _reciprocity(bsdf, scene, np.random.default_rng(0))
     numbers["reciprocity"] = rec
     if not math.isfinite(rec) or rec > RECIPROCITY_TOL:
