@@ -240,6 +240,10 @@ class FourierTable:
         """
         if version not in (1, 2):
             raise ValueError(f"unknown .bsdf version {version}; layersim writes 1 or 2")
+        if bsdf.anisotropic:
+            raise InfeasibleError("exporting anisotropic (coupled-mode) stacks to .bsdf is not "
+                                  "implemented yet: save them with BSDF.save (.lsim), or export "
+                                  "their rotational average (an isotropic approximation)")
         if bsdf.channels not in (1, 3):
             raise ValueError(f"a .bsdf file holds 1 or 3 channels, this BSDF has "
                              f"{bsdf.channels}")

@@ -43,6 +43,14 @@ A three-channel BSDF is sampled by luminance (Rec. 709 weights, :data:`layersim.
 as layerlab and Mitsuba do with the ``Y`` channel of ``.bsdf`` files); the weights are returned
 per channel, ``weight[..., c] = f_c |wo.z| / pdf``.
 
+Anisotropic stacks
+------------------
+The coupled-mode series has no one-dimensional azimuthal inverse, so the sampler draws from the
+stack's rotational average (:meth:`layersim.aniso.operator.AnisoOperator.rotational_average`:
+the ``s = 0`` coefficients, an isotropic series sampled as above) and weights by the anisotropic
+``eval``: ``weight = f(wi, wo) |wo.z| / pdf`` stays unbiased (the average is positive wherever
+the BSDF is), with a variance that grows with the anisotropy.
+
 Invalid queries
 ---------------
 ``wi`` on the horizon, light from below an opaque stack, or an incident direction from which no
@@ -68,10 +76,16 @@ _SAMPLERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def sampler_for(bsdf) -> "FourierSampler":
-    """The (cached) sampler of a BSDF."""
+    """The (cached) sampler of a BSDF (anisotropic ones: see the module docstring)."""
     s = _SAMPLERS.get(bsdf)
     if s is None:
-        s = FourierSampler(bsdf)
+        if bsdf.anisotropic:
+            from .bsdf import BSDF
+            proposal = BSDF([op.rotational_average() for op in bsdf.operators],
+                            info=bsdf.info)
+            s = FourierSampler(proposal, target=bsdf)
+        else:
+            s = FourierSampler(bsdf)
         _SAMPLERS[bsdf] = s
     return s
 
@@ -92,12 +106,17 @@ class FourierSampler:
     Parameters
     ----------
     bsdf : layersim.BSDF
+        Isotropic BSDF whose Fourier series is sampled.
     device : str, optional
         Warp device for the kernels (default: ``$LAYERSIM_DEVICE`` or the CPU).
+    target : layersim.BSDF, optional
+        BSDF whose ``eval`` gives the weights (default ``bsdf``); anisotropic stacks pass
+        themselves with their rotational average as ``bsdf``.
     """
 
-    def __init__(self, bsdf, device=None):
+    def __init__(self, bsdf, device=None, target=None):
         self.bsdf = bsdf
+        self.target = bsdf if target is None else target
         self.device = device
         self.mu = np.asarray(bsdf.grid.mu, float)
         self.h = self.mu.size
@@ -192,11 +211,11 @@ class FourierSampler:
             pdf[sel] = pdf_mu[sel] * pdf_phi
         good = pdf > 0
         wo[~good] = 0.0
-        nch = self.bsdf.channels
+        nch = self.target.channels
         weight = np.zeros((Q, nch))
         if good.any():
             g = np.flatnonzero(good)
-            f = self.bsdf.eval(wi[g], wo[g]).reshape(g.size, nch)
+            f = self.target.eval(wi[g], wo[g]).reshape(g.size, nch)
             weight[g] = np.maximum(f, 0.0) * (np.abs(wo[g, 2]) / pdf[g])[:, None]
         weight = weight[:, 0] if nch == 1 else weight
         return (wo.reshape(shape + (3,)), weight.reshape(shape + weight.shape[1:]),

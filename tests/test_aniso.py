@@ -381,3 +381,34 @@ def test_eval_of_a_rotated_anisotropic_interface_matches_the_physics():
     wide = layersim.solve(layersim.Scene.from_dict({**scene_dict, "discretization": {"ms": 10}}))
     err = np.abs(wide.eval(wi, wo)[lobe] / ref[lobe] - 1)
     assert np.median(err) < 3e-4 and np.percentile(err, 99) < 1e-2
+
+
+def _rotate_z(v, psi):
+    c, s = np.cos(psi), np.sin(psi)
+    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1], v[..., 2]],
+                    axis=-1)
+
+
+def test_rotational_average_is_the_mean_over_frame_rotations_and_sampling_is_unbiased():
+    """The isotropic proposal of anisotropic sampling equals the BSDF averaged over rotations
+    of both directions about the normal, and weights drawn with it average to the albedo."""
+    scene = layersim.Scene.from_dict({"layer": [
+        {"kind": "conductor", "ior": [0.2, 3.0], "roughness": [0.15, 0.45], "rotation": 20.0}],
+        "discretization": {"n": 48, "md": 64}})
+    bsdf = layersim.solve(scene)
+    avg = layersim.BSDF([op.rotational_average() for op in bsdf.operators])
+    rng = np.random.default_rng(4)
+    wi = unit(rng.uniform(10, 70, 6), rng.uniform(0, 360, 6))
+    wo = unit(rng.uniform(10, 70, 6), rng.uniform(0, 360, 6))
+    psi = np.linspace(0.0, 2 * np.pi, 256, endpoint=False)
+    mean = np.mean([bsdf.eval(_rotate_z(wi, p), _rotate_z(wo, p)) for p in psi], axis=0)
+    np.testing.assert_allclose(avg.eval(wi, wo), mean, rtol=1e-6, atol=1e-9 * mean.max())
+    # importance sampling: E[weight] = R(wi), and the returned pdf is pdf(wi, wo)
+    w1 = unit(40.0, 75.0)
+    u = rng.random((200_000, 2))
+    wo_s, weight, pdf = bsdf.sample(w1, u)
+    ok = pdf > 0
+    np.testing.assert_allclose(bsdf.pdf(w1, wo_s[ok][:500]), pdf[ok][:500], rtol=1e-9)
+    R, _ = bsdf.albedo(w1)
+    se = weight.std() / np.sqrt(weight.size)
+    assert abs(weight.mean() - float(R)) < 4 * se + 2e-3, (weight.mean(), float(R), se)

@@ -149,6 +149,32 @@ class AnisoOperator:
             blocks[name] = sps.block_diag(diag, format="csr")
         return cls(op.grid, md, blocks, op.eta_top, op.eta_bottom, op.delta, ms=0)
 
+    def rotational_average(self) -> IsoOperator:
+        """The isotropic operator of this layer averaged over rotations of its tangent frame.
+
+        Averaging over rotations keeps the ``s = 0`` coefficients ``f_{d,0}`` only, i.e. the
+        ``B_{l,l}`` blocks; in the real basis ``Re B_{l,l}`` is the mean of the ``cos<-cos`` and
+        ``sin<-sin`` diagonal slot blocks of order ``l`` (the ``B_{l,-l}`` terms they also hold
+        cancel in the mean), the ``0<-0`` block for ``l = 0``. The odd part ``Im B_{l,l}`` (sine
+        terms in ``phi_d``) is dropped: the result is the even part of the average, non-negative
+        wherever the BSDF is. Used as the importance-sampling proposal of anisotropic stacks
+        (:mod:`layersim.sampling`).
+        """
+        h = self.h
+        blocks = {}
+        for name in BLOCKS:
+            mat = self.blocks[name]
+            if mat is None:
+                blocks[name] = None
+                continue
+            mat = mat.tocsr()
+            diag = lambda slot: mat[slot * h:(slot + 1) * h, slot * h:(slot + 1) * h]
+            orders = [diag(0)]
+            for l in range(1, self.md):
+                orders.append(((diag(2 * l - 1) + diag(2 * l)) * 0.5).tocsr())
+            blocks[name] = [prune(sps.csr_matrix(b)) for b in orders]
+        return IsoOperator(self.grid, blocks, self.eta_top, self.eta_bottom, self.delta)
+
     @classmethod
     def identity(cls, grid: Grid, md: int, eta: float) -> "AnisoOperator":
         return cls.from_iso(IsoOperator.identity(grid, md, eta), md)

@@ -88,7 +88,8 @@ class ProjectionStats:
     truncated: int = 0
     """Pairs whose series needed more than ``m`` orders (truncated and tapered)."""
     aliased: int = 0
-    """Pairs whose series the numeric path could not sample without aliasing."""
+    """Pairs whose series the numeric path could not sample without aliasing (projected
+    semi-analytically instead)."""
     tapered: int = 0
     """Truncated pairs whose discarded tail was large enough to taper."""
     orders_needed: int = 0

@@ -6,8 +6,8 @@ evaluate, and it cross-checks the semi-analytic path (:mod:`.microfacet`). Its c
 the number of azimuth samples: the trapezoidal rule with N samples aliases coefficient
 ``l`` onto ``N - l``, so a pair whose series has ``K`` significant orders needs
 ``N >= m + K`` for its first ``m`` orders to be clean. Pairs are grouped by that N (a power of
-two), capped at ``max_samples``; pairs that would need more are aliased and counted in
-``stats.aliased``. On a GPU this path is far cheaper than the semi-analytic one (no fits, one
+two), capped at ``max_samples``; pairs that would need more (counted in ``stats.aliased``) are
+projected by the semi-analytic path instead. On a GPU this path is far cheaper than the semi-analytic one (no fits, one
 launch per group); on a single CPU thread it is usually slower.
 
 Everything else (pairs, energy pruning, reciprocity shortcut, truncation with Lanczos tapering,
@@ -46,8 +46,21 @@ def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, 
     N = 2 * np.array([scipy.fft.next_fast_len(int(x)) for x in
                       np.maximum(min_samples, need + 1) // 2 + 1])
     aliased = N > max_samples
-    stats.aliased += int(np.count_nonzero(aliased))
-    N = np.minimum(N, max_samples)
+    if aliased.any():
+        # too peaked to sample (near-specular lobes at grazing ordinates: ~1 / (alpha mu)
+        # orders): uniform samples would miss or overweight the azimuthal peak, and with it the
+        # pair's energy (order 0). Their exact peak series comes from the semi-analytic path.
+        stats.aliased += int(np.count_nonzero(aliased))
+        rest = np.flatnonzero(~aliased)
+        out = np.zeros((mu_i.size, m))
+        out[aliased] = microfacet._project_pairs(
+            mu_i[aliased], mu_o[aliased], o[aliased], i[aliased], q0[aliased], qpi[aliased],
+            K, m, eta, alpha, dist, stats)[2]
+        if rest.size:
+            out[rest] = _numeric_batch(mu_i[rest], mu_o[rest], o[rest], i[rest], q0[rest],
+                                       qpi[rest], K, m, eta, alpha, dist, stats, device=device,
+                                       max_samples=max_samples, min_samples=min_samples)[2]
+        return o, i, out
     # a few orders past m decide truncation exactly as the semi-analytic path does (the series
     # decays monotonically beyond its peak: a significant coefficient at or past m means the
     # pair needs more than m orders)
