@@ -8,8 +8,7 @@ from layersim import bench
 from layersim.bench import stability
 
 
-@pytest.mark.parametrize("case", [c for c in stability.cases()
-                                  if c.name != "near_specular_0.005"], ids=lambda c: c.name)
+@pytest.mark.parametrize("case", stability.cases(), ids=lambda c: c.name)
 def test_stability_case_passes_or_is_refused_clearly(case):
     result = stability.run_case(case, small=True)
     assert result["outcome"] in ("pass", "refused"), result["detail"]

@@ -78,7 +78,8 @@ def cases() -> list:
     cond = lambda ior, a: {"kind": "conductor", "ior": ior, "roughness": a}
     med = lambda albedo, tau, g=0.0: {"kind": "medium", "albedo": albedo, "tau": tau, "g": g}
     out = [
-        Case("near_specular_0.005", [cond(GOLD, 0.005)], "gold with alpha = 0.005"),
+        Case("near_specular_0.005", [cond(GOLD, 0.005)], "gold with alpha = 0.005",
+             small={"md": 300}),
         Case("near_specular_0.001", [cond(GOLD, 0.001)], "gold with alpha = 0.001"),
         Case("thick_1e2", [med(0.95, 1e2, 0.5), {"kind": "diffuse", "albedo": 0.5}],
              "HG slab tau = 100 over a diffuse base"),
