@@ -68,8 +68,8 @@ def run_row(k: int) -> dict:
     captured = {}
     original = solver._layer_operator
 
-    def keep(plan, grid, sc, i, stats):
-        op = original(plan, grid, sc, i, stats)
+    def keep(plan, grid, sc, i, *args, **kwargs):
+        op = original(plan, grid, sc, i, *args, **kwargs)
         captured[i] = op
         return op
 

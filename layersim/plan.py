@@ -228,7 +228,9 @@ def make_plan(scene: Scene) -> Plan:
         notes.append(f"coupled modes: ms = {ms_needed} set by layer {driver.index} "
                      f"({driver.kind}), roughness ratio -> ms = ceil({aplan.MS_SLOPE} r "
                      f"{aplan.MS_OFFSET:+g}) (seed 000 eq. (25)), +1 above alpha "
-                     f"{aplan.MS_ROUGH:g} (benchmarks/ms_study.py): relative L2 error < 1 %")
+                     f"{aplan.MS_ROUGH:g} (benchmarks/ms_study.py): relative L2 error < 1 %; "
+                     f"coefficients below {aplan.COUPLED_RELERR:g} of their ordinate pair's "
+                     "largest are dropped (layersim.aniso.plan.COUPLED_RELERR)")
 
     # ---- ordinates -------------------------------------------------------------------
     overridden = {}
@@ -285,7 +287,7 @@ def make_plan(scene: Scene) -> Plan:
         layer = mono.layers[lp.index]
         if lp.ms:
             lengths, full = aplan.interface_prepass(grid, layer, mono.ior_above(lp.index),
-                                                    lp.ms, SERIES_RELERR)
+                                                    lp.ms, aplan.COUPLED_RELERR)
         else:
             lengths, full = _interface_prepass(grid, layer, mono.ior_above(lp.index))
         lp.orders = int(lengths[full].max()) if full.any() else 1

@@ -40,7 +40,9 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
         # --- anisotropic interfaces (layersim.ingredients.aniso_microfacet) ---
         from .ingredients.aniso_microfacet import aniso_interface_operator
         lp = next(lp for lp in plan.layers if lp.index == i)
-        op = aniso_interface_operator(grid, plan.md, lp.ms, layer, eta_above, stats)
+        from .aniso.plan import COUPLED_RELERR
+        op = aniso_interface_operator(grid, plan.md, lp.ms, layer, eta_above, stats,
+                                      relerr=COUPLED_RELERR)
         _check_energy(op, i, layer, plan)
         return op
     if isinstance(layer, (Dielectric, Conductor)):
@@ -207,9 +209,11 @@ def _add_mixed(ops, threads):
             reduced.append(acc)
         else:
             reduced.append(g)
+    from .aniso.plan import STACK_RELERR, STACK_RELERR_INTERMEDIATE
     stack = reduced[-1]
     for op in reversed(reduced[:-1]):
-        stack = aniso_adding.add(op, stack)
+        stack = aniso_adding.add(op, stack, relerr=STACK_RELERR,
+                                 relerr_intermediate=STACK_RELERR_INTERMEDIATE)
     return stack
 
 

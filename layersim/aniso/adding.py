@@ -15,7 +15,9 @@ coated anisotropic base (and ``Tbt1`` is block diagonal when the coating is isot
 Table 2 of seed 000 the products of the other arrangement took 40 of 58 s.
 ``A`` is banded by Fourier order and solved with :func:`banded_solve` (block LU, pruned block
 substitution, sparse right-hand sides); results are pruned at
-:data:`layersim.operator.DROP_TOLERANCE` relative to each block's largest entry.
+:data:`layersim.operator.DROP_TOLERANCE` relative to each block's largest entry, and, with the
+``relerr`` of :func:`layersim.solve` (:data:`layersim.aniso.plan.COUPLED_RELERR`), per ordinate
+pair as the projected layers are, intermediates included.
 
 An isotropic operand is converted to the slot basis first (block diagonal): adding an
 anisotropic layer to an isotropic one works, and the result is anisotropic.
@@ -30,7 +32,7 @@ from ..errors import InfeasibleError, OperatorError
 from ..operator import DROP_TOLERANCE
 from . import basis
 from .banded import PRUNE, BlockBandedLU
-from .operator import AnisoOperator, as_aniso, prune
+from .operator import AnisoOperator, as_aniso, prune, prune_pairs, slot_pairs
 
 #: Relative residual above which a block-LU solve is redone with sparse LU, checked on up to
 #: RESIDUAL_COLUMNS columns.
@@ -87,19 +89,24 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
     # Order the active unknowns by (component, Fourier order): components (parity, and cosine
     # vs sine for mirror-symmetric stacks) never couple, so the matrix is block banded in this
     # order with the bandwidth of its widest component, and one factorisation serves them all.
-    coo = M.tocoo()
-    mode = basis.slot_mode(md)[active // h]
-    label = _component_labels(coo, active, h, md)
-    order = np.lexsort((active, mode, label))
-    key = label[order] * (md + 1) + mode[order]
+    # Blocks are (component, Fourier order), functions of the slot: the structure follows from
+    # the slot pairs holding entries (no per-entry temporaries of the tens of millions of
+    # entries of K).
+    slot_key = _slot_keys(M, h, md)
+    key_all = slot_key[active // h]
+    order = np.lexsort((active, key_all))
+    key = key_all[order]
     starts = np.concatenate([[0], np.flatnonzero(np.diff(key)) + 1, [order.size]])
     J = starts.size - 1
     blk_pos = np.repeat(np.arange(J), np.diff(starts))          # block of each position
     pos = np.full(N, -1, np.int64)
     pos[active[order]] = np.arange(order.size)                   # position of each unknown
-    keep = pos[coo.col] >= 0
-    bw = int(np.abs(blk_pos[pos[coo.row[keep]]] - blk_pos[pos[coo.col[keep]]]).max(initial=0))
-    del coo, keep
+    # bandwidth: entries between active unknowns (rows of K are empty exactly where the unknown
+    # is eliminated, so only the columns need the mask)
+    rs, cs = slot_pairs(M, h, columns=pos >= 0)
+    blk_of_key = {k: j for j, k in enumerate(key[starts[:-1]])}
+    blk_of_slot = np.array([blk_of_key.get(k, -1) for k in slot_key])
+    bw = int(np.abs(blk_of_slot[rs] - blk_of_slot[cs]).max(initial=0))
     need = BlockBandedLU.memory_estimate(starts, bw)
     limit = _memory_limit()
     if need > limit:
@@ -119,7 +126,7 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         cols = np.flatnonzero(np.diff(Bo.indptr))
         sample = cols if cols.size <= RESIDUAL_COLUMNS else \
             np.random.default_rng(0).choice(cols, RESIDUAL_COLUMNS, replace=False)
-        Ys = sps.csc_matrix(Y)[:, sample].tocoo()
+        Ys = Y[:, sample].tocoo()
         Ys_full = sps.csr_matrix((Ys.data, (ordered[Ys.row], Ys.col)), shape=(N, sample.size))
         Ms = (M @ Ys_full)[ordered]
         resid = Bo[:, sample] - (sps.csr_matrix(Ys) - Ms if identity_minus else Ms)
@@ -132,11 +139,14 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         Ao = M[ordered][:, ordered]
         Ao = (sps.identity(order.size) - Ao) if identity_minus else Ao
         Y = _sparse_lu_solve(Ao, Bo)
+    # back to the unknowns' numbering, with the eliminated ones (y = b); 32-bit indices keep
+    # the temporaries of a large solution small
     Y = sps.coo_matrix(Y)
     Brest = B[rest].tocoo()
-    r = np.concatenate([active[order[Y.row]], rest[Brest.row]])
-    c = np.concatenate([Y.col, Brest.col])
+    r = np.concatenate([ordered.astype(np.int32)[Y.row], rest.astype(np.int32)[Brest.row]])
+    c = np.concatenate([Y.col.astype(np.int32, copy=False), Brest.col.astype(np.int32)])
     v = np.concatenate([Y.data, Brest.data])
+    del Y
     out = sps.csr_matrix((v, (r, c)), shape=B.shape)
     out.sum_duplicates()
     return out
@@ -162,22 +172,24 @@ def _block_rows(M, ordered, pos, starts, bw, sign, identity_minus):
     return rows
 
 
-def _component_labels(coo, active, h, md):  # coo: entries of the full matrix
-    """Decoupled groups of unknowns: Fourier-order parity, and cosine vs sine slots when no
-    entry couples them (mirror-symmetric stacks). Finer decoupling (e.g. isotropic operators,
-    where every order is its own component) needs no label: it shows as a zero bandwidth."""
+def _slot_keys(M, h, md):
+    """Block key of every slot, ``component * (md + 1) + Fourier order``: components are
+    decoupled groups of unknowns, Fourier-order parity, and cosine vs sine slots when no entry
+    couples them (mirror-symmetric stacks). Finer decoupling (e.g. isotropic operators, where
+    every order is its own component) needs no label: it shows as a zero bandwidth."""
     sin_of = basis.slot_is_sin(md)
-    mixed = bool(np.any(sin_of[coo.row // h] != sin_of[coo.col // h]))
-    slot = active // h
-    mode = basis.slot_mode(md)[slot]
-    return (mode % 2) + (0 if mixed else 2 * sin_of[slot].astype(np.int64))
+    mode = basis.slot_mode(md)
+    rs, cs = slot_pairs(M, h)
+    mixed = bool(np.any(sin_of[rs] != sin_of[cs]))
+    label = (mode % 2) + (0 if mixed else 2 * sin_of.astype(np.int64))
+    return label * (md + 1) + mode
 
 
-def _solve_groups(lu, Bc, starts, blk_pos) -> sps.csr_matrix:
+def _solve_groups(lu, Bc, starts, blk_pos) -> sps.csc_matrix:
     """Pruned block substitution, right-hand sides grouped by the first block they touch."""
     cols = np.flatnonzero(np.diff(Bc.indptr))
     if cols.size == 0:
-        return sps.csr_matrix(Bc.shape)
+        return sps.csc_matrix(Bc.shape)
     rb = blk_pos[Bc.indices]
     first = np.minimum.reduceat(rb, Bc.indptr[cols])
     last = np.maximum.reduceat(rb, Bc.indptr[cols])
@@ -196,17 +208,18 @@ def _solve_groups(lu, Bc, starts, blk_pos) -> sps.csr_matrix:
             out.append((r + starts[j], gcols[c], y[r, c]))
         return out
 
-    rows_out, cols_out, vals_out = [], [], []
-    for parts in _map(group, list(np.unique(first))):
-        for r, c, v in parts:
-            rows_out.append(r)
-            cols_out.append(c)
-            vals_out.append(v)
-    if not rows_out:
-        return sps.coo_matrix(Bc.shape)
-    return sps.coo_matrix((np.concatenate(vals_out), (np.concatenate(rows_out),
-                                                      np.concatenate(cols_out))),
-                          shape=Bc.shape)
+    groups = [part for parts in _map(group, list(np.unique(first))) for part in parts]
+    # one CSC matrix, filled part by part while the parts are released (the solution can
+    # hold tens of millions of entries: no concatenated copies of 64-bit index lists)
+    total = sum(r.size for r, _, _ in groups)
+    rows, cols, vals = np.empty(total, np.int32), np.empty(total, np.int32), np.empty(total)
+    at = 0
+    for k in range(len(groups)):
+        r, c, v = groups[k]
+        groups[k] = None
+        rows[at:at + r.size], cols[at:at + r.size], vals[at:at + r.size] = r, c, v
+        at += r.size
+    return sps.csc_matrix((vals, (rows, cols)), shape=Bc.shape)
 
 
 def _map(fn, items):
@@ -235,7 +248,8 @@ def _check_pair(top: AnisoOperator, bottom: AnisoOperator) -> None:
                             f"{top.eta_bottom:g} but the bottom one starts in {bottom.eta_top:g}")
 
 
-def add(top, bottom) -> AnisoOperator:
+def add(top, bottom, relerr: float | None = None,
+        relerr_intermediate: float | None = None) -> AnisoOperator:
     """Operator of ``top`` stacked on ``bottom`` (coupled modes).
 
     Parameters
@@ -243,6 +257,19 @@ def add(top, bottom) -> AnisoOperator:
     top, bottom : AnisoOperator or IsoOperator
         Same grid; isotropic operands are converted; the result has
         ``md = max(top.md, bottom.md)``.
+    relerr : float, optional
+        Also drop coefficients of the result below ``relerr`` times the largest of their
+        ordinate pair, making it exactly reciprocal (:meth:`AnisoOperator.pruned`).
+    relerr_intermediate : float, optional
+        The same for the products ``K``, ``Rt2 Ttb1`` and the solution ``Z``
+        (:func:`~layersim.aniso.operator.prune_pairs`): ``Z`` keeps entries down to
+        :data:`~layersim.aniso.banded.PRUNE` of each group of right-hand sides, and the
+        products with it cost in proportion to its entries (3/4 of them are below 1e-6 of
+        their pair on Table 2 row 6).
+
+        By default only entries below :data:`~layersim.operator.DROP_TOLERANCE` of their
+        block's largest are dropped; :func:`layersim.solve` passes
+        :data:`layersim.aniso.plan.STACK_RELERR` and ``STACK_RELERR_INTERMEDIATE``.
 
     Returns
     -------
@@ -256,14 +283,18 @@ def add(top, bottom) -> AnisoOperator:
     opaque = bottom.opaque
     Rt1, Rb1, Ttb1, Tbt1 = (top.block(k) for k in ("Rt", "Rb", "Ttb", "Tbt"))
     Rt2 = bottom.block("Rt")
-    K = prune(Rt2 @ Rb1, 1e-16)
-    first = prune(Rt2 @ Ttb1, 1e-16)
+    tidy = (lambda m: prune(m, 1e-16)) if relerr_intermediate is None else \
+        (lambda m: prune_pairs(m, h, relerr_intermediate))
+    K = tidy(Rt2 @ Rb1)
+    first = tidy(Rt2 @ Ttb1)
     if opaque:
         rhs = first
     else:
         Rb2, Ttb2, Tbt2 = (bottom.block(k) for k in ("Rb", "Ttb", "Tbt"))
         rhs = sps.hstack([first, Tbt2], format="csr")
     Z = banded_solve(K, rhs, h, md, identity_minus=True)
+    del K, rhs, first       # the largest temporaries: free them before the products below
+    Z = Z if relerr_intermediate is None else tidy(Z)
     Z1 = Z[:, :N]
     out = {"Rt": Rt1 + Tbt1 @ Z1}
     if not opaque:
@@ -278,5 +309,6 @@ def add(top, bottom) -> AnisoOperator:
         for name in ("Ttb", "Tbt"):
             if name in top.delta and name in bottom.delta:
                 delta[name] = top.delta[name] * bottom.delta[name]
-    return AnisoOperator(top.grid, md, blocks, top.eta_top,
-                         None if opaque else bottom.eta_bottom, delta)
+    out = AnisoOperator(top.grid, md, blocks, top.eta_top,
+                        None if opaque else bottom.eta_bottom, delta)
+    return out if relerr is None else out.pruned(relerr)

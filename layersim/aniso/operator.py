@@ -96,10 +96,9 @@ class AnisoOperator:
         for mat in self.blocks.values():
             if mat is None or mat.nnz == 0:
                 continue
-            coo = mat.tocoo()
-            lo, li = mode[coo.row // self.h], mode[coo.col // self.h]
+            rs, cs = slot_pairs(mat, self.h)
             # |l - k| / 2 over the complex modes +-lo, +-li that the real entry stands for
-            worst = max(worst, int(np.abs(lo - li).max()) // 2)
+            worst = max(worst, int(np.abs(mode[rs] - mode[cs]).max()) // 2)
         return worst
 
     def block(self, name: str) -> sps.csr_matrix:
@@ -211,6 +210,63 @@ class AnisoOperator:
         return AnisoOperator(self.grid, self.md, blocks, self.eta_top, self.eta_bottom,
                              self.delta)
 
+    def pruned(self, relerr: float) -> "AnisoOperator":
+        """This operator made exactly reciprocal and without the coefficients below ``relerr``
+        times the largest of their ordinate pair (the truncation that the coupled projection
+        applies to each pair, see :data:`layersim.aniso.plan.COUPLED_RELERR`).
+
+        In ``S = G D / eta^2`` (``G`` the coefficients, ``D`` the slot scale of
+        :func:`reciprocity_error`, ``eta`` the index of the side light leaves to) reciprocity
+        reads ``S_Rt = S_Rt^T``, ``S_Rb = S_Rb^T``, ``S_Ttb^T = S_Tbt``. An operator computed
+        from truncated intermediates (:func:`layersim.aniso.adding.add` with ``relerr``) obeys
+        it to about the truncation only; replacing ``S`` by the mean of ``S`` and its mirror
+        image restores it exactly and, the exact operator being reciprocal, does not increase
+        the error. Magnitudes are then compared on ``S``: an entry and its reciprocal are
+        compared with the same pair maximum (over the pair and its mirror), so both are kept
+        or both dropped. The unscattered beam on the diagonal of the transmission blocks is
+        always kept and does not count in the maximum.
+        """
+        h = self.h
+        fw = np.tile(self.grid.flux_weight, self.slots)
+        col_scale = np.repeat(basis.slot_scale(self.md), h) / fw     # B -> G D (no 2 pi)
+        scale, unscale = sps.diags(col_scale), sps.diags(1.0 / col_scale)
+        mirror = lambda m: sps.csr_matrix(scale @ m.T @ unscale)      # B of S^T
+        blocks = dict(self.blocks)
+        for name in ("Rt", "Rb"):
+            if blocks.get(name) is not None:
+                blocks[name] = 0.5 * (blocks[name] + mirror(blocks[name]))
+        if blocks.get("Ttb") is not None:
+            ratio = (self.eta_bottom / self.eta_top) ** 2
+            blocks["Ttb"] = 0.5 * (blocks["Ttb"] + ratio * mirror(blocks["Tbt"]))
+            blocks["Tbt"] = mirror(blocks["Ttb"]) / ratio
+        # reflection blocks are symmetric on their own; Ttb / eta_b^2 mirrors Tbt / eta_t^2
+        eta = {"Rt": 1.0, "Rb": 1.0, "Ttb": self.eta_bottom, "Tbt": self.eta_top}
+        for first, second in (("Rt", None), ("Rb", None), ("Ttb", "Tbt")):
+            parts = []
+            for name, flip in ((first, False), (second, True)):
+                if name is None or blocks.get(name) is None:
+                    continue
+                coo = blocks[name].tocoo()
+                o, i = coo.row % h, coo.col % h
+                if second is None:          # one symmetric block: unordered pairs
+                    o, i = np.minimum(o, i), np.maximum(o, i)
+                elif flip:                  # Tbt[y, x] pairs with Ttb[x, y]
+                    o, i = i, o
+                mag = np.abs(coo.data) * col_scale[coo.col] / eta[name] ** 2
+                beam = (coo.row == coo.col) if name in self.delta else np.zeros(coo.nnz, bool)
+                parts.append((name, coo, o * h + i, mag, beam))
+            if not parts:
+                continue
+            big = np.zeros(h * h)
+            for _, _, key, mag, beam in parts:
+                np.maximum.at(big, key[~beam], mag[~beam])
+            for name, coo, key, mag, beam in parts:
+                keep = beam | (mag >= relerr * big[key])
+                blocks[name] = sps.csr_matrix((coo.data[keep], (coo.row[keep], coo.col[keep])),
+                                              shape=coo.shape)
+        return AnisoOperator(self.grid, self.md, blocks, self.eta_top, self.eta_bottom,
+                             self.delta)
+
     # ---- coefficients ------------------------------------------------------------------
 
     def coefficients(self, name: str) -> sps.csr_matrix:
@@ -289,6 +345,55 @@ def as_aniso(op, md: int | None = None) -> AnisoOperator:
     if isinstance(op, IsoOperator):
         return AnisoOperator.from_iso(op, md)
     raise TypeError(f"expected an IsoOperator or AnisoOperator, got {type(op).__name__}")
+
+
+def _row_chunks(mat: sps.csr_matrix, rows_per_chunk: int = 1 << 14):
+    """``(lo, hi, rows)`` for chunks of rows of a CSR matrix: its entries ``lo:hi`` and their
+    rows. Per-entry index arrays of the operators of coupled stacks (tens of millions of
+    entries) took more memory than the matrices themselves when formed at once."""
+    for start in range(0, mat.shape[0], rows_per_chunk):
+        stop = min(mat.shape[0], start + rows_per_chunk)
+        ptr = mat.indptr[start:stop + 1]
+        yield int(ptr[0]), int(ptr[-1]), np.repeat(np.arange(start, stop), np.diff(ptr))
+
+
+def slot_pairs(mat, h: int, columns=None):
+    """Distinct ``(row slot, column slot)`` pairs holding entries of the CSR matrix ``mat``
+    (slots of ``h`` rows / columns), optionally only entries in the columns where the boolean
+    mask ``columns`` is true.
+
+    Returns
+    -------
+    rows, cols : int ndarray
+    """
+    mat = sps.csr_matrix(mat)
+    mark = np.zeros((-(-mat.shape[0] // h), -(-mat.shape[1] // h)), bool)
+    for lo, hi, rows in _row_chunks(mat):
+        cols = mat.indices[lo:hi]
+        if columns is not None:
+            sel = columns[cols]
+            rows, cols = rows[sel], cols[sel]
+        mark[rows // h, cols // h] = True
+    return np.nonzero(mark)
+
+
+def prune_pairs(mat, h: int, relerr: float) -> sps.csr_matrix:
+    """Drop the entries of ``mat`` below ``relerr`` times the largest entry of their ordinate
+    pair ``(row % h, col % h)`` over all slots (CSR copy): the truncation of each pair's
+    coefficients that the coupled projection applies
+    (:data:`layersim.aniso.plan.COUPLED_RELERR`), for the intermediate products of the
+    adding equations. See :meth:`AnisoOperator.pruned` for operators (reciprocity kept)."""
+    mat = sps.csr_matrix(mat)
+    big = np.zeros(h * h)
+    key = lambda lo, hi, rows: (rows % h) * h + mat.indices[lo:hi] % h
+    for lo, hi, rows in _row_chunks(mat):
+        np.maximum.at(big, key(lo, hi, rows), np.abs(mat.data[lo:hi]))
+    keep = np.empty(mat.nnz, bool)
+    for lo, hi, rows in _row_chunks(mat):
+        keep[lo:hi] = np.abs(mat.data[lo:hi]) >= relerr * big[key(lo, hi, rows)]
+    kept = np.concatenate([[0], np.cumsum(keep)])
+    return sps.csr_matrix((mat.data[keep], mat.indices[keep], kept[mat.indptr]),
+                          shape=mat.shape)
 
 
 def prune(mat, tolerance: float = DROP_TOLERANCE) -> sps.csr_matrix:

@@ -25,7 +25,8 @@ frame). The BSDF is split by the kernels into ``f = smooth * peak(q)``
    coefficients at ``|s| ~ Q_s / 2`` exceed :data:`S_ALIAS` of their largest are recomputed with
    twice as many samples.
 5. ``|s| <= ms`` is kept (the L2 fraction dropped is recorded, see
-   ``benchmarks/ms_study.py``); ``d`` is truncated at the series length (``RELERR``) and at
+   ``benchmarks/ms_study.py``); ``d`` is truncated at the series length (``relerr``, see
+   :data:`layersim.aniso.plan.COUPLED_RELERR`) and at
    ``md`` (Lanczos sigma factors, as for isotropic interfaces).
 
 Reflection blocks are projected on one triangle of pairs and mirrored with reciprocity
@@ -204,9 +205,10 @@ def _fit_smooth(mu_i, mu_o, theta_c, width, tau_ab, q_pars, phi_s, eta, au, av, 
     return series.fit_restricted(x, wt, s.transpose(0, 2, 1), rel, L)
 
 
-def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, geometry):
-    """Coefficients ``F[p, d, ms + s] = f_{d,s}`` (d >= 0, |s| <= ms) of a batch of pairs,
-    the pairs whose phi_s sampling aliases, the dropped |s| > ms fraction and the total L2."""
+def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, geometry, relerr):
+    """Coefficients ``F[p, d, ms + s] = f_{d,s}`` (d >= 0, |s| <= ms) of a batch of pairs
+    (series length in ``d`` at ``relerr``), the pairs whose phi_s sampling aliases, the dropped
+    |s| > ms fraction and the total L2."""
     theta0, q0, qpi, theta_c, width = geometry
     P, ns = q0.shape
     phi_s = np.arange(ns) * (2.0 * np.pi / qs)
@@ -226,7 +228,7 @@ def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, geometry):
         coef = wide
         hard[redo] = np.any(r2 > FIT_RESIDUAL, axis=1)
     L = coef.shape[1]
-    K = min(int(fourier.peak_length(q0.ravel(), qpi.ravel(), dist, RELERR).max()) + L + 2,
+    K = min(int(fourier.peak_length(q0.ravel(), qpi.ravel(), dist, relerr).max()) + L + 2,
             md + L_FIT)
     if hard.any():
         # a kinked smooth factor has a slowly decaying spectrum (~k^-1.5): keep its tail up
@@ -335,8 +337,8 @@ def _aliases(F, s_all, ms, qs):
     return predicted > S_ALIAS * big
 
 
-def _truncate(F, md, stats, peak_len):
-    """Zero coefficients below ``RELERR`` times the pair's largest (this also ends each pair's
+def _truncate(F, md, stats, peak_len, relerr):
+    """Zero coefficients below ``relerr`` times the pair's largest (this also ends each pair's
     series in d); taper series whose *peak* is cut at ``md`` (``peak_len``: the rule of
     :func:`layersim.ingredients.microfacet.needs_taper`, shared by all projection paths) with
     Lanczos sigma factors in d, so that they blur instead of ringing. A long tail from a kink of
@@ -344,7 +346,7 @@ def _truncate(F, md, stats, peak_len):
     whole lobe by ~(d / md)^2 to remove a ringing of the tail's size."""
     mag = np.abs(F)
     big = mag.max(axis=(1, 2), keepdims=True)
-    small = mag < RELERR * np.maximum(big, 1e-300)
+    small = mag < relerr * np.maximum(big, 1e-300)
     F = np.where(small, 0.0, F)
     above = ~small.all(axis=2)                                       # (P, K)
     length = F.shape[1] - np.argmax(above[:, ::-1], axis=1)
@@ -359,7 +361,8 @@ def _truncate(F, md, stats, peak_len):
 
 
 def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: float, av: float,
-                   dist: str, stats: AnisoProjectionStats, triangle: bool = False):
+                   dist: str, stats: AnisoProjectionStats, triangle: bool = False,
+                   relerr: float = RELERR):
     mu_i, mu_o, o, i = _block_pairs(grid, name, triangle)
     stats.pairs += mu_i.size
     fw = grid.flux_weight
@@ -378,6 +381,7 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
         if not todo.size:
             break
         theta_c, width = _supports(theta0, q0, qpi, dist)
+        # batch sizes follow the FFT length, which follows the full series (not ``relerr``)
         kest = fourier.peak_length(q0.max(axis=1), qpi.max(axis=1), dist, RELERR)
         order = np.argsort(kest, kind="stable")
         redo = []
@@ -397,7 +401,7 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
         def work(sel, qs=qs):
             geo = (theta0[sel], q0[sel], qpi[sel], theta_c[sel], width[sel])
             return _project_pairs(mu_i[todo[sel]], mu_o[todo[sel]], eta, au, av, dist, ms, md,
-                                  qs, geo)
+                                  qs, geo, relerr)
 
         for sel, (F, alias, dropped, tot, plen, nrefit) in zip(batches, _map(work, batches)):
             stats.refit += nrefit
@@ -412,7 +416,7 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
                 w = fw[i[pp]] * fw[o[pp]]
                 stats._num += float(np.sum(w * dropped[ok] ** 2 * tot[ok]))
                 stats._den += float(np.sum(w * tot[ok]))
-                Fk = _truncate(F[ok], md, stats, plen[ok])
+                Fk = _truncate(F[ok], md, stats, plen[ok], relerr)
                 chunks.append((o[pp], i[pp], Fk))
         todo = np.concatenate(redo) if redo else np.zeros(0, np.int64)
         qs *= 2
@@ -488,7 +492,7 @@ def _assemble(grid: Grid, md: int, ms: int, chunks) -> sps.csr_matrix:
 
 def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: float,
                              stats: AnisoProjectionStats | None = None,
-                             reciprocity: bool = True) -> AnisoOperator:
+                             reciprocity: bool = True, relerr: float = RELERR) -> AnisoOperator:
     """Operator of an anisotropic (or rotated) rough interface in the slot basis.
 
     Parameters
@@ -507,6 +511,11 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
     reciprocity : bool
         Project one triangle of the reflection blocks and ``Ttb`` only, deriving the rest by
         reciprocity (``False`` projects every block, for tests).
+    relerr : float
+        Coefficients below ``relerr`` times the largest of their ordinate pair are dropped
+        (default: the isotropic projection's ``RELERR``; :func:`layersim.solve` passes the
+        plan's :data:`layersim.aniso.plan.COUPLED_RELERR`). Truncation is per pair, and mirrored
+        blocks reuse the projected pairs, so reciprocity stays exact at any ``relerr``.
     """
     if layer.smooth:
         raise ValueError("aniso_interface_operator needs a rough interface")
@@ -519,13 +528,16 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
     chunks = {}
     for name in names:
         if not reciprocity:
-            chunks[name] = _project_block(grid, name, md, ms, eta, au, av, dist, stats)
+            chunks[name] = _project_block(grid, name, md, ms, eta, au, av, dist, stats,
+                                          relerr=relerr)
         elif name == "Tbt":
             chunks[name] = _mirror(chunks["Ttb"], 1.0 / eta.real ** 2, skip_diagonal=False)
         elif name == "Ttb":
-            chunks[name] = _project_block(grid, name, md, ms, eta, au, av, dist, stats)
+            chunks[name] = _project_block(grid, name, md, ms, eta, au, av, dist, stats,
+                                          relerr=relerr)
         else:
-            half = _project_block(grid, name, md, ms, eta, au, av, dist, stats, triangle=True)
+            half = _project_block(grid, name, md, ms, eta, au, av, dist, stats, triangle=True,
+                                  relerr=relerr)
             chunks[name] = half + _mirror(half)
     blocks = {name: _assemble(grid, md, ms, chunks[name]) for name in names}
     op = AnisoOperator(grid, md, blocks, eta_top=eta_above,
