@@ -17,41 +17,14 @@ from __future__ import annotations
 import sys
 import time
 
-import numpy as np
-import scipy.sparse as sps
-
 import layersim
 from layersim import adding
-from layersim.aniso import AnisoOperator, adding as aniso_adding
-from layersim.aniso.operator import as_aniso
+from layersim.aniso import adding as aniso_adding
 from layersim.ingredients import interface_operator, medium_operator
 from layersim.ingredients.aniso_microfacet import aniso_interface_operator
-from layersim.operator import Grid, IsoOperator
+from layersim.operator import Grid
 from layersim.scene import Conductor, Dielectric
-from layersim.subtract import _negativity
-
-
-def error(a, b) -> float:
-    a, b = as_aniso(a), as_aniso(b)
-    w = np.tile(np.sqrt(a.grid.flux_weight), a.slots)
-    W, Wi = sps.diags(w), sps.diags(1.0 / w)
-    num = den = 0.0
-    for k, blk in b.blocks.items():
-        if blk is not None:
-            num += (W @ (a.blocks[k] - blk) @ Wi).power(2).sum()
-            den += (W @ blk @ Wi).power(2).sum()
-    return float(np.sqrt(num / den))
-
-
-def noisy(op, level, seed=3):
-    rng = np.random.default_rng(seed)
-    if isinstance(op, AnisoOperator):
-        blocks = {k: None if v is None else v.multiply(1 + level * rng.standard_normal(v.shape))
-                  .tocsr() for k, v in op.blocks.items()}
-        return AnisoOperator(op.grid, op.md, blocks, op.eta_top, op.eta_bottom, op.delta)
-    blocks = {k: None if v is None else [b.multiply(1 + level * rng.standard_normal(b.shape))
-                                         .tocsr() for b in v] for k, v in op.blocks.items()}
-    return IsoOperator(op.grid, blocks, op.eta_top, op.eta_bottom, op.delta)
+from layersim.subtract import _negativity, relative_error as error, with_noise
 
 
 def main() -> int:
@@ -79,7 +52,7 @@ def main() -> int:
         known, truth = (a, b) if side == "top" else (b, a)
         for level in (0.0, 0.01):
             t0 = time.perf_counter()
-            data = stack if level == 0 else noisy(stack, level)
+            data = stack if level == 0 else with_noise(stack, level, 3)
             got = layersim.subtract(data, known, side=side)
             info = got.info["subtract"]
             print(f"{label:>58} | {level:5.2f} | {info['eps']:8.2g} {info['method']:>27} | "

@@ -16,13 +16,31 @@ from .runtime import device_for
 TAPS = 16
 
 
+@wp.func
+def cosine_sum(coef: wp.array(dtype=wp.float64), start: wp.int64, end: wp.int64,
+               c1: wp.float64):
+    """sum_l coef[start + l] cos(l phi) over ``start <= start + l < end`` (``end > start``),
+    given ``c1 = cos(phi)``: cos(l phi) by the Chebyshev recurrence (one cosine per query)."""
+    two_c1 = wp.float64(2.0) * c1
+    s = coef[start]
+    c_prev = wp.float64(1.0)
+    c_cur = c1
+    j = start + wp.int64(1)
+    while j < end:
+        s += coef[j] * c_cur
+        c_next = two_c1 * c_cur - c_prev
+        c_prev = c_cur
+        c_cur = c_next
+        j += wp.int64(1)
+    return s
+
+
 @wp.kernel
 def _eval_series(offsets: wp.array(dtype=wp.int64), coef: wp.array(dtype=wp.float64),
                  pair: wp.array2d(dtype=wp.int64), weight: wp.array2d(dtype=wp.float64),
                  dphi: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):
     q = wp.tid()
     c1 = wp.cos(dphi[q])
-    two_c1 = wp.float64(2.0) * c1
     acc = wp.float64(0.0)
     for k in range(TAPS):
         w = weight[q, k]
@@ -31,17 +49,7 @@ def _eval_series(offsets: wp.array(dtype=wp.int64), coef: wp.array(dtype=wp.floa
             start = offsets[p]
             end = offsets[p + wp.int64(1)]
             if end > start:
-                s = coef[start]
-                c_prev = wp.float64(1.0)
-                c_cur = c1
-                j = start + wp.int64(1)
-                while j < end:
-                    s += coef[j] * c_cur
-                    c_next = two_c1 * c_cur - c_prev
-                    c_prev = c_cur
-                    c_cur = c_next
-                    j += wp.int64(1)
-                acc += w * s
+                acc += w * cosine_sum(coef, start, end, c1)
     out[q] = acc
 
 

@@ -41,6 +41,7 @@ import math
 import numpy as np
 import warp as wp
 
+from .fourier_eval import cosine_sum
 from .runtime import device_for
 
 #: (x0, width, c0, c1, c2, c3, exact): an interval of the elevation marginal (see
@@ -422,7 +423,6 @@ def _pdf_azimuth(offsets: wp.array(dtype=wp.int64), coef: wp.array(dtype=wp.floa
     q = wp.tid()
     zero = wp.float64(0.0)
     c1 = wp.cos(phi[q])
-    two_c1 = wp.float64(2.0) * c1
     g0 = zero
     g = zero
     for k in range(16):
@@ -433,17 +433,7 @@ def _pdf_azimuth(offsets: wp.array(dtype=wp.int64), coef: wp.array(dtype=wp.floa
             end = offsets[p + wp.int64(1)]
             if end > start:
                 g0 += w * coef[start]
-                s = coef[start]
-                c_prev = wp.float64(1.0)
-                c_cur = c1
-                j = start + wp.int64(1)
-                while j < end:
-                    s += coef[j] * c_cur
-                    c_next = two_c1 * c_cur - c_prev
-                    c_prev = c_cur
-                    c_cur = c_next
-                    j += wp.int64(1)
-                g += w * s
+                g += w * cosine_sum(coef, start, end, c1)
     if g0 > zero and exact[q] != 0:
         out_pdf[q] = wp.max(g, zero) / (wp.float64(2.0) * _PI * g0)
     else:

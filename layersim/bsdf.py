@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FileFormatError, LayersimError
+from .errors import FileFormatError, OperatorError
 from .kernels import fourier_eval
 from .operator import BLOCKS, IsoOperator, order_weight
 
@@ -90,6 +90,39 @@ def spline_weights(nodes: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.nda
     idx[mid] = np.stack([km1, k, k + 1, kp2], axis=1)
     w[mid] = wm
     return idx, w
+
+
+def channel_pairs(a: "BSDF", b: "BSDF", mismatch: str) -> list:
+    """Per-channel operator pairs of two BSDFs for stack algebra: equal channel counts pair
+    up, a one-channel BSDF pairs with every channel of the other. Other counts raise
+    :class:`OperatorError` with ``mismatch.format(a=a.channels, b=b.channels)``."""
+    if a.channels != b.channels and 1 not in (a.channels, b.channels):
+        raise OperatorError(mismatch.format(a=a.channels, b=b.channels))
+    pick = lambda x, c: x.operators[0 if x.channels == 1 else c]
+    return [(pick(a, c), pick(b, c)) for c in range(max(a.channels, b.channels))]
+
+
+def block_taps(op, table, mu_in: np.ndarray, mu_out: np.ndarray):
+    """For each block present, the queries it serves and their 16 interpolation taps.
+
+    ``mu_in`` and ``mu_out`` are the signed cosines of the propagation directions (Q,); yields
+    ``(sel, pair, weight)``: indices into the queries, and (len(sel), 16) pair indices
+    (``table.base(block) + o * h + i``) and weights of the bicubic spline in both elevations.
+    Shared by the isotropic and the anisotropic ``eval``.
+    """
+    h = op.h
+    names = np.where(mu_in > 0, np.where(mu_out < 0, "Rt", "Ttb"),
+                     np.where(mu_out > 0, "Rb", "Tbt"))
+    valid = (mu_in != 0) & (mu_out != 0)
+    for name in BLOCKS:
+        sel = np.flatnonzero(valid & (names == name))
+        if sel.size == 0 or op.blocks[name] is None:
+            continue
+        io, wo_ = spline_weights(op.grid.mu, np.abs(mu_out[sel]))
+        ii, wi_ = spline_weights(op.grid.mu, np.abs(mu_in[sel]))
+        pair = table.base(name) + (io[:, :, None] * h + ii[:, None, :]).reshape(sel.size, 16)
+        weight = (wo_[:, :, None] * wi_[:, None, :]).reshape(sel.size, 16)
+        yield sel, pair, weight
 
 
 def hat_weights(nodes: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -268,21 +301,9 @@ class BSDF:
                                  .reshape(shape))
 
     def _eval_channel(self, c, mu_in, mu_out, dphi) -> np.ndarray:
-        op = self.operators[c]
         table = self._table(c)
-        h = op.h
         out = np.zeros(mu_in.size)
-        names = np.where(mu_in > 0, np.where(mu_out < 0, "Rt", "Ttb"),
-                         np.where(mu_out > 0, "Rb", "Tbt"))
-        valid = (mu_in != 0) & (mu_out != 0)
-        for name in BLOCKS:
-            sel = np.flatnonzero(valid & (names == name))
-            if sel.size == 0 or op.blocks[name] is None:
-                continue
-            io, wo_ = spline_weights(op.grid.mu, np.abs(mu_out[sel]))
-            ii, wi_ = spline_weights(op.grid.mu, np.abs(mu_in[sel]))
-            pair = table.base(name) + (io[:, :, None] * h + ii[:, None, :]).reshape(sel.size, 16)
-            weight = (wo_[:, :, None] * wi_[:, None, :]).reshape(sel.size, 16)
+        for sel, pair, weight in block_taps(self.operators[c], table, mu_in, mu_out):
             out[sel] = fourier_eval.eval_series(table.offsets, table.coef, pair, weight,
                                                 dphi[sel])
         return out

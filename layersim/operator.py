@@ -179,7 +179,6 @@ class IsoOperator:
         and ``coef`` of shape (P, K) holding ``f_l(mu_o, mu_i)`` for ``l < K`` (zero-padded).
         A block given as ``None`` is left out; a block missing from ``series`` is all zero.
         """
-        h = grid.h
         blocks = {}
         for name in BLOCKS:
             chunks = series.get(name, [])
@@ -237,19 +236,11 @@ class IsoOperator:
 
     def to_arrays(self, prefix: str = "") -> dict:
         """Flat arrays for ``np.savez`` (one CSR triple per block, orders concatenated)."""
-        d = {f"{prefix}rule": np.array(self.grid.rule), f"{prefix}n": np.array(self.grid.n),
-             f"{prefix}m": np.array(self.m), f"{prefix}eta_top": np.array(self.eta_top),
-             f"{prefix}eta_bottom": np.array(np.nan if self.eta_bottom is None
-                                             else self.eta_bottom)}
-        for name, vec in self.delta.items():
-            d[f"{prefix}delta_{name}"] = vec
-        for name, blk in self.blocks.items():
-            if blk is None:
-                continue
-            stacked = sps.vstack(blk, format="csr") if blk else sps.csr_matrix((0, self.h))
-            d[f"{prefix}{name}_data"] = stacked.data
-            d[f"{prefix}{name}_indices"] = stacked.indices.astype(np.int32)
-            d[f"{prefix}{name}_indptr"] = stacked.indptr.astype(np.int64)
+        d = header_arrays(self, prefix)
+        d[f"{prefix}m"] = np.array(self.m)
+        write_blocks(d, prefix, {
+            name: sps.vstack(blk, format="csr") if blk else sps.csr_matrix((0, self.h))
+            for name, blk in self.blocks.items() if blk is not None})
         return d
 
     @classmethod
@@ -261,20 +252,48 @@ class IsoOperator:
             eb = float(d[f"{prefix}eta_bottom"])
             grid = Grid.make(rule, n)
             h = grid.h
-            blocks = {}
-            for name in BLOCKS:
-                key = f"{prefix}{name}_data"
-                if key not in d:
-                    blocks[name] = None
-                    continue
-                stacked = sps.csr_matrix((d[key], d[f"{prefix}{name}_indices"],
-                                          d[f"{prefix}{name}_indptr"]), shape=(m * h, h))
-                blocks[name] = [stacked[l * h:(l + 1) * h] for l in range(m)]
-            delta = {name: np.asarray(d[f"{prefix}delta_{name}"]) for name in ("Ttb", "Tbt")
-                     if f"{prefix}delta_{name}" in d}
+            blocks = {name: None if stacked is None else
+                      [stacked[l * h:(l + 1) * h] for l in range(m)]
+                      for name, stacked in read_blocks(d, prefix, (m * h, h)).items()}
+            delta = read_delta(d, prefix)
         except (KeyError, ValueError, TypeError) as exc:
             raise FileFormatError(f"not a layersim operator file ({exc})") from None
         return cls(grid, blocks, eta_top, None if np.isnan(eb) else eb, delta)
+
+
+# ---- file arrays shared by IsoOperator and layersim.aniso.AnisoOperator ----------------
+
+def header_arrays(op, prefix: str) -> dict:
+    """Grid, indices and unscattered transmission of an operator as named arrays."""
+    d = {f"{prefix}rule": np.array(op.grid.rule), f"{prefix}n": np.array(op.grid.n),
+         f"{prefix}eta_top": np.array(op.eta_top),
+         f"{prefix}eta_bottom": np.array(np.nan if op.eta_bottom is None else op.eta_bottom)}
+    for name, vec in op.delta.items():
+        d[f"{prefix}delta_{name}"] = vec
+    return d
+
+
+def write_blocks(d: dict, prefix: str, mats: dict) -> None:
+    """Store CSR matrices ``{block: csr}`` as data / int32 indices / int64 indptr arrays."""
+    for name, mat in mats.items():
+        d[f"{prefix}{name}_data"] = mat.data
+        d[f"{prefix}{name}_indices"] = mat.indices.astype(np.int32)
+        d[f"{prefix}{name}_indptr"] = mat.indptr.astype(np.int64)
+
+
+def read_blocks(d, prefix: str, shape: tuple) -> dict:
+    """Inverse of :func:`write_blocks`: ``{block: csr of shape or None}`` for every block."""
+    blocks = {}
+    for name in BLOCKS:
+        key = f"{prefix}{name}_data"
+        blocks[name] = None if key not in d else sps.csr_matrix(
+            (d[key], d[f"{prefix}{name}_indices"], d[f"{prefix}{name}_indptr"]), shape=shape)
+    return blocks
+
+
+def read_delta(d, prefix: str) -> dict:
+    return {name: np.asarray(d[f"{prefix}delta_{name}"]) for name in ("Ttb", "Tbt")
+            if f"{prefix}delta_{name}" in d}
 
 
 #: Largest dense (orders x h x h) scratch array _orders_to_csr uses (entries; 128 MiB).

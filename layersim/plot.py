@@ -32,7 +32,6 @@ from matplotlib.patches import Circle
 
 from .bsdf import BSDF, spline_weights
 from .channels import LUMINANCE
-from .operator import BLOCKS
 
 #: Panel order of layerlab's plot_layer: (block, mu_i range, mu_o range).
 PANELS = (("Tbt", (-1, 0), (-1, 0)), ("Rt", (0, 1), (-1, 0)),

@@ -9,8 +9,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from . import adding, energy
-from .bsdf import BSDF
-from .errors import InfeasibleError, OperatorError
+from .bsdf import BSDF, channel_pairs
+from .errors import InfeasibleError
 from .ingredients import diffuse_operator, interface_operator, medium_operator
 from .ingredients.microfacet import ProjectionStats
 from .ingredients.numeric import numeric_interface_operator
@@ -234,12 +234,9 @@ def add(top, bottom, threads: int | None = None):
         return aniso_adding.add(top, bottom)
     if not (isinstance(top, BSDF) and isinstance(bottom, BSDF)):
         raise TypeError("add() takes two BSDF objects (from layersim.solve) or two operators")
-    if top.channels != bottom.channels and 1 not in (top.channels, bottom.channels):
-        raise OperatorError(f"cannot add a {top.channels}-channel BSDF to a "
-                            f"{bottom.channels}-channel one")
-    channels = max(top.channels, bottom.channels)
-    pick = lambda b, c: b.operators[0 if b.channels == 1 else c]
-    ops = [add(pick(top, c), pick(bottom, c), threads) for c in range(channels)]
+    pairs = channel_pairs(top, bottom, "cannot add a {a}-channel BSDF to a {b}-channel one")
+    channels = len(pairs)
+    ops = [add(a, b, threads) for a, b in pairs]
     info = {"scene": f"{top.info.get('scene', 'top')} + {bottom.info.get('scene', 'bottom')}",
             "channels": channels}
     return BSDF(ops, None, info)

@@ -128,7 +128,7 @@ def subtract(stack, known, side: str = "top", eps: float | None = None,
         If the operands are not compatible (grids, indices, opaque known layer on the wrong
         side).
     """
-    from .bsdf import BSDF
+    from .bsdf import BSDF, channel_pairs
     if side not in ("top", "bottom"):
         raise ValueError(f"side must be 'top' or 'bottom' (where the known layer is), got "
                          f"{side!r}")
@@ -139,19 +139,16 @@ def subtract(stack, known, side: str = "top", eps: float | None = None,
     if isinstance(stack, BSDF) or isinstance(known, BSDF):
         if not (isinstance(stack, BSDF) and isinstance(known, BSDF)):
             raise TypeError("subtract() takes two BSDF objects or two operators")
-        if stack.channels != known.channels and 1 not in (stack.channels, known.channels):
-            raise OperatorError(f"cannot subtract a {known.channels}-channel BSDF from a "
-                                f"{stack.channels}-channel one")
-        channels = max(stack.channels, known.channels)
-        pick = lambda b, c: b.operators[0 if b.channels == 1 else c]
+        pairs = channel_pairs(stack, known,
+                              "cannot subtract a {b}-channel BSDF from a {a}-channel one")
         ops, infos = [], []
-        for c in range(channels):
-            op, info = _subtract_op(pick(stack, c), pick(known, c), side, eps, noise)
+        for s_op, k_op in pairs:
+            op, info = _subtract_op(s_op, k_op, side, eps, noise)
             ops.append(op)
             infos.append(info)
         meta = {"scene": f"{stack.info.get('scene', 'stack')} - "
                          f"{known.info.get('scene', 'known')} ({side})",
-                "channels": channels, "subtract": infos[0] if channels == 1 else infos}
+                "channels": len(ops), "subtract": infos[0] if len(ops) == 1 else infos}
         return BSDF(ops, None, meta)
     op, info = _subtract_op(stack, known, side, eps, noise)
     op.info = {"subtract": info}
@@ -285,6 +282,20 @@ def relative_error(a, b) -> float:
         num += (W @ (a.blocks[k] - blk) @ Wi).power(2).sum()
         den += (W @ blk @ Wi).power(2).sum()
     return float(np.sqrt(num / den))
+
+
+def with_noise(op, level: float, seed: int):
+    """``op`` with independent multiplicative Gaussian noise of relative standard deviation
+    ``level`` on every stored entry (synthetic "measured" stacks for subtraction studies)."""
+    from .aniso.operator import AnisoOperator
+    from .operator import IsoOperator
+    rng = np.random.default_rng(seed)
+    perturb = lambda mat: mat.multiply(1 + level * rng.standard_normal(mat.shape)).tocsr()
+    if isinstance(op, AnisoOperator):
+        blocks = {k: None if v is None else perturb(v) for k, v in op.blocks.items()}
+        return AnisoOperator(op.grid, op.md, blocks, op.eta_top, op.eta_bottom, op.delta)
+    blocks = {k: None if v is None else [perturb(b) for b in v] for k, v in op.blocks.items()}
+    return IsoOperator(op.grid, blocks, op.eta_top, op.eta_bottom, op.delta)
 
 
 def _raise_diffusing(side, vis, e, noise_level, source, h):
@@ -564,7 +575,6 @@ class _AnisoAlgebra:
         return sps.csr_matrix(self._solve(sps.csr_matrix(A.T), sps.csr_matrix(M.T)).T)
 
     def visibility(self, names, eps=None):
-        from .aniso import basis
         fw = self.grid.flux_weight
         h = self.h
         energy = 0.0

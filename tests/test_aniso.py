@@ -275,7 +275,6 @@ def test_coupled_stack_never_creates_energy_and_is_reciprocal(coupled_layers):
 
 
 def test_block_lu_solver_matches_sparse_lu_on_a_banded_system():
-    rng = np.random.default_rng(4)
     h, md = 6, 9
     N = basis.n_slots(md) * h
     mode = basis.slot_mode(md)[np.arange(N) // h]

@@ -4,7 +4,6 @@ where nothing is clamped, the clamped sampling density next to undershoot, and i
 
 import numpy as np
 import pytest
-import scipy.sparse as sps
 import scipy.stats
 
 import layersim

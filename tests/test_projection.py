@@ -4,9 +4,7 @@ azimuth), near-specular roughness, GGX tails, conductors and total internal refl
 
 import numpy as np
 import pytest
-import warp as wp
 
-from layersim import fourier
 from layersim.ingredients.microfacet import pair_series
 from layersim.kernels import projection as kproj
 from layersim.operator import Grid

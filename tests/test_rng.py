@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-import warp as wp
 
 from layersim.kernels import rng
 from layersim.kernels.runtime import ensure_init

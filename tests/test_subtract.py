@@ -4,16 +4,15 @@ regularisation with 1 % noise, refusal of ill-posed problems, BSDF-level use and
 
 import numpy as np
 import pytest
-import scipy.sparse as sps
 
 import layersim
-from layersim.subtract import relative_error
+from layersim.subtract import relative_error, with_noise as noisy
 from layersim import adding
 from layersim.aniso import AnisoOperator, adding as aniso_adding
 from layersim.errors import InfeasibleError, OperatorError
 from layersim.ingredients import interface_operator, medium_operator
 from layersim.ingredients.aniso_microfacet import aniso_interface_operator
-from layersim.operator import Grid, IsoOperator
+from layersim.operator import Grid
 from layersim.scene import Conductor, Dielectric
 from layersim.subtract import _negativity
 
@@ -25,18 +24,6 @@ M = 24
 def energy_error(a, b):
     """Relative Frobenius error of all blocks in the energy basis (sqrt(w mu) scaling)."""
     return relative_error(a, b)
-
-
-def noisy(op, level, seed):
-    """``op`` with independent multiplicative noise of relative std ``level`` on every entry."""
-    rng = np.random.default_rng(seed)
-    if isinstance(op, AnisoOperator):
-        blocks = {k: None if v is None else v.multiply(1 + level * rng.standard_normal(v.shape))
-                  .tocsr() for k, v in op.blocks.items()}
-        return AnisoOperator(op.grid, op.md, blocks, op.eta_top, op.eta_bottom, op.delta)
-    blocks = {k: None if v is None else [b.multiply(1 + level * rng.standard_normal(b.shape))
-                                         .tocsr() for b in v] for k, v in op.blocks.items()}
-    return IsoOperator(op.grid, blocks, op.eta_top, op.eta_bottom, op.delta)
 
 
 @pytest.fixture(scope="module")

@@ -29,6 +29,7 @@ import numpy as np
 import scipy.sparse as sps
 
 from ..errors import InfeasibleError, OperatorError
+from ..adding import _check_pair  # same grid / opacity / index checks for both representations
 from ..operator import DROP_TOLERANCE
 from . import basis
 from .banded import PRUNE, BlockBandedLU
@@ -234,18 +235,6 @@ def _sparse_lu_solve(Ac, Bc):
     from ..adding import _solve_columns, _sparse_lu
     solve = _sparse_lu(sps.csc_matrix(Ac))
     return sps.csr_matrix(_solve_columns(solve, sps.csc_matrix(Bc)))
-
-
-def _check_pair(top: AnisoOperator, bottom: AnisoOperator) -> None:
-    if top.grid != bottom.grid:
-        raise OperatorError(f"cannot add operators on different grids ({top.grid.rule} n="
-                            f"{top.grid.n} over {bottom.grid.rule} n={bottom.grid.n}); "
-                            "build both from the same discretisation plan")
-    if top.opaque:
-        raise OperatorError("the top operator is opaque: nothing reaches a layer below it")
-    if abs(top.eta_bottom - bottom.eta_top) > 1e-9 * max(1.0, top.eta_bottom):
-        raise OperatorError(f"index mismatch: the top operator ends in a medium of index "
-                            f"{top.eta_bottom:g} but the bottom one starts in {bottom.eta_top:g}")
 
 
 def add(top, bottom, relerr: float | None = None,

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg as sla
-import scipy.sparse as sps
 
 #: Relative magnitude below which blocks of the solution are treated as zero (and the
 #: substitution stops after ``b`` such blocks in a row).

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from ..bsdf import closed_bin
+from ..bsdf import block_taps, closed_bin
 from ..kernels import fourier_eval2d
 from ..operator import BLOCKS
 from . import basis
@@ -127,24 +127,11 @@ def _prop_azimuths(wi, wo):
 
 def eval_channel(bsdf, c: int, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     """f(wi, wo) (1/sr) for flattened directions (Q, 3) of channel ``c``."""
-    from ..bsdf import spline_weights
-    op = bsdf.operators[c]
     table = bsdf._table(c)
-    h = op.h
     mu_in, mu_out = wi[:, 2], -wo[:, 2]
     phi_i, phi_o = _prop_azimuths(wi, wo)
     out = np.zeros(mu_in.size)
-    names = np.where(mu_in > 0, np.where(mu_out < 0, "Rt", "Ttb"),
-                     np.where(mu_out > 0, "Rb", "Tbt"))
-    valid = (mu_in != 0) & (mu_out != 0)
-    for name in BLOCKS:
-        sel = np.flatnonzero(valid & (names == name))
-        if sel.size == 0 or op.blocks[name] is None:
-            continue
-        io, wo_ = spline_weights(op.grid.mu, np.abs(mu_out[sel]))
-        ii, wi_ = spline_weights(op.grid.mu, np.abs(mu_in[sel]))
-        pair = table.base(name) + (io[:, :, None] * h + ii[:, None, :]).reshape(sel.size, 16)
-        weight = (wo_[:, :, None] * wi_[:, None, :]).reshape(sel.size, 16)
+    for sel, pair, weight in block_taps(bsdf.operators[c], table, mu_in, mu_out):
         out[sel] = fourier_eval2d.eval_series2d(table, pair, weight,
                                                  phi_o[sel] - phi_i[sel],
                                                  phi_o[sel] + phi_i[sel])

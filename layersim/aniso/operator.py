@@ -19,7 +19,8 @@ import numpy as np
 import scipy.sparse as sps
 
 from ..errors import FileFormatError, OperatorError
-from ..operator import BLOCKS, DROP_TOLERANCE, Grid, IsoOperator
+from ..operator import (BLOCKS, DROP_TOLERANCE, Grid, IsoOperator, header_arrays,
+                        read_blocks, read_delta, write_blocks)
 from . import basis
 
 
@@ -134,7 +135,6 @@ class AnisoOperator:
         missing ones are zero, except for the unscattered beam of media, which occupies every
         order."""
         md = op.m if md is None else int(md)
-        h = op.h
         blocks = {}
         for name in BLOCKS:
             if op.blocks[name] is None:
@@ -297,20 +297,11 @@ class AnisoOperator:
     # ---- persistence -------------------------------------------------------------------
 
     def to_arrays(self, prefix: str = "") -> dict:
-        d = {f"{prefix}representation": np.array("anisotropic"),
-             f"{prefix}rule": np.array(self.grid.rule), f"{prefix}n": np.array(self.grid.n),
-             f"{prefix}md": np.array(self.md), f"{prefix}ms": np.array(self.ms),
-             f"{prefix}eta_top": np.array(self.eta_top),
-             f"{prefix}eta_bottom": np.array(np.nan if self.eta_bottom is None
-                                             else self.eta_bottom)}
-        for name, vec in self.delta.items():
-            d[f"{prefix}delta_{name}"] = vec
-        for name, mat in self.blocks.items():
-            if mat is None:
-                continue
-            d[f"{prefix}{name}_data"] = mat.data
-            d[f"{prefix}{name}_indices"] = mat.indices.astype(np.int32)
-            d[f"{prefix}{name}_indptr"] = mat.indptr.astype(np.int64)
+        d = header_arrays(self, prefix)
+        d.update({f"{prefix}representation": np.array("anisotropic"),
+                  f"{prefix}md": np.array(self.md), f"{prefix}ms": np.array(self.ms)})
+        write_blocks(d, prefix, {name: mat for name, mat in self.blocks.items()
+                                 if mat is not None})
         return d
 
     @classmethod
@@ -320,16 +311,8 @@ class AnisoOperator:
             md, ms = int(d[f"{prefix}md"]), int(d[f"{prefix}ms"])
             eb = float(d[f"{prefix}eta_bottom"])
             N = basis.n_slots(md) * grid.h
-            blocks = {}
-            for name in BLOCKS:
-                key = f"{prefix}{name}_data"
-                if key not in d:
-                    blocks[name] = None
-                    continue
-                blocks[name] = sps.csr_matrix((d[key], d[f"{prefix}{name}_indices"],
-                                               d[f"{prefix}{name}_indptr"]), shape=(N, N))
-            delta = {name: np.asarray(d[f"{prefix}delta_{name}"]) for name in ("Ttb", "Tbt")
-                     if f"{prefix}delta_{name}" in d}
+            blocks = read_blocks(d, prefix, (N, N))
+            delta = read_delta(d, prefix)
             op = cls(grid, md, blocks, float(d[f"{prefix}eta_top"]),
                      None if np.isnan(eb) else eb, delta, ms=ms)
         except (KeyError, ValueError, TypeError, OperatorError) as exc:

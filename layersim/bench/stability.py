@@ -139,9 +139,9 @@ class SubtractCase:
         from ..errors import InfeasibleError
         from ..ingredients import medium_operator
         from ..ingredients.numeric import numeric_interface_operator
-        from ..operator import Grid, IsoOperator
+        from ..operator import Grid
         from ..scene import Conductor, Dielectric
-        from ..subtract import _negativity, relative_error, subtract
+        from ..subtract import _negativity, relative_error, subtract, with_noise
 
         grid, m = Grid.make("gauss-lobatto", 48), 24
         if self.blurring:
@@ -154,12 +154,7 @@ class SubtractCase:
                 grid, m, Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3), 1.0)
         stack = add(top, bottom)
         if self.noise:
-            rng = np.random.default_rng(3)
-            blocks = {k: None if v is None else
-                      [b.multiply(1 + self.noise * rng.standard_normal(b.shape)).tocsr()
-                       for b in v] for k, v in stack.blocks.items()}
-            stack = IsoOperator(stack.grid, blocks, stack.eta_top, stack.eta_bottom,
-                                stack.delta)
+            stack = with_noise(stack, self.noise, seed=3)
         try:
             got = subtract(stack, top, side="top")
         except InfeasibleError as exc:

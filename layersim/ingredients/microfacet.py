@@ -33,7 +33,7 @@ from .. import fourier
 from ..kernels import projection as kproj
 from ..kernels.runtime import device_for
 from ..operator import Grid, IsoOperator
-from ..scene import Conductor, Dielectric
+from ..scene import Conductor
 from ..threads import parallel_map
 
 #: Relative truncation of each pair's cosine series (|f_l| < RELERR |f_0| are dropped).
