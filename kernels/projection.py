@@ -202,6 +202,179 @@ def uniform_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, sampl
     return out
 
 
+# Whole blocks on the device: coarse energy bound, ragged sampling, DCT, truncation
+# ---------------------------------------------------------------------------------------------
+#
+# The numeric path on a GPU keeps a block's samples and series on the device
+# (``layersim.ingredients.numeric``): each pair ``p`` has its own half period ``M_p`` (a power of
+# two, so one cosine table of the largest ``M`` serves all pairs) and its samples live in one flat
+# array at ``start[p]``.
+
+
+@wp.kernel
+def _coarse_bound_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
+                         n_phi: int, eta: wp.float64, k: wp.float64, au: wp.float64,
+                         av: wp.float64, dist: int, smax: wp.array(dtype=wp.float64),
+                         q0: wp.array(dtype=wp.float64), qpi: wp.array(dtype=wp.float64)):
+    """Largest |smooth factor| over ``n_phi`` azimuths pi j / (n_phi - 1), and the slope-space
+    form q at phi = 0 and pi, of each pair."""
+    p = wp.tid()
+    big = wp.float64(0.0)
+    for j in range(n_phi):
+        phi = wp.float64(wp.pi) * wp.float64(j) / wp.float64(n_phi - 1)
+        wi, wo = _pair_directions(mu_i[p], mu_o[p], phi)
+        s, q = physics.microfacet_smooth_q(wi, wo, eta, k, au, av, dist)
+        big = wp.max(big, wp.abs(s))
+        if j == 0:
+            q0[p] = q
+        if j == n_phi - 1:
+            qpi[p] = q
+    smax[p] = big
+
+
+def coarse_bound(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, n_phi: int, device=None):
+    """Per pair: ``max |S(phi)|`` over ``n_phi`` uniform azimuths of [0, pi], ``q(0)`` and
+    ``q(pi)`` (see :func:`microfacet_split`); arrays of shape (P,). Only these three numbers per
+    pair leave the device."""
+    ensure_init()
+    dev = device_for(device)
+    mu_i = np.ascontiguousarray(mu_i, dtype=np.float64)
+    P = mu_i.size
+    outs = [wp.zeros(P, dtype=wp.float64, device=dev) for _ in range(3)]
+    if P:
+        wp.launch(_coarse_bound_kernel, dim=P, device=dev,
+                  inputs=[wp.array(mu_i, dtype=wp.float64, device=dev),
+                          wp.array(np.ascontiguousarray(mu_o, dtype=np.float64),
+                                   dtype=wp.float64, device=dev), int(n_phi),
+                          *_interface_params(eta, alpha_u, alpha_v, distribution)],
+                  outputs=outs)
+    return tuple(o.numpy() for o in outs)
+
+
+@wp.kernel
+def _ragged_eval_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
+                        half: wp.array(dtype=wp.int32), start: wp.array(dtype=wp.int64),
+                        first: int, eta: wp.float64, k: wp.float64, au: wp.float64,
+                        av: wp.float64, dist: int, f: wp.array(dtype=wp.float64)):
+    """f[start[p] + j] = BSDF of pair p = first + row at phi_j = pi j / M_p, j = 0..M_p."""
+    row, j = wp.tid()
+    p = first + row
+    M = half[p]
+    phi = wp.float64(wp.pi) * wp.float64(j) / wp.float64(M)
+    wi, wo = _pair_directions(mu_i[p], mu_o[p], phi)
+    f[start[p] + wp.int64(j)] = physics.microfacet_eval(wi, wo, eta, k, au, av, dist)
+
+
+@wp.kernel
+def _ragged_dct_kernel(f: wp.array(dtype=wp.float64), half: wp.array(dtype=wp.int32),
+                       start: wp.array(dtype=wp.int64), table: wp.array(dtype=wp.float64),
+                       c: wp.array2d(dtype=wp.float64)):
+    """The DCT-I of :func:`_cosine_dct_kernel` on ragged rows: ``table[i] = cos(pi i / M_max)``,
+    read with stride ``M_max / M_p`` (both powers of two)."""
+    p, l = wp.tid()
+    M = half[p]
+    if l > M:
+        c[p, l] = wp.float64(0.0)
+        return
+    two_m = 2 * M
+    stride = (table.shape[0] // 2) // M
+    base = start[p]
+    acc = f[base]
+    idx = l
+    for j in range(1, M):
+        if idx >= two_m:
+            idx -= two_m
+        acc += wp.float64(2.0) * f[base + wp.int64(j)] * table[idx * stride]
+        idx += l
+    last = f[base + wp.int64(M)]
+    if l % 2 == 1:
+        last = -last
+    acc += last
+    scale = wp.float64(1.0) / wp.float64(M)
+    if l == 0:
+        scale = wp.float64(0.5) / wp.float64(M)
+    c[p, l] = acc * scale
+
+
+@wp.kernel
+def _truncate_kernel(c: wp.array2d(dtype=wp.float64), m: int, relerr: wp.float64,
+                     taper: wp.array(dtype=wp.int32), cut: wp.array(dtype=wp.int32)):
+    """Per pair: series computed to ``c.shape[1] >= m`` orders are cut to ``m``. A coefficient at
+    or past ``m`` above ``relerr |c_0|`` marks the pair truncated (``cut``); otherwise orders past
+    the last one above ``relerr |c_0|`` are zeroed. Rows with ``taper`` get Lanczos sigma
+    factors ``sinc(l / m)``. Same rule as ``layersim.ingredients.numeric`` on the host."""
+    p = wp.tid()
+    extra = c.shape[1]
+    thr = relerr * wp.max(wp.abs(c[p, 0]), wp.float64(1e-300))
+    last = int(-1)
+    for l in range(extra):
+        if wp.abs(c[p, l]) >= thr:
+            last = l
+    length = extra
+    if last >= 0:
+        length = last + 1
+    cut[p] = 0
+    if last >= m:
+        cut[p] = 1
+        length = m
+    for l in range(m):
+        if l >= length:
+            c[p, l] = wp.float64(0.0)
+        elif taper[p] != 0 and l > 0:
+            x = wp.float64(wp.pi) * wp.float64(l) / wp.float64(m)
+            c[p, l] = c[p, l] * wp.sin(x) / x
+
+
+def ragged_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, half: np.ndarray,
+                         orders: int, m: int, relerr: float, taper: np.ndarray,
+                         device=None):
+    """Trapezoidal cosine series of each pair with its own ``2 half[p]`` samples per period
+    (``half`` powers of two), ``orders`` coefficients, then cut to ``m`` orders as described in
+    :func:`_truncate_kernel`. Pairs should be sorted by ``half`` (one launch per distinct
+    value; unsorted input works but launches more often).
+
+    Returns
+    -------
+    coef : wp.array2d of float64, shape (P, orders)
+        The series (orders ``>= m`` left as computed), on ``device``.
+    cut : wp.array of int32, shape (P,)
+        1 where the pair had significant orders at or past ``m``.
+    """
+    ensure_init()
+    dev = device_for(device)
+    half = np.ascontiguousarray(half, dtype=np.int32)
+    P = half.size
+    if np.any(half < 1) or np.any(half & (half - 1)):
+        raise ValueError("half sample counts must be powers of two")
+    start = np.zeros(P, np.int64)
+    np.cumsum(half[:-1].astype(np.int64) + 1, out=start[1:])
+    total = int(start[-1] + half[-1] + 1) if P else 0
+    params = _interface_params(eta, alpha_u, alpha_v, distribution)
+    a_mi = wp.array(np.ascontiguousarray(mu_i, dtype=np.float64), dtype=wp.float64, device=dev)
+    a_mo = wp.array(np.ascontiguousarray(mu_o, dtype=np.float64), dtype=wp.float64, device=dev)
+    a_half = wp.array(half, dtype=wp.int32, device=dev)
+    a_start = wp.array(start, dtype=wp.int64, device=dev)
+    f = wp.empty(max(total, 1), dtype=wp.float64, device=dev)
+    edges = np.flatnonzero(np.diff(half)) + 1
+    for a, b in zip(np.r_[0, edges], np.r_[edges, P]):
+        if b > a:
+            wp.launch(_ragged_eval_kernel, dim=(int(b - a), int(half[a]) + 1), device=dev,
+                      inputs=[a_mi, a_mo, a_half, a_start, int(a), *params], outputs=[f])
+    m_max = int(half.max(initial=1))
+    table = np.cos(np.pi * np.arange(2 * m_max) / m_max)
+    coef = wp.empty((P, orders), dtype=wp.float64, device=dev)
+    cut = wp.zeros(P, dtype=wp.int32, device=dev)
+    if P:
+        wp.launch(_ragged_dct_kernel, dim=(P, orders), device=dev,
+                  inputs=[f, a_half, a_start, wp.array(table, dtype=wp.float64, device=dev)],
+                  outputs=[coef])
+        wp.launch(_truncate_kernel, dim=P, device=dev,
+                  inputs=[coef, int(m), wp.float64(relerr),
+                          wp.array(np.ascontiguousarray(taper, dtype=np.int32),
+                                   dtype=wp.int32, device=dev)], outputs=[cut])
+    return coef, cut
+
+
 # Anisotropic layers: samples in (phi_d, phi_s)
 # ---------------------------------------------------------------------------------------------
 #

@@ -33,13 +33,15 @@ transmission blocks with the same value in every order. It stays in the blocks (
 equations need it), and is also recorded in ``delta[name]`` (per node), so that the BSDF can
 evaluate the smooth part without it and report the delta separately.
 
-Orders at or beyond ``m`` are exactly zero. Blocks are scipy CSR matrices; entries whose
-magnitude is below :data:`DROP_TOLERANCE` times the largest entry of the same block and order are
-pruned when an operator is assembled.
+Orders at or beyond ``m`` are exactly zero. Blocks are scipy CSR matrices (a list, or an
+:class:`OrderStack` holding the orders of a block in one array triple); entries whose magnitude is
+below :data:`DROP_TOLERANCE` times the largest entry of the same block and order are pruned when
+an operator is assembled.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -159,7 +161,7 @@ class IsoOperator:
                 return None
             if m <= len(blk):
                 return blk[:m]
-            return blk + [sps.csr_matrix((self.h, self.h)) for _ in range(m - len(blk))]
+            return list(blk) + [sps.csr_matrix((self.h, self.h)) for _ in range(m - len(blk))]
         return IsoOperator(self.grid, {k: fix(v) for k, v in self.blocks.items()},
                            self.eta_top, self.eta_bottom, self.delta)
 
@@ -252,13 +254,66 @@ class IsoOperator:
             eb = float(d[f"{prefix}eta_bottom"])
             grid = Grid.make(rule, n)
             h = grid.h
-            blocks = {name: None if stacked is None else
-                      [stacked[l * h:(l + 1) * h] for l in range(m)]
+            blocks = {name: None if stacked is None else OrderStack.from_csr(stacked, h)
                       for name, stacked in read_blocks(d, prefix, (m * h, h)).items()}
             delta = read_delta(d, prefix)
         except (KeyError, ValueError, TypeError) as exc:
             raise FileFormatError(f"not a layersim operator file ({exc})") from None
         return cls(grid, blocks, eta_top, None if np.isnan(eb) else eb, delta)
+
+
+class OrderStack(Sequence):
+    """The ``m`` orders ``B_0 .. B_{m-1}`` (each (h, h)) of one block, held as the single CSR
+    matrix of the stacked orders (row ``l h + o``): what the assembly (host or device) produces
+    in one pass, and what operator files store.
+
+    Indexing gives ``scipy.sparse.csr_matrix`` views of order ``l`` (sharing the arrays; built on
+    first access and cached, since scipy's constructor costs ~20-50 us, a large part of the
+    projection of a whole operator on a GPU). A slice gives a list of them.
+
+    Parameters
+    ----------
+    data : float64 ndarray (nnz,)
+    indices : int32 ndarray (nnz,)
+        Column (incident node) of each entry.
+    indptr : int ndarray (m h + 1,)
+        Row pointers of the stacked matrix.
+    h : int
+        Nodes per hemisphere.
+    """
+
+    def __init__(self, data, indices, indptr, h: int):
+        self.h = int(h)
+        self._data = np.asarray(data, dtype=np.float64)
+        self._indices = np.asarray(indices, dtype=np.int32)
+        self._indptr = np.asarray(indptr, dtype=np.int64)
+        rows = self._indptr.size - 1
+        if rows % self.h or self._indptr[0] != 0 or self._indptr[-1] != self._data.size \
+                or self._indices.size != self._data.size:
+            raise OperatorError(f"inconsistent stacked CSR arrays ({rows} rows for h={h}, "
+                                f"{self._data.size} values, {self._indices.size} indices)")
+        self._mats = [None] * (rows // self.h)
+
+    @classmethod
+    def from_csr(cls, stacked: sps.csr_matrix, h: int) -> "OrderStack":
+        """From the stacked matrix of shape (m h, h)."""
+        return cls(stacked.data, stacked.indices, stacked.indptr, h)
+
+    def __len__(self) -> int:
+        return len(self._mats)
+
+    def __getitem__(self, l):
+        if isinstance(l, slice):
+            return [self[k] for k in range(*l.indices(len(self)))]
+        l = range(len(self))[l]          # negative indices, IndexError past the end
+        mat = self._mats[l]
+        if mat is None:
+            h = self.h
+            ptr = self._indptr[l * h:(l + 1) * h + 1]
+            a, b = ptr[0], ptr[-1]
+            mat = sps.csr_matrix((self._data[a:b], self._indices[a:b], ptr - a), shape=(h, h))
+            self._mats[l] = mat
+        return mat
 
 
 # ---- file arrays shared by IsoOperator and layersim.aniso.AnisoOperator ----------------
@@ -300,7 +355,7 @@ def read_delta(d, prefix: str) -> dict:
 DENSE_ASSEMBLY_MAX = 1 << 24
 
 
-def _orders_to_csr(chunks, m: int, grid: Grid) -> list:
+def _orders_to_csr(chunks, m: int, grid: Grid) -> "OrderStack":
     """Per-order CSR blocks ``B_l = c_l f_l w_i mu_i`` from per-pair series chunks, pruned per
     order (:data:`DROP_TOLERANCE` relative to the order's largest entry).
 
@@ -312,7 +367,7 @@ def _orders_to_csr(chunks, m: int, grid: Grid) -> list:
     h = grid.h
     chunks = [(o, i, c[:, :m]) for o, i, c in chunks if o.size]
     if not chunks:
-        return [sps.csr_matrix((h, h)) for _ in range(m)]
+        return OrderStack(np.zeros(0), np.zeros(0, np.int32), np.zeros(m * h + 1, np.int64), h)
     weight = order_weight(np.arange(m))
     if m * h * h <= DENSE_ASSEMBLY_MAX:
         dense = np.zeros((m, h, h))
@@ -341,14 +396,9 @@ def _orders_to_csr(chunks, m: int, grid: Grid) -> list:
         np.maximum.at(amax, l, np.abs(v))
         keep = np.abs(v) >= DROP_TOLERANCE * amax[l]
         o, i, l, v = o[keep], i[keep], l[keep], v[keep]
-    bounds = np.searchsorted(l, np.arange(m + 1))
-    mats = []
-    for k in range(m):
-        a, b = bounds[k], bounds[k + 1]
-        indptr = np.zeros(h + 1, np.int64)
-        np.cumsum(np.bincount(o[a:b], minlength=h), out=indptr[1:])
-        mats.append(sps.csr_matrix((v[a:b], i[a:b].astype(np.int32), indptr), shape=(h, h)))
-    return mats
+    indptr = np.zeros(m * h + 1, np.int64)
+    np.cumsum(np.bincount(l * h + o, minlength=m * h), out=indptr[1:])
+    return OrderStack(v, i.astype(np.int32), indptr, h)
 
 
 def _prune(mat: sps.csr_matrix) -> sps.csr_matrix:

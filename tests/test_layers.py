@@ -334,3 +334,31 @@ def test_operator_assembly_dense_and_sorted_paths_agree(monkeypatch):
             ref[o, i] = c[:, l] * grid.flux_weight[i] * opmod.order_weight(l)
         ref[np.abs(ref) < opmod.DROP_TOLERANCE * np.abs(ref).max()] = 0.0
         np.testing.assert_allclose(dense[l].toarray(), ref, rtol=1e-15)
+
+
+def test_order_stack_views_and_file_round_trip(tmp_path):
+    """OrderStack: per-order CSR views of the stacked arrays (indexing, negative indices,
+    slices), consistency checks, and an operator file round trip that keeps every order."""
+    import scipy.sparse as sps
+    from layersim.errors import OperatorError
+    from layersim.operator import Grid, IsoOperator, OrderStack
+    rng = np.random.default_rng(0)
+    h, m = 5, 4
+    dense = rng.random((m, h, h)) * (rng.random((m, h, h)) < 0.4)
+    stack = OrderStack.from_csr(sps.csr_matrix(dense.reshape(m * h, h)), h)
+    assert len(stack) == m
+    for l in range(m):
+        np.testing.assert_array_equal(stack[l].toarray(), dense[l])
+    np.testing.assert_array_equal(stack[-1].toarray(), dense[-1])
+    assert [mat.shape for mat in stack[1:3]] == [(h, h), (h, h)]
+    with pytest.raises(IndexError):
+        stack[m]
+    with pytest.raises(OperatorError):
+        OrderStack(np.ones(3), np.zeros(3, np.int32), np.zeros(m * h), h)
+    grid = Grid.make("gauss-lobatto", 2 * h)
+    op = IsoOperator(grid, {"Rt": stack}, 1.0, None)
+    path = tmp_path / "op.npz"
+    np.savez(path, **op.to_arrays())
+    back = IsoOperator.from_arrays(np.load(path))
+    for l in range(m):
+        np.testing.assert_array_equal(back.block("Rt", l).toarray(), dense[l])

@@ -127,6 +127,29 @@ def _block_pairs(grid: Grid, name: str, triangle: bool):
     return sign_i * mu[i], sign_o * mu[o], o, i
 
 
+def significant_pairs(grid: Grid, name: str, triangle: bool, eta: complex, alpha: float,
+                      dist: str, device=None):
+    """The pairs of a block (see :func:`_block_pairs`) and which of them can carry more than
+    :data:`ENERGY_DROP` of a beam's energy, from a coarse bound on the device.
+
+    Returns
+    -------
+    mu_i, mu_o, o, i : ndarray (P,)
+    q0, qpi : ndarray (P,)
+        Slope-space form of the peak at azimuth 0 and pi (they set each pair's series length).
+    keep : int ndarray
+        Indices of the significant pairs.
+    """
+    mu_i, mu_o, o, i = _block_pairs(grid, name, triangle)
+    fw = grid.flux_weight
+    smax, q0, qpi = kproj.coarse_bound(mu_i, mu_o, eta, alpha, alpha, dist, N_COARSE,
+                                       device=device)
+    # Bound on f over phi: peak <= peak(q0); S bounded by its coarse maximum (x10 margin).
+    bound = 10.0 * fourier.peak_values(q0, dist) * smax
+    energy = bound * 2.0 * np.pi * np.maximum(fw[i], fw[o])
+    return mu_i, mu_o, o, i, q0, qpi, np.flatnonzero(energy > ENERGY_DROP)
+
+
 def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, dist: str,
                    stats: ProjectionStats, triangle: bool = False, method=None,
                    batch: int = BATCH, device=None):
@@ -137,17 +160,9 @@ def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, di
     most ``batch`` pairs; ``device`` runs the coarse sampling that bounds each pair's energy.
     """
     method = method or _project_pairs
-    mu_i, mu_o, o, i = _block_pairs(grid, name, triangle)
+    mu_i, mu_o, o, i, q0, qpi, keep = significant_pairs(grid, name, triangle, eta, alpha, dist,
+                                                        device)
     stats.pairs += mu_i.size
-    fw = grid.flux_weight
-    coarse = np.broadcast_to(np.linspace(0.0, np.pi, N_COARSE), (mu_i.size, N_COARSE))
-    s_c, q_c = kproj.microfacet_split(mu_i, mu_o, coarse, eta, alpha, alpha, dist,
-                                      device=device)
-    q0, qpi = q_c[:, 0], q_c[:, -1]
-    # Bound on f over phi: peak <= peak(q0); S bounded by its coarse maximum (x10 margin).
-    bound = 10.0 * fourier.peak_values(q0, dist) * np.abs(s_c).max(axis=1)
-    energy = bound * 2.0 * np.pi * np.maximum(fw[i], fw[o])
-    keep = np.flatnonzero(energy > ENERGY_DROP)
     chunks = []
     if keep.size == 0:
         return chunks
