@@ -131,35 +131,40 @@ def _uniform_eval_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=
     f[p, j] = physics.microfacet_eval(wi, wo, eta, k, au, av, dist)
 
 
-@wp.kernel
-def _cosine_dct_kernel(f: wp.array2d(dtype=wp.float64), table: wp.array(dtype=wp.float64),
-                       c: wp.array2d(dtype=wp.float64)):
-    """Trapezoidal cosine coefficients from half-period samples (a DCT-I):
-    c[p, l] = (2 - delta_l0) / (2M) [f_0 + (-1)^l f_M + 2 sum_{0<j<M} f_j cos(pi l j / M)],
-    cosines read from an exact table of cos(pi i / M), i < 2M (index l j mod 2M)."""
-    p, l = wp.tid()
-    M = f.shape[1] - 1
+@wp.func
+def _dct1(f: wp.array(dtype=wp.float64), base: wp.int64, M: int, l: int,
+          table: wp.array(dtype=wp.float64), stride: int):
+    """Trapezoidal cosine coefficient ``l`` of half-period samples ``f[base .. base + M]`` (a
+    DCT-I): (2 - delta_l0) / (2M) [f_0 + (-1)^l f_M + 2 sum_{0<j<M} f_j cos(pi l j / M)],
+    cosines read from an exact table, ``table[i stride] = cos(pi i / M)``, i < 2M (index l j
+    mod 2M). Orders beyond the Nyquist order M carry no information: zero (the CPU path's DCT
+    returns M + 1 orders and zero-pads the rest)."""
     if l > M:
-        # beyond the Nyquist order the samples carry no information (the CPU path's DCT
-        # returns M + 1 orders and zero-pads the rest)
-        c[p, l] = wp.float64(0.0)
-        return
+        return wp.float64(0.0)
     two_m = 2 * M
-    acc = f[p, 0]
+    acc = f[base]
     idx = l
     for j in range(1, M):
         if idx >= two_m:
             idx -= two_m
-        acc += wp.float64(2.0) * f[p, j] * table[idx]
+        acc += wp.float64(2.0) * f[base + wp.int64(j)] * table[idx * stride]
         idx += l
-    last = f[p, M]
+    last = f[base + wp.int64(M)]
     if l % 2 == 1:
         last = -last
     acc += last
     scale = wp.float64(1.0) / wp.float64(M)
     if l == 0:
         scale = wp.float64(0.5) / wp.float64(M)
-    c[p, l] = acc * scale
+    return acc * scale
+
+
+@wp.kernel
+def _cosine_dct_kernel(f: wp.array(dtype=wp.float64), M: int,
+                       table: wp.array(dtype=wp.float64), c: wp.array2d(dtype=wp.float64)):
+    """c[p, l] = :func:`_dct1` of row p of the (P, M + 1) samples ``f`` (flattened)."""
+    p, l = wp.tid()
+    c[p, l] = _dct1(f, wp.int64(p) * wp.int64(M + 1), M, l, table, 1)
 
 
 def uniform_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, samples: int,
@@ -193,7 +198,8 @@ def uniform_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, sampl
         table = np.cos(np.pi * np.arange(2 * M) / M)
         c = wp.empty((P, orders), dtype=wp.float64, device=dev)
         wp.launch(_cosine_dct_kernel, dim=(P, orders), device=dev,
-                  inputs=[f, wp.array(table, dtype=wp.float64, device=dev)], outputs=[c])
+                  inputs=[f.flatten(), M, wp.array(table, dtype=wp.float64, device=dev)],
+                  outputs=[c])
         return c.numpy()
     coef = scipy.fft.dct(f.numpy(), type=1, axis=1)[:, :orders] / M
     coef[:, 0] *= 0.5
@@ -269,31 +275,11 @@ def _ragged_eval_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=w
 def _ragged_dct_kernel(f: wp.array(dtype=wp.float64), half: wp.array(dtype=wp.int32),
                        start: wp.array(dtype=wp.int64), table: wp.array(dtype=wp.float64),
                        c: wp.array2d(dtype=wp.float64)):
-    """The DCT-I of :func:`_cosine_dct_kernel` on ragged rows: ``table[i] = cos(pi i / M_max)``,
-    read with stride ``M_max / M_p`` (both powers of two)."""
+    """:func:`_dct1` of ragged rows: ``table[i] = cos(pi i / M_max)``, read with stride
+    ``M_max / M_p`` (both powers of two)."""
     p, l = wp.tid()
     M = half[p]
-    if l > M:
-        c[p, l] = wp.float64(0.0)
-        return
-    two_m = 2 * M
-    stride = (table.shape[0] // 2) // M
-    base = start[p]
-    acc = f[base]
-    idx = l
-    for j in range(1, M):
-        if idx >= two_m:
-            idx -= two_m
-        acc += wp.float64(2.0) * f[base + wp.int64(j)] * table[idx * stride]
-        idx += l
-    last = f[base + wp.int64(M)]
-    if l % 2 == 1:
-        last = -last
-    acc += last
-    scale = wp.float64(1.0) / wp.float64(M)
-    if l == 0:
-        scale = wp.float64(0.5) / wp.float64(M)
-    c[p, l] = acc * scale
+    c[p, l] = _dct1(f, start[p], M, l, table, (table.shape[0] // 2) // M)
 
 
 @wp.kernel

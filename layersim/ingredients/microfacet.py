@@ -331,6 +331,16 @@ def _project_pairs(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats):
     return o, i, series
 
 
+def interface_setup(layer, eta_above: float):
+    """What every isotropic interface projection needs: relative index ``eta`` (complex),
+    distribution, roughness, whether it is opaque and the blocks it has."""
+    if layer.anisotropic or layer.smooth:
+        raise ValueError("interface_operator projects isotropic rough interfaces only")
+    opaque = isinstance(layer, Conductor)
+    names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
+    return complex(layer.ior) / eta_above, layer.distribution, layer.alpha, opaque, names
+
+
 def interface_operator(grid: Grid, m: int, layer, eta_above: float,
                        stats: ProjectionStats | None = None,
                        reciprocity: bool = True, method=None, batch: int = BATCH,
@@ -361,14 +371,9 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
         Warp device of the coarse sampling; a CUDA device also makes the blocks run one after
         the other (each launch already fills the GPU).
     """
-    if layer.anisotropic or layer.smooth:
-        raise ValueError("interface_operator projects isotropic rough interfaces only")
     stats = stats if stats is not None else ProjectionStats()
     t0 = time.perf_counter()
-    eta = complex(layer.ior) / eta_above
-    dist, alpha = layer.distribution, layer.alpha
-    opaque = isinstance(layer, Conductor)
-    names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
+    eta, dist, alpha, opaque, names = interface_setup(layer, eta_above)
     series = {}
     # Blocks are independent: project them concurrently (Warp CPU launches, FFTs and LAPACK
     # release the GIL), one worker per core up to the number of blocks.

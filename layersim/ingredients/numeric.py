@@ -32,7 +32,6 @@ from .. import fourier
 from ..kernels import projection as kproj
 from ..kernels.sparse import BlockAssembler
 from ..operator import DROP_TOLERANCE, Grid, IsoOperator, OrderStack
-from ..scene import Conductor
 from . import microfacet
 from .microfacet import ProjectionStats
 
@@ -180,10 +179,7 @@ def device_interface_operator(grid: Grid, m: int, layer, eta_above: float,
     CPU); it pays off on GPUs. The scratch block takes ``8 m h^2`` bytes of device memory."""
     stats = stats if stats is not None else ProjectionStats()
     t0 = time.perf_counter()
-    eta = complex(layer.ior) / eta_above
-    dist, alpha = layer.distribution, layer.alpha
-    opaque = isinstance(layer, Conductor)
-    names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
+    eta, dist, alpha, opaque, names = microfacet.interface_setup(layer, eta_above)
     h = grid.h
     asm = BlockAssembler(m, h, grid.flux_weight, device=device)
     blocks, ttb = {}, None
