@@ -461,9 +461,11 @@ class BSDF:
 
     # ---- persistence -------------------------------------------------------------------
 
-    def export(self, path, version: int = 1, alpha=(0.0, 0.0)):
-        """Write a ``.bsdf`` file (``SCATFUN``) for layerlab, Mitsuba 0.6 and pbrt-v3; returns
-        the :class:`layersim.bsdffile.FourierTable` written. See :mod:`layersim.bsdffile`."""
+    def export(self, path, version: int | None = None, alpha=(0.0, 0.0)):
+        """Write a ``.bsdf`` file (``SCATFUN``): version 1 for layerlab, Mitsuba 0.6 and pbrt-v3
+        (isotropic BSDFs), version 2 in the Layer Laboratory's anisotropic layout; the default
+        (None) is 1 for isotropic and 2 for anisotropic BSDFs. Returns the
+        :class:`layersim.bsdffile.FourierTable` written. See :mod:`layersim.bsdffile`."""
         from .bsdffile import export
         return export(self, path, version=version, alpha=alpha)
 

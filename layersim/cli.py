@@ -5,7 +5,9 @@
     layersim info FILE               reload a saved BSDF and print its summary and albedos
     layersim bench [--quick] [--stability] [--backend B ...] --out DIR
                                      solver vs Monte Carlo report and stability suite
-    layersim export SRC [-o F.bsdf]  write a tabulated Fourier BSDF file (layerlab/Mitsuba/pbrt)
+    layersim export SRC [-o F.bsdf] [--version 1|2]
+                                     write a tabulated Fourier BSDF file (v1: layerlab/Mitsuba
+                                     0.6/pbrt-v3; v2, anisotropic: the Layer Laboratory)
     layersim eval SRC --wi X,Y,Z --wo X,Y,Z     print f(wi, wo) (per channel for RGB)
     layersim plot SRC (--wi THETA,PHI | --blocks) [-o F.png]   draw slices or operator blocks
     layersim subtract STACK KNOWN --side top|bottom [-o FILE] [--eps EPS] [--noise NOISE]
@@ -109,8 +111,8 @@ def cmd_bench(args) -> int:
 
 def _load(path):
     """A BSDF from a scene, a saved ``.lsim`` BSDF or a ``.bsdf`` file (a ``.bsdf`` file that
-    layersim cannot convert, e.g. anisotropic or on foreign nodes, stays a FourierTable, which
-    evaluates as pbrt-v3 does)."""
+    layersim cannot convert, e.g. one on foreign nodes, stays a FourierTable, which evaluates
+    as pbrt-v3 and the Layer Laboratory's plugin do)."""
     from .bsdf import BSDF
     from .bsdffile import read
     from .errors import FileFormatError, InfeasibleError
@@ -123,7 +125,7 @@ def _load(path):
         try:
             return table.to_bsdf()
         except (FileFormatError, InfeasibleError) as exc:
-            print(f"note: {path}: {exc}; evaluating the table as pbrt-v3 does",
+            print(f"note: {path}: {exc}; evaluating the table as renderers do",
                   file=sys.stderr)
             return table
     if head[:2] == b"PK":                    # numpy .npz container of BSDF.save
@@ -164,7 +166,7 @@ def cmd_export(args) -> int:
     out = Path(args.output) if args.output else Path(Path(args.source).stem + ".bsdf")
     alpha = _vector(args.alpha, "--alpha", 2) if args.alpha else (0.0, 0.0)
     if isinstance(bsdf, FourierTable):
-        if args.version != bsdf.version:
+        if args.version not in (None, bsdf.version):
             raise ValueError(f"{args.source}: layersim cannot convert this file, so it can only "
                              f"be copied as version {bsdf.version}")
         table = bsdf
@@ -173,7 +175,8 @@ def cmd_export(args) -> int:
         table = bsdf.export(out, version=args.version, alpha=alpha)
     size = out.stat().st_size
     print(f"wrote {out}: SCATFUN v{table.version}, {table.n_nodes} nodes, max order "
-          f"{table.max_order}, {table.channels} channel(s) "
+          f"{table.max_order}{' (complex)' if table.is_complex else ''}, {table.channels} "
+          f"channel(s) "
           f"({'Y, R, B' if table.channels == 3 else 'mono'}), {table.coef.size} coefficients, "
           f"eta = {table.eta:g}, {size} bytes ({size / 2**20:.2f} MiB)")
     return 0
@@ -269,9 +272,10 @@ def build_parser() -> argparse.ArgumentParser:
                                        "layerlab, Mitsuba 0.6 and pbrt-v3")
     sp.add_argument("source", help=src_help)
     sp.add_argument("-o", "--output", help="output file (default: SOURCE_STEM.bsdf)")
-    sp.add_argument("--version", type=int, choices=(1, 2), default=1,
-                    help="1: isotropic format of layerlab/Mitsuba 0.6/pbrt-v3 (default); "
-                         "2: the Layer Laboratory's anisotropic layout")
+    sp.add_argument("--version", type=int, choices=(1, 2), default=None,
+                    help="1: isotropic format of layerlab/Mitsuba 0.6/pbrt-v3 (default for "
+                         "isotropic sources); 2: the Layer Laboratory's anisotropic layout "
+                         "(default for anisotropic sources)")
     sp.add_argument("--alpha", help="A_TOP,A_BOTTOM: Beckmann-equivalent roughness hints for "
                                     "the header (default 0,0)")
     sp.set_defaults(func=cmd_export)

@@ -16,7 +16,8 @@ and hemispherical slices for one incident direction.
 
 Both accept anything with ``eval(wi, wo)``, ``channels`` and ``opaque`` (a
 :class:`layersim.BSDF` or a :class:`layersim.bsdffile.FourierTable`); Fourier orders need a
-``BSDF``. RGB shows the luminance in the block plot and colour images in the slices.
+``BSDF``; for an anisotropic one they are those of its rotational average
+(:meth:`~layersim.aniso.operator.AnisoOperator.rotational_average`, the ``s = 0`` terms). RGB shows the luminance in the block plot and colour images in the slices.
 Figures are drawn with matplotlib's object API and the Agg canvas: no global backend is changed.
 """
 
@@ -95,6 +96,8 @@ def block_images(bsdf, order: int | None = None, phi_d: float = 0.0, samples: in
                                 "FourierTable.to_bsdf())")
             if order < 0:
                 raise ValueError(f"order must be >= 0, got {order}")
+            if bsdf.anisotropic:        # order l of the rotational average (the s = 0 terms)
+                bsdf = BSDF([op.rotational_average() for op in bsdf.operators])
             per = np.stack([_order_coefficient(bsdf, c, name, order, MO, MI)
                             for c in range(bsdf.channels)], axis=-1)
             vals = _scalar(per if bsdf.channels > 1 else per[..., 0], bsdf.channels, channel)
@@ -119,7 +122,8 @@ def plot_blocks(bsdf, path, order: int | None = None, phi_d: float = 0.0, sample
     path : path-like
     order : int, optional
         Show the Fourier coefficient ``f_l`` of this order (signed for ``l >= 1``: diverging
-        colour map); default: the BSDF at azimuth difference ``phi_d``.
+        colour map; anisotropic BSDFs: of their rotational average); default: the BSDF at
+        azimuth difference ``phi_d``.
     phi_d : float
         Azimuth difference of the propagation directions (radians; 0 = specular / straight
         through) when ``order`` is None.

@@ -10,7 +10,7 @@ import pytest
 
 import layersim
 from layersim import FileFormatError, InfeasibleError, bsdffile
-from layersim.channels import LUMINANCE
+from layersim.channels import LUMINANCE, green_from_ybr
 
 from conftest import random_directions, unit
 
@@ -193,32 +193,48 @@ def test_version_2_layout(tmp_path, rough_glass):
     np.testing.assert_allclose(c, np.r_[a[0], a[1:] / 2], rtol=1e-6)
 
 
-def test_version_2_anisotropic_series_are_evaluated_and_refused_for_conversion():
-    """A synthetic v2 table whose pairs all hold the same 3 x 2 series: between the inner
-    nodes the interpolated series is that series, and eval must follow the 2D formula
-    f |cos_light| = 2 sum c_sd cos(s phi_s + d phi_d) - sum_s c_s0 cos(s phi_s)."""
+def _file_series(c, s, ps, pd):
+    """``2 sum_{s, d >= 0} Re(c_sd e^{i(s ps + d pd)}) - sum_s Re(c_s0 e^{i s ps})`` for a
+    (ms, md) block ``c`` (rows ``s``), written from the Layer Laboratory's
+    ``eval_fourier_series_2d`` with complex coefficients; ps, pd broadcast (..., 1, 1)."""
+    e = np.exp(1j * (s[:, None] * ps + np.arange(c.shape[1])[None, :] * pd))
+    return 2 * np.sum((c * e).real, axis=(-2, -1)) - np.sum((c[:, 0] * e[..., 0]).real, axis=-1)
+
+
+@pytest.mark.parametrize("imag", [False, True])
+def test_version_2_series_are_evaluated_with_the_2d_formula(imag):
+    """A synthetic v2 table whose pairs all hold the same 3 x 2 series (real, as the Layer
+    Laboratory writes, or complex with flag 0x04): between the inner nodes the interpolated
+    series is that series, and eval must follow the 2D formula of the module docstring with
+    the plugin's azimuths (camera; reversed light). Foreign nodes are refused for conversion."""
     mu = np.linspace(0.1, 1.0, 10)
     nodes = bsdffile.file_nodes(mu)
     N = nodes.size
-    c = np.array([[0.01, 0.02], [0.3, 0.05], [0.01, 0.02]], np.float32)   # s = -1, 0, 1
+    c = np.array([[0.01, 0.02], [0.3, 0.05], [0.01, 0.02]])               # s = -1, 0, 1
+    if imag:
+        c = c + 1j * np.array([[0.02, -0.01], [0.0, 0.04], [-0.02, 0.03]])
     shape = np.zeros((N * N, 2), np.uint32)
     full = np.ones((N, N), bool)
     full[[N // 2 - 1, N // 2], :] = full[:, [N // 2 - 1, N // 2]] = False
     shape[full.ravel()] = (3, 2)
-    size = shape[:, 0] * shape[:, 1]
+    parts = 2 if imag else 1
+    size = parts * shape[:, 0] * shape[:, 1]
     offsets = np.r_[0, np.cumsum(size)[:-1]].astype(np.uint32)
-    coef = np.tile(c.ravel(), int(full.sum()))
-    cdf = np.zeros(N * N * 2, np.float32)
-    table = bsdffile.FourierTable(2, nodes, offsets, shape, coef, cdf, 1)
+    block = np.r_[c.real.ravel(), c.imag.ravel()] if imag else c.real.ravel()
+    coef = np.tile(block.astype(np.float32), int(full.sum()))
+    flags = bsdffile.FLAG_BSDF | (bsdffile.FLAG_COMPLEX if imag else 0)
+    cdf = np.zeros(N * N * (3 if imag else 2), np.float32)
+    table = bsdffile.FourierTable(2, nodes, offsets, shape, coef, cdf, 1, flags=flags)
     again = bsdffile.FourierTable.from_bytes(table.to_bytes())
+    assert again.is_complex == imag and again.anisotropic
     wi, wo = unit(40.0, 30.0), unit(50.0, 100.0)
     phi_i, phi_o = np.arctan2(wo[1], wo[0]), np.arctan2(-wi[1], -wi[0])
-    ps, pd = phi_o + phi_i, phi_o - phi_i
-    s = np.array([-1, 0, 1])
-    val = 2 * np.sum(c * np.cos(s[:, None] * ps + np.arange(2)[None, :] * pd)) \
-        - np.sum(c[:, 0] * np.cos(s * ps))
+    val = _file_series(c, np.array([-1, 0, 1]), phi_o + phi_i, phi_o - phi_i)
     assert again.eval(wi, wo) == pytest.approx(val / wi[2], rel=1e-6)
-    with pytest.raises(InfeasibleError, match="anisotropic"):
+    if imag:       # the sine terms are there: the real parts alone give another value
+        assert abs(_file_series(c.real, np.array([-1, 0, 1]), phi_o + phi_i,
+                                phi_o - phi_i) - val) > 1e-3
+    with pytest.raises(FileFormatError, match="gauss-lobatto"):
         again.to_bsdf()
 
 
@@ -270,3 +286,229 @@ def test_foreign_nodes_are_refused_for_conversion_but_evaluated(tmp_path, lamber
     with pytest.raises(FileFormatError, match="Gauss-Lobatto|gauss-lobatto"):
         again.to_bsdf()
     assert again.eval(unit(30.0), unit(40.0, 200.0)) > 0
+
+
+# ---- anisotropic stacks in version 2 ------------------------------------------------------
+
+ANISO_SCENES = {
+    # aligned: real coefficients, the Layer Laboratory's layout bit for bit
+    "brushed": {"layer": [{"kind": "conductor", "ior": [0.2, 3.0], "roughness": [0.4, 0.2]}],
+                "discretization": {"n": 24, "md": 10}},
+    # rotated tangent frame, transmissive (all four blocks, eta 1.5): complex coefficients
+    "rotated": {"layer": [{"kind": "dielectric", "ior": 1.5, "roughness": [0.3, 0.5],
+                           "rotation": 25}], "discretization": {"n": 24, "md": 10}},
+    "rgb": {"layer": [{"kind": "conductor", "ior": GOLD_RGB, "roughness": [0.4, 0.2],
+                       "rotation": -40}], "discretization": {"n": 24, "md": 10}},
+}
+
+
+@pytest.fixture(scope="module")
+def aniso(tmp_path_factory):
+    """The three anisotropic stacks solved and exported (default version: 2), once."""
+    d = tmp_path_factory.mktemp("aniso")
+    out = {}
+    for name, scene in ANISO_SCENES.items():
+        bsdf = layersim.solve(layersim.Scene.from_dict(scene))
+        table = bsdf.export(d / f"{name}.bsdf")
+        out[name] = (bsdf, table, d / f"{name}.bsdf")
+    return out
+
+
+def _ordinate_directions(rng, mu, n, opaque):
+    """Directions at the ordinates' elevations (either side unless opaque), random azimuths."""
+    z = mu[rng.integers(0, mu.size, (2, n))]
+    if not opaque:
+        z = z * rng.choice([-1, 1], (2, n))
+    ph = rng.uniform(0, 2 * np.pi, (2, n))
+    s = np.sqrt(1 - z ** 2)
+    return tuple(np.stack([s[k] * np.cos(ph[k]), s[k] * np.sin(ph[k]), z[k]], -1)
+                 for k in range(2))
+
+
+@pytest.mark.parametrize("name", list(ANISO_SCENES))
+def test_anisotropic_round_trip_reproduces_eval_to_float32(aniso, name):
+    """export -> read -> to_bsdf -> eval equals the solver's eval to float32 precision at random
+    direction pairs (both sides); the renderer's adjoint evaluation of the file equals our
+    f(wo, wi) (eta_wo / eta_wi)^2 at the ordinates' elevations and any azimuths."""
+    bsdf, table, path = aniso[name]
+    assert table.version == 2 and path.stat().st_size == table.nbytes()
+    assert table.is_complex == (name != "brushed")            # rotated frames: sine terms
+    again = bsdffile.read(path)
+    back = again.to_bsdf()
+    assert back.anisotropic and back.channels == bsdf.channels
+    assert back.operators[0].md == bsdf.operators[0].md
+    rng = np.random.default_rng(5)
+    wi = np.concatenate([random_directions(rng, 1500), random_directions(rng, 1500, lower=True)])
+    wo = np.concatenate([random_directions(rng, 1500), random_directions(rng, 1500, lower=True)])
+    rng.shuffle(wo)
+    f, g = bsdf.eval(wi, wo), back.eval(wi, wo)
+    assert np.max(np.abs(f)) > 0.1
+    assert np.max(np.abs(f - g)) <= 1e-7 * np.max(np.abs(f))
+    np.testing.assert_allclose(back.albedo(wi[:40]), bsdf.albedo(wi[:40]), rtol=1e-6,
+                               atol=1e-9)
+    # the renderer's evaluation of the table itself (no layersim operator involved)
+    wi, wo = _ordinate_directions(rng, bsdf.grid.mu, 800, bsdf.opaque)
+    eta_b = 1.0 if bsdf.opaque else 1.5
+    ratio = (np.where(wo[:, 2] > 0, 1.0, eta_b) / np.where(wi[:, 2] > 0, 1.0, eta_b)) ** 2
+    f = bsdf.eval(wo, wi)
+    if f.ndim == 2:        # renderers clamp Y at 0 before they reconstruct G, then clamp RGB
+        y = np.maximum(f @ LUMINANCE, 0)
+        f = np.stack([f[:, 0], green_from_ybr(y, f[:, 0], f[:, 2]), f[:, 2]], -1)
+        ratio = ratio[:, None]
+    expected = np.maximum(f, 0) * ratio
+    np.testing.assert_allclose(again.eval(wi, wo), expected, rtol=2e-5,
+                               atol=1e-6 * expected.max())
+
+
+def test_version_2_anisotropic_layout(aniso):
+    """Header fields, the exact file size, the offset table and one pair's coefficients of a
+    complex v2 file, read with struct against the module docstring's layout; the pair's values
+    against the operator's complex coefficients (layersim.aniso.basis.complex_entries)."""
+    from layersim.aniso import basis
+    bsdf, table, path = aniso["rotated"]
+    data = path.read_bytes()
+    (magic, version, flags, N, n_coef, ms_max, md_max, nch, nb, nmeta, npar, npv, eta, a0, a1,
+     unused) = struct.unpack_from("<7sB10If2ff", data)
+    op = bsdf.operators[0]
+    h = op.h
+    assert (magic, version, flags, nch, nb, npar, npv) == (b"SCATFUN", 2, 5, 1, 1, 0, 0)
+    assert N == 2 * h + 2 and eta == pytest.approx(1.5) and (a0, a1, unused) == (0, 0, 0)
+    assert ms_max % 2 == 1 and ms_max >= 2 * op.ms + 1 and md_max == op.md
+    M = ms_max // 2 + 1 + ms_max // 2                   # cosines and (flag 0x04) sines
+    assert len(data) == 64 + 4 * N + 4 * M * N * N + 12 * N * N + 4 * n_coef + nmeta
+    off = 64 + 4 * N + 4 * M * N * N
+    tab = np.frombuffer(data, "<u4", 3 * N * N, off).reshape(N * N, 3).astype(np.int64)
+    assert tab[:, 1].max() == ms_max and tab[:, 2].max() == md_max
+    assert np.all((tab[:, 1] % 2 == 1) | (tab[:, 1] * tab[:, 2] == 0))
+    per_pair = 2 * tab[:, 1] * tab[:, 2]                 # real and imaginary parts, 1 channel
+    np.testing.assert_array_equal(tab[:, 0], np.r_[0, np.cumsum(per_pair)[:-1]])
+    assert per_pair.sum() == n_coef
+    coef = np.frombuffer(data, "<f4", n_coef, off + 12 * N * N)
+    # Rt[o, i] is file pair (h + 2 + i) N + (h - 1 - o)
+    o, i = 4, 9
+    p = (h + 2 + i) * N + (h - 1 - o)
+    ms, md = tab[p, 1:]
+    block = coef[tab[p, 0]:tab[p, 0] + 2 * ms * md].astype(float).reshape(2, ms, md)
+    stored = block[0] + 1j * block[1]                    # [s + ms // 2, d]
+    G = op.coefficients("Rt").tocsr()
+    S = basis.n_slots(op.md)
+    rows, cols = np.arange(S) * h + o, np.arange(S) * h + i
+    sub = G[rows][:, cols].tocoo()
+    full = {}                                            # f_{d,s} over all d, s
+    for (l, k), v in basis.complex_entries(sub.row, sub.col, sub.data).items():
+        d, s = (l + k) // 2, (l - k) // 2
+        full[(d, s)], full[(-d, -s)] = v, np.conj(v)
+    want = np.zeros((ms, md), complex)
+    for (d, s), v in full.items():
+        if d >= 0 and v != 0:
+            want[s + ms // 2, d] = v * op.grid.mu[o]
+    assert np.abs(want.imag).max() > 1e-3 * np.abs(want).max()
+    np.testing.assert_allclose(stored, want, rtol=1e-6, atol=1e-7 * np.abs(want).max())
+
+
+def test_version_2_marginal_table_integrates_the_azimuthal_average(aniso):
+    """The marginal table of a complex file: for every incident node, its entries evaluated at
+    phi_i (cosines and sines in 2 phi_i) equal the Catmull-Rom integral over mu_o of the file's
+    series averaged over the outgoing azimuth (trapezoid rule, exact for these series)."""
+    bsdf, table, path = aniso["rotated"]
+    t = bsdffile.read(path)
+    N = t.n_nodes
+    ms_max = t.max_order[0]
+    J = ms_max // 2
+    M = bsdffile.n_marginal(ms_max, t.flags)
+    assert M == 2 * J + 1 and t.cdf.size == N * N * M
+    phi_i = np.array([0.3, 1.1, 2.5])
+    phi_o = np.linspace(0, 2 * np.pi, 4 * (ms_max + t.max_order[1]), endpoint=False)
+    avg = np.zeros((phi_i.size, N, N))                   # [phi_i, i, o]
+    for p in np.flatnonzero(t.pair_size):
+        ms, md = t.shape[p]
+        c = t.coef[t.offsets[p]:t.offsets[p] + 2 * ms * md].astype(float).reshape(2, ms, md)
+        vals = _file_series(c[0] + 1j * c[1], np.arange(ms) - ms // 2,
+                            (phi_o[None, :] + phi_i[:, None])[..., None, None],
+                            (phi_o[None, :] - phi_i[:, None])[..., None, None])
+        avg[:, p // N, p % N] = vals.mean(axis=1)
+    want = bsdffile.integrate_catmull_rom(t.nodes.astype(float), avg)        # [phi_i, i, o]
+    cdf = t.cdf.reshape(N, N, M).transpose(1, 0, 2)                           # [i, o, j]
+    j = np.arange(J + 1)
+    basis_ = np.concatenate([np.cos(2 * j[None, :] * phi_i[:, None]),
+                             np.sin(2 * j[None, 1:] * phi_i[:, None])], axis=1)
+    got = np.einsum("ioj,qj->qio", cdf, basis_)
+    assert np.abs(want).max() > 0.1
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+    # the sine half matters for a rotated layer
+    sines = np.abs(cdf[:, :, J + 1:]).max()
+    assert sines > 1e-3 * np.abs(cdf).max()
+
+
+def test_unscattered_transmission_survives_the_anisotropic_round_trip(tmp_path):
+    """A medium (unscattered beam on the transmission diagonals of every slot) with a coupled
+    reflection term added, so that the file is anisotropic: the delta comes back from the
+    metadata, in every slot."""
+    from layersim.aniso.operator import AnisoOperator, as_aniso
+    disc = {"n": 24, "md": 8}
+    medium = layersim.solve(layersim.Scene.from_dict({"layer": [
+        {"kind": "medium", "albedo": 0.5, "tau": 0.3}], "discretization": disc}))
+    metal = layersim.solve(layersim.Scene.from_dict({"layer": [
+        {"kind": "conductor", "ior": [0.2, 3.0], "roughness": [0.4, 0.2], "rotation": 30}],
+        "discretization": disc}))
+    m, c = as_aniso(medium.operators[0], 8), metal.operators[0]
+    assert m.grid.rule == c.grid.rule and m.grid.n == c.grid.n
+    blocks = dict(m.blocks)
+    blocks["Rt"] = m.blocks["Rt"] + 0.05 * c.blocks["Rt"]
+    op = AnisoOperator(m.grid, 8, blocks, m.eta_top, m.eta_bottom, m.delta)
+    bsdf = layersim.BSDF([op])
+    table = bsdf.export(tmp_path / "m.bsdf")
+    assert table.anisotropic and table.is_complex
+    back = bsdffile.read(tmp_path / "m.bsdf").to_bsdf()
+    assert back.anisotropic and set(back.operators[0].delta) == {"Ttb", "Tbt"}
+    for wi in (unit(35.0, 60.0), unit(50.0, 200.0, below=True)):
+        R, T = bsdf.albedo(wi)
+        assert T > 0.5
+        np.testing.assert_allclose(back.albedo(wi), (R, T), rtol=1e-6)
+
+
+V2_CORRUPTIONS = [
+    (lambda d, t: d[:-4], "size mismatch"),
+    (lambda d, t: d + b"\0", "size mismatch"),
+    (lambda d, t: d[:40], "truncated header"),
+    # without the complex flag the marginal table has fewer coefficients: the size no longer fits
+    (lambda d, t: _put(d, 8, "<I", 1), "size mismatch"),
+    (lambda d, t: _put(d, 8, "<I", 0x0D), "unknown flags"),
+    (lambda d, t: _put(d, 20, "<I", t.max_order[0] + 2), "size mismatch"),        # ms_max
+    (lambda d, t: _put(d, 16, "<I", 0xFFFFFFF0), "size mismatch"),                 # nCoeffs
+    (lambda d, t: _put(d, _entry(t, 1), "<I", t.max_order[0] + 2), "n_max_order_s"),
+    (lambda d, t: _put(d, _entry(t, 2), "<I", t.max_order[1] + 1), "n_max_order_d"),
+    (lambda d, t: _put(d, _entry(t, 1), "<I", 2), "even ms"),
+    (lambda d, t: _put(d, _entry(t, 0), "<I", t.coef.size - 1), "offset table"),
+]
+
+
+def _entry(t, field_):
+    """Byte position of field ``field_`` (0 offset, 1 ms, 2 md) of the last non-empty pair's
+    offset-table entry."""
+    N = t.n_nodes
+    p = int(np.flatnonzero(t.pair_size)[-1])
+    return 64 + 4 * N + 4 * t.cdf.size + 12 * p + 4 * field_
+
+
+def _put(data, pos, fmt, value):
+    data = bytearray(data)
+    struct.pack_into(fmt, data, pos, value)
+    return bytes(data)
+
+
+@pytest.mark.parametrize("mutate,match", V2_CORRUPTIONS)
+def test_corrupt_version_2_files_are_rejected(aniso, mutate, match):
+    """Truncated files, wrong counts and offsets past the end of a complex v2 file raise
+    FileFormatError naming the field (the file is never read out of bounds)."""
+    _, table, path = aniso["rotated"]
+    data = path.read_bytes()
+    bsdffile.FourierTable.from_bytes(data)                # the intact file reads
+    with pytest.raises(FileFormatError, match=match):
+        bsdffile.FourierTable.from_bytes(mutate(data, table))
+
+
+def test_version_1_refuses_anisotropic_stacks(aniso, tmp_path):
+    bsdf = aniso["brushed"][0]
+    with pytest.raises(InfeasibleError, match="version 1 .* isotropic BSDFs only"):
+        bsdf.export(tmp_path / "v1.bsdf", version=1)
