@@ -461,13 +461,14 @@ class BSDF:
 
     # ---- persistence -------------------------------------------------------------------
 
-    def export(self, path, version: int | None = None, alpha=(0.0, 0.0)):
+    def export(self, path, version: int | None = None, alpha=(0.0, 0.0), relerr: float = 0.0):
         """Write a ``.bsdf`` file (``SCATFUN``): version 1 for layerlab, Mitsuba 0.6 and pbrt-v3
         (isotropic BSDFs), version 2 in the Layer Laboratory's anisotropic layout; the default
-        (None) is 1 for isotropic and 2 for anisotropic BSDFs. Returns the
+        (None) is 1 for isotropic and 2 for anisotropic BSDFs. ``relerr`` (version 2) drops
+        each pair's coefficients below that fraction of its largest. Returns the
         :class:`layersim.bsdffile.FourierTable` written. See :mod:`layersim.bsdffile`."""
         from .bsdffile import export
-        return export(self, path, version=version, alpha=alpha)
+        return export(self, path, version=version, alpha=alpha, relerr=relerr)
 
     def save(self, path) -> Path:
         """Write the solved operators and metadata to ``path`` (numpy ``.npz`` container;

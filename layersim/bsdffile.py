@@ -318,7 +318,7 @@ class FourierTable:
 
     @classmethod
     def from_bsdf(cls, bsdf: BSDF, version: int | None = None, alpha=(0.0, 0.0),
-                  metadata: dict | None = None) -> "FourierTable":
+                  metadata: dict | None = None, relerr: float = 0.0) -> "FourierTable":
         """Tabulate a solved BSDF in the file's layout.
 
         Parameters
@@ -335,7 +335,15 @@ class FourierTable:
             (renderers use it only as a hint; layerlab writes 0).
         metadata : dict, optional
             Extra JSON fields.
+        relerr : float
+            Version 2 only: drop the coefficients of each file pair below ``relerr`` times the
+            pair's largest (over all channels), shrinking each pair's ``(ms, md)`` box to what
+            is left (the Layer Laboratory trims its files at 1e-3). 0 (default) keeps every
+            nonzero coefficient.
         """
+        if not 0.0 <= relerr < 1.0:
+            raise ValueError(f"relerr = {relerr!r}: the relative truncation of the coefficients "
+                             "must be in [0, 1)")
         if version is None:
             version = 2 if bsdf.anisotropic else 1
         if version not in (1, 2):
@@ -353,14 +361,20 @@ class FourierTable:
         # |mu_o| of our pair [o, i] of every block (row-major)
         mu_out = np.tile(np.repeat(grid.mu, grid.h), len(BLOCKS))
         nodes = file_nodes(grid.mu)
-        layout = _layout_v1 if version == 1 else _layout_v2
-        offsets, shape, coef, cdf, flags = layout(bsdf, file_of, mu_out, nodes)
+        if version == 1:
+            if relerr:
+                raise ValueError("relerr applies to version 2 files only (version 1 stores each "
+                                 "pair's series as solved)")
+            offsets, shape, coef, cdf, flags = _layout_v1(bsdf, file_of, mu_out, nodes)
+        else:
+            offsets, shape, coef, cdf, flags = _layout_v2(bsdf, file_of, mu_out, nodes, relerr)
         if coef.size > _U32:
             raise InfeasibleError(f"{coef.size} coefficients exceed the format's 32-bit "
                                   "offsets; lower md or n")
         info = {"generator": "layersim", "format": f"SCATFUN v{version}",
                 "scene": bsdf.info.get("scene"),
                 "channels": "Y,R,B" if bsdf.channels == 3 else "mono",
+                "relerr": relerr,
                 "layersim": {"rule": grid.rule, "n": grid.n, "md": op.m,
                              "representation": "anisotropic" if bsdf.anisotropic
                              else "isotropic",
@@ -822,11 +836,12 @@ def _bsdf_spectrum(bsdf, c: int):
             np.concatenate([d, d[mirror]]), np.concatenate([f, np.conj(f[mirror])]))
 
 
-def _layout_v2(bsdf, file_of, mu_out, nodes):
+def _layout_v2(bsdf, file_of, mu_out, nodes, relerr: float = 0.0):
     """Version 2: ``(offsets, (ms, md), coef, cdf, flags)`` of any solved BSDF (module
     docstring): per file pair the box of every nonzero ``c_sd = f_{d,s} |mu_o|`` over all
-    channels, channel-major Y, R, B, imaginary parts after the real parts where any is
-    nonzero (:data:`FLAG_COMPLEX`)."""
+    channels (those below ``relerr`` times the pair's largest dropped first), channel-major
+    Y, R, B, imaginary parts after the real parts where any is nonzero
+    (:data:`FLAG_COMPLEX`)."""
     N = nodes.size
     P = N * N
     nch = bsdf.channels
@@ -835,6 +850,12 @@ def _layout_v2(bsdf, file_of, mu_out, nodes):
         pair, s, d, f = _bsdf_spectrum(bsdf, c)
         sel = file_of[pair] >= 0
         spectra.append((file_of[pair[sel]], s[sel], d[sel], f[sel] * mu_out[pair[sel]]))
+    if relerr > 0:
+        peak = np.zeros(P)
+        for p, _, _, f in spectra:
+            np.maximum.at(peak, p, np.abs(f))
+        spectra = [tuple(x[np.abs(f) >= relerr * peak[p]] for x in (p, s, d, f))
+                   for p, s, d, f in spectra]
     allp = np.concatenate([sp[0] for sp in spectra])
     msh = np.zeros(P, np.int64)
     np.maximum.at(msh, allp, np.abs(np.concatenate([sp[1] for sp in spectra])))
@@ -883,11 +904,13 @@ def _layout_v2(bsdf, file_of, mu_out, nodes):
 # Functions
 # ---------------------------------------------------------------------------------------------
 
-def export(bsdf: BSDF, path, version: int | None = None, alpha=(0.0, 0.0)) -> FourierTable:
+def export(bsdf: BSDF, path, version: int | None = None, alpha=(0.0, 0.0),
+           relerr: float = 0.0) -> FourierTable:
     """Write a solved BSDF as a ``.bsdf`` file: version 1 for layerlab, Mitsuba 0.6 and pbrt-v3
     (isotropic BSDFs), version 2 in the Layer Laboratory's anisotropic layout (default: 1 for
-    isotropic, 2 for anisotropic BSDFs); returns the table written."""
-    table = FourierTable.from_bsdf(bsdf, version=version, alpha=alpha)
+    isotropic, 2 for anisotropic BSDFs); ``relerr``: see :meth:`FourierTable.from_bsdf`.
+    Returns the table written."""
+    table = FourierTable.from_bsdf(bsdf, version=version, alpha=alpha, relerr=relerr)
     table.write(path)
     return table
 

@@ -162,17 +162,19 @@ def _format(f) -> str:
 
 def cmd_export(args) -> int:
     from .bsdffile import FourierTable
+    if not 0.0 <= args.relerr < 1.0:          # before solving the scene
+        raise ValueError(f"--relerr {args.relerr:g}: the relative truncation must be in [0, 1)")
     bsdf = _load(args.source)
     out = Path(args.output) if args.output else Path(Path(args.source).stem + ".bsdf")
     alpha = _vector(args.alpha, "--alpha", 2) if args.alpha else (0.0, 0.0)
     if isinstance(bsdf, FourierTable):
-        if args.version not in (None, bsdf.version):
+        if args.version not in (None, bsdf.version) or args.relerr:
             raise ValueError(f"{args.source}: layersim cannot convert this file, so it can only "
-                             f"be copied as version {bsdf.version}")
+                             f"be copied as version {bsdf.version} (without --relerr)")
         table = bsdf
         table.write(out)
     else:
-        table = bsdf.export(out, version=args.version, alpha=alpha)
+        table = bsdf.export(out, version=args.version, alpha=alpha, relerr=args.relerr)
     size = out.stat().st_size
     print(f"wrote {out}: SCATFUN v{table.version}, {table.n_nodes} nodes, max order "
           f"{table.max_order}{' (complex)' if table.is_complex else ''}, {table.channels} "
@@ -276,6 +278,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="1: isotropic format of layerlab/Mitsuba 0.6/pbrt-v3 (default for "
                          "isotropic sources); 2: the Layer Laboratory's anisotropic layout "
                          "(default for anisotropic sources)")
+    sp.add_argument("--relerr", type=float, default=0.0,
+                    help="version 2: drop each pair's coefficients below this fraction of its "
+                         "largest (e.g. 1e-3 as the Layer Laboratory does; default 0 keeps all)")
     sp.add_argument("--alpha", help="A_TOP,A_BOTTOM: Beckmann-equivalent roughness hints for "
                                     "the header (default 0,0)")
     sp.set_defaults(func=cmd_export)

@@ -180,6 +180,7 @@ def test_plot_writes_slices_and_blocks(glass_files, capsys):
     (["plot", "{d}/glass.toml", "--wi", "90,0"], "horizon"),
     (["plot", "{d}/glass.toml"], "exactly one of"),
     (["plot", "{d}/glass.toml", "--blocks", "--order", "-1"], "order"),
+    (["export", "{d}/glass.toml", "--relerr", "1.5"], "[0, 1)"),
 ])
 def test_bad_input_prints_one_line_and_exits_2(glass_files, capsys, argv, words):
     d = glass_files
