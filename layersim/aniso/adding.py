@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sps
 
+from .. import memory
 from ..errors import InfeasibleError, OperatorError
 from ..adding import _check_pair  # same grid / opacity / index checks for both representations
 from ..operator import DROP_TOLERANCE
@@ -283,6 +284,7 @@ def add(top, bottom, relerr: float | None = None,
         rhs = sps.hstack([first, Tbt2], format="csr")
     Z = banded_solve(K, rhs, h, md, identity_minus=True)
     del K, rhs, first       # the largest temporaries: free them before the products below
+    memory.release()
     Z = Z if relerr_intermediate is None else tidy(Z)
     Z1 = Z[:, :N]
     out = {"Rt": Rt1 + Tbt1 @ Z1}
@@ -293,6 +295,8 @@ def add(top, bottom, relerr: float | None = None,
         out["Ttb"] = Ttb2 @ Ttb1 + W @ Z1
         out["Rb"] = Rb2 + W @ Z2
     blocks = {k: prune(v, DROP_TOLERANCE) for k, v in out.items()}
+    del out, Z, Z1
+    memory.release()
     delta = {}
     if not opaque:
         for name in ("Ttb", "Tbt"):
