@@ -120,7 +120,7 @@ def main(argv) -> int:
     s.wrap(banded.BlockBandedLU, "__init__", "    block LU")
     s.wrap(adding, "_solve_groups", "    substitutions")
     s.wrap(adding.AnisoOperator, "pruned", "  pruned (result)")
-    s.wrap(adding, "prune_pairs", "  prune_pairs")
+    s.wrap(adding, "pruned_product", "  product (pruned)")
     from layersim import plan as lplan
     s.wrap(solver, "make_plan", "plan")
     t0 = time.perf_counter()

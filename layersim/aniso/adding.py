@@ -34,7 +34,7 @@ from ..adding import _check_pair  # same grid / opacity / index checks for both 
 from ..operator import DROP_TOLERANCE
 from . import basis
 from .banded import PRUNE, BlockBandedLU
-from .operator import (AnisoOperator, as_aniso, from_parts, pair_pruner, prune, prune_pairs,
+from .operator import (AnisoOperator, PairPruner, as_aniso, from_parts, prune,
                        pruned_product, slot_pairs)
 
 #: Relative residual above which a block-LU solve is redone with sparse LU, checked on up to
@@ -64,10 +64,9 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         Named in errors.
     relerr : float, optional
         Drop entries of the solution below ``relerr`` times the largest of their ordinate pair
-        (:func:`~layersim.aniso.operator.prune_pairs`). Applied while the groups of right-hand
-        sides are solved, against the largest entries found so far (which drops a subset of
-        what the final pass drops), so that the unpruned solution is never held; the caller
-        applies the final pass.
+        (the result of :func:`~layersim.aniso.operator.prune_pairs`), applied while the groups
+        of right-hand sides are solved (:class:`~layersim.aniso.operator.PairPruner`), so that
+        the unpruned solution is never held.
 
     Raises
     ------
@@ -129,6 +128,7 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
     Bo = B_a[order].tocsc()
     del B_a
     parts = None
+    keep = (lambda *part: part) if relerr is None else PairPruner(h, relerr)
     try:
         lu = BlockBandedLU(rows, starts, bw)
         del rows
@@ -142,7 +142,7 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         Ms = (M @ Ys)[ordered]
         resid = Bs - (Ys[ordered] - Ms if identity_minus else Ms)
         if not (resid.nnz and abs(resid).max() > RESIDUAL_CHECK * max(abs(Bs).max(), 1e-300)):
-            parts = _solve_groups(lu, Bo, starts, blk_pos, ordered, relerr, h)
+            parts = _solve_groups(lu, Bo, starts, blk_pos, ordered, keep)
         del lu
     except np.linalg.LinAlgError:
         parts = None
@@ -154,9 +154,9 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         del Y
     # the eliminated unknowns (y = b), then one CSR matrix in the unknowns' numbering
     Brest = B[rest].tocoo()
-    parts.append((rest[Brest.row], Brest.col, Brest.data))
+    parts.append(keep(rest[Brest.row], Brest.col, Brest.data))
     del Brest, Bo
-    return from_parts(parts, B.shape)
+    return from_parts(parts if relerr is None else keep.final(parts), B.shape)
 
 
 def _block_rows(M, ordered, pos, starts, bw, sign, identity_minus):
@@ -192,16 +192,14 @@ def _slot_keys(M, h, md):
     return label * (md + 1) + mode
 
 
-def _solve_groups(lu, Bc, starts, blk_pos, ordered, relerr: float | None = None,
-                  h: int = 1) -> list:
+def _solve_groups(lu, Bc, starts, blk_pos, ordered, keep=None) -> list:
     """Pruned block substitution, right-hand sides grouped by the first block they touch.
 
     Returns the solution as parts ``(rows, cols, values)`` (32-bit indices, rows in the
     unknowns' numbering ``ordered[position]``) for :func:`~layersim.aniso.operator.from_parts`.
-    Groups are solved :data:`layersim.threads.THREADS` at a time and, with ``relerr``, each
-    round is pruned per ordinate pair against the largest entries found so far
-    (:func:`~layersim.aniso.operator.pair_pruner`), so that the unpruned solution (several times
-    the pruned one) is never held.
+    Groups are solved :data:`layersim.threads.THREADS` at a time and each round's parts go
+    through ``keep`` (a :class:`~layersim.aniso.operator.PairPruner`) as they come, so that
+    the unpruned solution (several times the pruned one) is never held.
     """
     from ..threads import THREADS
     cols = np.flatnonzero(np.diff(Bc.indptr))
@@ -212,7 +210,6 @@ def _solve_groups(lu, Bc, starts, blk_pos, ordered, relerr: float | None = None,
     last = np.maximum.reduceat(rb, Bc.indptr[cols])
     Bcsr = Bc.tocsr()
     unknown = ordered.astype(np.int32)
-    keep = None if relerr is None else pair_pruner(h, relerr)
 
     def group(g):
         sel = first == g
@@ -290,10 +287,8 @@ def add(top, bottom, relerr: float | None = None,
     Rt1, Rb1, Ttb1, Tbt1 = (top.block(k) for k in ("Rt", "Rb", "Ttb", "Tbt"))
     Rt2 = bottom.block("Rt")
     if relerr_intermediate is None:
-        tidy = lambda m: prune(m, 1e-16)
-        product = lambda a, b: tidy(a @ b)
+        product = lambda a, b: prune(a @ b, 1e-16)
     else:
-        tidy = lambda m: prune_pairs(m, h, relerr_intermediate)
         product = lambda a, b: pruned_product(a, b, h, relerr_intermediate)
     K = product(Rt2, Rb1)
     first = product(Rt2, Ttb1)
@@ -305,7 +300,6 @@ def add(top, bottom, relerr: float | None = None,
     Z = banded_solve(K, rhs, h, md, identity_minus=True, relerr=relerr_intermediate)
     del K, rhs, first       # the largest temporaries: free them before the products below
     memory.release()
-    Z = Z if relerr_intermediate is None else tidy(Z)
     Z1 = Z[:, :N]
     out = {"Rt": Rt1 + Tbt1 @ Z1}
     if not opaque:

@@ -458,22 +458,37 @@ def _select(mat: sps.csr_matrix, keep: np.ndarray) -> sps.csr_matrix:
                           shape=mat.shape)
 
 
-def pair_pruner(h: int, relerr: float):
-    """A filter for a stream of entries ``(rows, cols, values)``: it keeps those not below
-    ``relerr`` times the largest magnitude of their ordinate pair ``(row % h, col % h)`` seen
-    so far (this part included). Every entry it drops is dropped by :func:`prune_pairs` of the
-    whole, and the largest entries are kept, so ``prune_pairs`` of the kept entries equals
-    ``prune_pairs`` of all of them."""
-    big = np.zeros(h * h)
+class PairPruner:
+    """A filter for a stream of entries ``(rows, cols, values)`` that ends with the result of
+    :func:`prune_pairs` of all of them, without holding them all unpruned.
 
-    def keep(rows, cols, vals):
-        key = (rows % h).astype(np.int64) * h + cols % h
+    Calling it keeps the entries of a part not below ``relerr`` times the largest magnitude
+    of their ordinate pair ``(row % h, col % h)`` seen so far (this part included): every
+    entry it drops is dropped by :func:`prune_pairs` of the whole. :meth:`final` then filters
+    the kept parts against the largest magnitudes of the whole stream, which are exactly those
+    of :func:`prune_pairs` (the largest entries are never dropped).
+    """
+
+    def __init__(self, h: int, relerr: float):
+        self.h, self.relerr = int(h), float(relerr)
+        self.big = np.zeros(self.h * self.h)
+
+    def _filter(self, rows, cols, vals, update: bool):
+        key = (rows % self.h).astype(np.int64) * self.h + cols % self.h
         mag = np.abs(vals)
-        np.maximum.at(big, key, mag)
-        sel = mag >= relerr * big[key]
+        if update:
+            np.maximum.at(self.big, key, mag)
+        sel = mag >= self.relerr * self.big[key]
         return rows[sel], cols[sel], vals[sel]
 
-    return keep
+    def __call__(self, rows, cols, vals):
+        return self._filter(rows, cols, vals, True)
+
+    def final(self, parts: list) -> list:
+        """The parts (filtered by earlier calls) pruned against the whole stream's maxima."""
+        for k in range(len(parts)):
+            parts[k] = self._filter(*parts[k], False)
+        return parts
 
 
 #: Rows of the left factor per chunk in :func:`pruned_product`, as a fraction of all rows.
@@ -482,11 +497,11 @@ PRODUCT_CHUNKS = 16
 
 def pruned_product(a, b, h: int, relerr: float) -> sps.csr_matrix:
     """``prune_pairs(a @ b, h, relerr)`` without holding the unpruned product: it is formed
-    in :data:`PRODUCT_CHUNKS` chunks of rows of ``a``, each filtered by :func:`pair_pruner`
+    in :data:`PRODUCT_CHUNKS` chunks of rows of ``a``, each filtered by :class:`PairPruner`
     as it comes (on Table 2 row 7 of seed 000 the product ``Rt2 Rb1`` had several times the
     entries it keeps)."""
     a, b = sps.csr_matrix(a), sps.csr_matrix(b)
-    keep = pair_pruner(h, relerr)
+    keep = PairPruner(h, relerr)
     step = max(1, -(-a.shape[0] // PRODUCT_CHUNKS))
     parts = []
     for start in range(0, a.shape[0], step):
@@ -495,7 +510,7 @@ def pruned_product(a, b, h: int, relerr: float) -> sps.csr_matrix:
                          np.diff(part.indptr))
         parts.append(keep(rows, part.indices, part.data))
         del part, rows
-    return prune_pairs(from_parts(parts, (a.shape[0], b.shape[1])), h, relerr)
+    return from_parts(keep.final(parts), (a.shape[0], b.shape[1]))
 
 
 def prune(mat, tolerance: float = DROP_TOLERANCE) -> sps.csr_matrix:
