@@ -40,6 +40,7 @@ class Sampler:
         self.peaks: dict = {}
         self.order: list = []
         self.peak = 0
+        self.t0 = time.perf_counter()
         self._stop = False
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -61,6 +62,9 @@ class Sampler:
             name = f"{base} #{k}"
         self.peaks[name] = rss_bytes()
         self.order.append((name, len(self.stack), rss_bytes()))
+        # progress on stderr, for runs that may be stopped before the summary
+        print(f"[{time.perf_counter() - self.t0:7.1f} s] {name.strip()}: RSS "
+              f"{rss_bytes() / 2**20:.0f} MiB", file=sys.stderr, flush=True)
         self.stack.append(name)
         return name
 
