@@ -6,7 +6,10 @@ memory is the row's own); the paper's numbers (4-core i7-6700K, UMFPACK) are pri
 Columns: total solve time (plan + projection + adding), adding only, density of the top, bottom
 and combined operators (nonzeros over all entries of the coupled representation, modes
 -(md-1)..md-1, as in the paper), storage of the combined operator, peak resident memory of the
-process (includes Python, numpy, scipy and Warp, ~250 MiB), and the discretisation.
+process and, in parentheses, above its baseline (resident memory after importing numpy,
+scipy, Warp and layersim and warming up Warp's kernels, ~210 MiB), the plan's memory estimate
+(:mod:`layersim.aniso.plan`) and its ratio to the peak above baseline, and the
+discretisation.
 
 Usage::
 
@@ -15,10 +18,14 @@ Usage::
     python benchmarks/table2.py --row 4      # one row in this process (used internally)
 
 Row 6 (both layers 1:3 anisotropic, the narrow axis 0.05 in the coating) needs n = 390 and
-md = 502 at the planner's accuracy (estimated 4.7 GiB at n = 196 already; the coating's
-refraction lobe sets n = 390). It is run at ``n = 224, md = 300``: the smallest n at which the
-coating's discrete operator does not create energy (n = 196 and 210 are refused by the energy
-check: 1.00000x and 1.0012), and marked as such.
+md = 426 at the planner's accuracy (the coating's refraction lobe sets n = 390; estimated
+10.2 GiB). At that plan (``LAYERSIM_MAX_MEMORY`` raised, ``benchmarks/memory_phases.py 6
+--default``, shared 2-core machine) the projection of the two layers alone took 162 s, RSS
+2.7 GiB, the first product of the adding equations (``K = Rt2 Rb1``) another 146 s (RSS
+3.6 GiB after it), and the run was stopped at 330 s (its first 40 s shared the machine with
+another benchmark of ours). It is run at ``n = 224, md = 300``: the smallest n at which the coating's discrete
+operator does not create energy (n = 196 and 210 are refused by the energy check: 1.00000x and
+1.0012), and marked as such.
 """
 
 from __future__ import annotations
@@ -65,6 +72,8 @@ def run_row(k: int) -> dict:
     layersim.solve(layersim.Scene.from_dict({"layer": [
         {"kind": "conductor", "ior": [0.2, 3.0], "roughness": [0.3, 0.2]}],
         "discretization": {"n": 16, "md": 4}}))
+    with open("/proc/self/statm") as f:   # resident memory of the imported, warmed-up process
+        baseline = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
     captured = {}
     original = solver._layer_operator
 
@@ -85,6 +94,7 @@ def run_row(k: int) -> dict:
         "top": _density(captured[0]), "bottom": _density(captured[1]), "combined": _density(op),
         "storage": op.memory_bytes() / 2**20,
         "rss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+        "baseline": baseline, "estimate": bsdf.plan.memory_bytes / 2**20,
         "n": bsdf.info["n"], "md": bsdf.info["md"], "ms": bsdf.info["ms"],
         "representation": bsdf.info.get("representation", "isotropic"),
     }
@@ -96,10 +106,12 @@ def main(argv) -> int:
         return 0
     rows = [int(a) for a in argv] or list(range(1, len(ROWS) + 1))
     print(f"machine: {os.cpu_count()} cores; layersim projection threads: "
-          f"{os.environ.get('LAYERSIM_PROJECTION_THREADS', os.cpu_count())}")
+          f"{os.environ.get('LAYERSIM_PROJECTION_THREADS', os.cpu_count())}; load average "
+          f"at start {os.getloadavg()[0]:.1f}")
     head = (f"{'row':>3} {'top':>11} {'bottom':>11} | {'total s':>15} {'adding s':>15} | "
             f"{'top %':>13} {'bottom %':>13} {'combined %':>13} | {'storage MiB':>15} | "
-            f"{'peak RSS MiB':>12} | discretisation")
+            f"{'peak RSS MiB (above base)':>25} | {'estimate MiB (/above)':>21} | "
+            "discretisation")
     print(head)
     print("    (ours / paper)" + " " * 20 + "(ours / paper in each column)")
     for k in rows:
@@ -116,7 +128,9 @@ def main(argv) -> int:
         print(f"{k:>3} {str(p[0]):>11} {str(p[1]):>11} | {r['total']:6.1f} / {pt:>6} "
               f"{r['adding']:6.1f} / {pa:>6} | {r['top']:6.3f}/{p[4]:<6.3f} "
               f"{r['bottom']:6.3f}/{p[5]:<6.3f} {r['combined']:6.3f}/{p[6]:<6.3f} | "
-              f"{r['storage']:6.1f} / {p[7]:<6.1f} | {r['rss']:12.0f} | n={r['n']} "
+              f"{r['storage']:6.1f} / {p[7]:<6.1f} | {r['rss']:11.0f} ({r['rss'] - r['baseline']:5.0f})"
+              f"       | {r['estimate']:8.0f} ({r['estimate'] / (r['rss'] - r['baseline']):4.2f}x)"
+              f"       | n={r['n']} "
               f"md={r['md']} ms={r['ms']} {r['representation']}{tag}")
     return 0
 

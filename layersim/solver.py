@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from . import adding, energy
+from . import adding, energy, memory
 from .bsdf import BSDF, channel_pairs
 from .errors import InfeasibleError
 from .ingredients import diffuse_operator, interface_operator, medium_operator
@@ -156,6 +156,7 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
                 t0 = time.perf_counter()
                 cache[key] = _layer_operator(plan, grid, mono, lp.index, stats, projection,
                                              device)
+                memory.release()
                 t_layers += time.perf_counter() - t0
             ops.append(cache[key])
         t0 = time.perf_counter()

@@ -28,12 +28,14 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sps
 
+from .. import memory
 from ..errors import InfeasibleError, OperatorError
 from ..adding import _check_pair  # same grid / opacity / index checks for both representations
 from ..operator import DROP_TOLERANCE
 from . import basis
 from .banded import PRUNE, BlockBandedLU
-from .operator import AnisoOperator, as_aniso, prune, prune_pairs, slot_pairs
+from .operator import (AnisoOperator, PairPruner, as_aniso, from_parts, prune,
+                       pruned_product, slot_pairs)
 
 #: Relative residual above which a block-LU solve is redone with sparse LU, checked on up to
 #: RESIDUAL_COLUMNS columns.
@@ -47,7 +49,7 @@ def _memory_limit() -> int:
 
 
 def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
-                 identity_minus: bool = False) -> sps.csr_matrix:
+                 identity_minus: bool = False, relerr: float | None = None) -> sps.csr_matrix:
     """``Y = A^-1 B`` for a coupled-mode matrix ``A`` (slot basis) and sparse ``B``.
 
     Parameters
@@ -60,6 +62,11 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         Ordinates per slot and Fourier orders.
     what : str
         Named in errors.
+    relerr : float, optional
+        Drop entries of the solution below ``relerr`` times the largest of their ordinate pair
+        (the result of :func:`~layersim.aniso.operator.prune_pairs`), applied while the groups
+        of right-hand sides are solved (:class:`~layersim.aniso.operator.PairPruner`), so that
+        the unpruned solution is never held.
 
     Raises
     ------
@@ -119,38 +126,37 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
     ordered = active[order]                                      # unknown at each position
     rows = _block_rows(M, ordered, pos, starts, bw, sign, identity_minus)
     Bo = B_a[order].tocsc()
-    Y = None
+    del B_a
+    parts = None
+    keep = (lambda *part: part) if relerr is None else PairPruner(h, relerr)
     try:
         lu = BlockBandedLU(rows, starts, bw)
-        Y = _solve_groups(lu, Bo, starts, blk_pos)
-        # verify on a sample of columns (the block LU does not pivot across blocks)
+        del rows
+        # verify on a sample of columns (the block LU does not pivot across blocks), solved
+        # without the pruning of ``relerr``
         cols = np.flatnonzero(np.diff(Bo.indptr))
         sample = cols if cols.size <= RESIDUAL_COLUMNS else \
             np.random.default_rng(0).choice(cols, RESIDUAL_COLUMNS, replace=False)
-        Ys = Y[:, sample].tocoo()
-        Ys_full = sps.csr_matrix((Ys.data, (ordered[Ys.row], Ys.col)), shape=(N, sample.size))
-        Ms = (M @ Ys_full)[ordered]
-        resid = Bo[:, sample] - (sps.csr_matrix(Ys) - Ms if identity_minus else Ms)
-        if resid.nnz and abs(resid).max() > RESIDUAL_CHECK * max(abs(Bo[:, sample]).max(),
-                                                                 1e-300):
-            Y = None
+        Bs = Bo[:, sample]
+        Ys = from_parts(_solve_groups(lu, Bs, starts, blk_pos, ordered), (N, sample.size))
+        Ms = (M @ Ys)[ordered]
+        resid = Bs - (Ys[ordered] - Ms if identity_minus else Ms)
+        if not (resid.nnz and abs(resid).max() > RESIDUAL_CHECK * max(abs(Bs).max(), 1e-300)):
+            parts = _solve_groups(lu, Bo, starts, blk_pos, ordered, keep)
+        del lu
     except np.linalg.LinAlgError:
-        Y = None
-    if Y is None:
+        parts = None
+    if parts is None:
         Ao = M[ordered][:, ordered]
         Ao = (sps.identity(order.size) - Ao) if identity_minus else Ao
-        Y = _sparse_lu_solve(Ao, Bo)
-    # back to the unknowns' numbering, with the eliminated ones (y = b); 32-bit indices keep
-    # the temporaries of a large solution small
-    Y = sps.coo_matrix(Y)
+        Y = _sparse_lu_solve(Ao, Bo).tocoo()
+        parts = [(ordered[Y.row], Y.col, Y.data)]
+        del Y
+    # the eliminated unknowns (y = b), then one CSR matrix in the unknowns' numbering
     Brest = B[rest].tocoo()
-    r = np.concatenate([ordered.astype(np.int32)[Y.row], rest.astype(np.int32)[Brest.row]])
-    c = np.concatenate([Y.col.astype(np.int32, copy=False), Brest.col.astype(np.int32)])
-    v = np.concatenate([Y.data, Brest.data])
-    del Y
-    out = sps.csr_matrix((v, (r, c)), shape=B.shape)
-    out.sum_duplicates()
-    return out
+    parts.append(keep(rest[Brest.row], Brest.col, Brest.data))
+    del Brest, Bo
+    return from_parts(parts if relerr is None else keep.final(parts), B.shape)
 
 
 def _block_rows(M, ordered, pos, starts, bw, sign, identity_minus):
@@ -186,41 +192,49 @@ def _slot_keys(M, h, md):
     return label * (md + 1) + mode
 
 
-def _solve_groups(lu, Bc, starts, blk_pos) -> sps.csc_matrix:
-    """Pruned block substitution, right-hand sides grouped by the first block they touch."""
+def _solve_groups(lu, Bc, starts, blk_pos, ordered, keep=None) -> list:
+    """Pruned block substitution, right-hand sides grouped by the first block they touch.
+
+    Returns the solution as parts ``(rows, cols, values)`` (32-bit indices, rows in the
+    unknowns' numbering ``ordered[position]``) for :func:`~layersim.aniso.operator.from_parts`.
+    Groups are solved :data:`layersim.threads.THREADS` at a time and each round's parts go
+    through ``keep`` (a :class:`~layersim.aniso.operator.PairPruner`) as they come, so that
+    the unpruned solution (several times the pruned one) is never held.
+    """
+    from ..threads import THREADS
     cols = np.flatnonzero(np.diff(Bc.indptr))
     if cols.size == 0:
-        return sps.csc_matrix(Bc.shape)
+        return []
     rb = blk_pos[Bc.indices]
     first = np.minimum.reduceat(rb, Bc.indptr[cols])
     last = np.maximum.reduceat(rb, Bc.indptr[cols])
     Bcsr = Bc.tocsr()
+    unknown = ordered.astype(np.int32)
 
     def group(g):
         sel = first == g
-        gcols = cols[sel]
+        gcols = cols[sel].astype(np.int32)
         lo, hi = int(g), int(last[sel].max()) + 1
         dense = Bcsr[starts[lo]:starts[hi]][:, gcols].toarray()
         rhs = {j: dense[starts[j] - starts[lo]:starts[j + 1] - starts[lo]] for j in range(lo, hi)}
         scale = np.abs(dense).max()
-        out = []
+        del dense
+        rows, cs, vals = [], [], []
         for j, y in lu.solve(rhs, lo, hi).items():
             r, c = np.nonzero(np.abs(y) > PRUNE * scale)
-            out.append((r + starts[j], gcols[c], y[r, c]))
-        return out
+            rows.append(unknown[r + starts[j]])
+            cs.append(gcols[c])
+            vals.append(y[r, c])
+        if not rows:
+            return np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0)
+        return np.concatenate(rows), np.concatenate(cs), np.concatenate(vals)
 
-    groups = [part for parts in _map(group, list(np.unique(first))) for part in parts]
-    # one CSC matrix, filled part by part while the parts are released (the solution can
-    # hold tens of millions of entries: no concatenated copies of 64-bit index lists)
-    total = sum(r.size for r, _, _ in groups)
-    rows, cols, vals = np.empty(total, np.int32), np.empty(total, np.int32), np.empty(total)
-    at = 0
-    for k in range(len(groups)):
-        r, c, v = groups[k]
-        groups[k] = None
-        rows[at:at + r.size], cols[at:at + r.size], vals[at:at + r.size] = r, c, v
-        at += r.size
-    return sps.csc_matrix((vals, (rows, cols)), shape=Bc.shape)
+    todo = list(np.unique(first))
+    parts = []
+    for at in range(0, len(todo), THREADS):
+        for part in _map(group, todo[at:at + THREADS]):
+            parts.append(part if keep is None else keep(*part))
+    return parts
 
 
 def _map(fn, items):
@@ -272,18 +286,20 @@ def add(top, bottom, relerr: float | None = None,
     opaque = bottom.opaque
     Rt1, Rb1, Ttb1, Tbt1 = (top.block(k) for k in ("Rt", "Rb", "Ttb", "Tbt"))
     Rt2 = bottom.block("Rt")
-    tidy = (lambda m: prune(m, 1e-16)) if relerr_intermediate is None else \
-        (lambda m: prune_pairs(m, h, relerr_intermediate))
-    K = tidy(Rt2 @ Rb1)
-    first = tidy(Rt2 @ Ttb1)
+    if relerr_intermediate is None:
+        product = lambda a, b: prune(a @ b, 1e-16)
+    else:
+        product = lambda a, b: pruned_product(a, b, h, relerr_intermediate)
+    K = product(Rt2, Rb1)
+    first = product(Rt2, Ttb1)
     if opaque:
         rhs = first
     else:
         Rb2, Ttb2, Tbt2 = (bottom.block(k) for k in ("Rb", "Ttb", "Tbt"))
         rhs = sps.hstack([first, Tbt2], format="csr")
-    Z = banded_solve(K, rhs, h, md, identity_minus=True)
+    Z = banded_solve(K, rhs, h, md, identity_minus=True, relerr=relerr_intermediate)
     del K, rhs, first       # the largest temporaries: free them before the products below
-    Z = Z if relerr_intermediate is None else tidy(Z)
+    memory.release()
     Z1 = Z[:, :N]
     out = {"Rt": Rt1 + Tbt1 @ Z1}
     if not opaque:
@@ -293,6 +309,8 @@ def add(top, bottom, relerr: float | None = None,
         out["Ttb"] = Ttb2 @ Ttb1 + W @ Z1
         out["Rb"] = Rb2 + W @ Z2
     blocks = {k: prune(v, DROP_TOLERANCE) for k, v in out.items()}
+    del out, Z, Z1
+    memory.release()
     delta = {}
     if not opaque:
         for name in ("Ttb", "Tbt"):

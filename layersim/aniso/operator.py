@@ -227,43 +227,53 @@ class AnisoOperator:
         always kept and does not count in the maximum.
         """
         h = self.h
-        fw = np.tile(self.grid.flux_weight, self.slots)
-        col_scale = np.repeat(basis.slot_scale(self.md), h) / fw     # B -> G D (no 2 pi)
-        scale, unscale = sps.diags(col_scale), sps.diags(1.0 / col_scale)
-        mirror = lambda m: sps.csr_matrix(scale @ m.T @ unscale)      # B of S^T
+        col_scale = slot_column_scale(self.grid, self.md)            # B -> G D (no 2 pi)
+        mirror = lambda m: reciprocal_image(m, h, col_scale)          # B of S^T
         blocks = dict(self.blocks)
+
+        def mean(a, b):
+            out = a + b
+            out.data *= 0.5
+            return out
+
         for name in ("Rt", "Rb"):
             if blocks.get(name) is not None:
-                blocks[name] = 0.5 * (blocks[name] + mirror(blocks[name]))
+                blocks[name] = mean(blocks[name], mirror(blocks[name]))
         if blocks.get("Ttb") is not None:
             ratio = (self.eta_bottom / self.eta_top) ** 2
-            blocks["Ttb"] = 0.5 * (blocks["Ttb"] + ratio * mirror(blocks["Tbt"]))
-            blocks["Tbt"] = mirror(blocks["Ttb"]) / ratio
-        # reflection blocks are symmetric on their own; Ttb / eta_b^2 mirrors Tbt / eta_t^2
+            blocks["Ttb"] = mean(blocks["Ttb"], reciprocal_image(blocks["Tbt"], h, col_scale,
+                                                                 ratio))
+            blocks["Tbt"] = reciprocal_image(blocks["Ttb"], h, col_scale, 1.0 / ratio)
+        # reflection blocks are symmetric on their own; Ttb / eta_b^2 mirrors Tbt / eta_t^2;
+        # per-entry quantities are formed in chunks of rows (the blocks of a coupled stack
+        # have millions of entries)
         eta = {"Rt": 1.0, "Rb": 1.0, "Ttb": self.eta_bottom, "Tbt": self.eta_top}
         for first, second in (("Rt", None), ("Rb", None), ("Ttb", "Tbt")):
-            parts = []
-            for name, flip in ((first, False), (second, True)):
-                if name is None or blocks.get(name) is None:
-                    continue
-                coo = blocks[name].tocoo()
-                o, i = coo.row % h, coo.col % h
-                if second is None:          # one symmetric block: unordered pairs
+            parts = [(name, flip, blocks[name]) for name, flip in ((first, False), (second, True))
+                     if name is not None and blocks.get(name) is not None]
+
+            def keyed(name, flip, mat, lo, hi, rows, one=second is None):
+                cols = mat.indices[lo:hi]
+                o, i = rows % h, cols % h
+                if one:                     # one symmetric block: unordered pairs
                     o, i = np.minimum(o, i), np.maximum(o, i)
                 elif flip:                  # Tbt[y, x] pairs with Ttb[x, y]
                     o, i = i, o
-                mag = np.abs(coo.data) * col_scale[coo.col] / eta[name] ** 2
-                beam = (coo.row == coo.col) if name in self.delta else np.zeros(coo.nnz, bool)
-                parts.append((name, coo, o * h + i, mag, beam))
-            if not parts:
-                continue
+                mag = np.abs(mat.data[lo:hi]) * col_scale[cols] / eta[name] ** 2
+                beam = (rows == cols) if name in self.delta else np.zeros(hi - lo, bool)
+                return o.astype(np.int64) * h + i, mag, beam
+
             big = np.zeros(h * h)
-            for _, _, key, mag, beam in parts:
-                np.maximum.at(big, key[~beam], mag[~beam])
-            for name, coo, key, mag, beam in parts:
-                keep = beam | (mag >= relerr * big[key])
-                blocks[name] = sps.csr_matrix((coo.data[keep], (coo.row[keep], coo.col[keep])),
-                                              shape=coo.shape)
+            for name, flip, mat in parts:
+                for lo, hi, rows in _row_chunks(mat):
+                    key, mag, beam = keyed(name, flip, mat, lo, hi, rows)
+                    np.maximum.at(big, key[~beam], mag[~beam])
+            for name, flip, mat in parts:
+                keep = np.empty(mat.nnz, bool)
+                for lo, hi, rows in _row_chunks(mat):
+                    key, mag, beam = keyed(name, flip, mat, lo, hi, rows)
+                    keep[lo:hi] = beam | (mag >= relerr * big[key])
+                blocks[name] = _select(mat, keep)
         return AnisoOperator(self.grid, self.md, blocks, self.eta_top, self.eta_bottom,
                              self.delta)
 
@@ -320,6 +330,14 @@ class AnisoOperator:
         return op
 
 
+def slot_column_scale(grid: Grid, md: int) -> np.ndarray:
+    """``D / (w |mu|)`` per unknown, shape (S h,): the column scale that turns a block ``B``
+    into ``S = G D`` up to ``2 pi`` (``G`` the coefficients, ``D`` the slot scale of
+    :func:`reciprocity_error`), in which reciprocity is a transpose."""
+    return np.repeat(basis.slot_scale(md), grid.h) / np.tile(grid.flux_weight,
+                                                              basis.n_slots(md))
+
+
 def as_aniso(op, md: int | None = None) -> AnisoOperator:
     """``op`` as an :class:`AnisoOperator` with ``md`` orders (isotropic operators are
     converted: block diagonal, no coupling)."""
@@ -338,6 +356,62 @@ def _row_chunks(mat: sps.csr_matrix, rows_per_chunk: int = 1 << 14):
         stop = min(mat.shape[0], start + rows_per_chunk)
         ptr = mat.indptr[start:stop + 1]
         yield int(ptr[0]), int(ptr[-1]), np.repeat(np.arange(start, stop), np.diff(ptr))
+
+
+def from_parts(parts: list, shape: tuple, fmt: str = "csr"):
+    """Sparse matrix of shape ``shape`` from ``parts``, a list of ``(rows, cols, values)``
+    triplets (duplicates are summed). The parts are copied into one set of 32-bit index and
+    value arrays and released one by one (``parts`` is emptied): the matrices of coupled
+    stacks hold tens of millions of entries, and concatenated copies of their 64-bit index
+    lists took more memory than the matrices.
+
+    Parameters
+    ----------
+    parts : list of (int ndarray (E,), int ndarray (E,), float ndarray (E,))
+    shape : (int, int)
+    fmt : {"csr", "csc"}
+    """
+    total = sum(r.size for r, _, _ in parts)
+    rows, cols, vals = np.empty(total, np.int32), np.empty(total, np.int32), np.empty(total)
+    at = 0
+    for k in range(len(parts)):
+        r, c, v = parts[k]
+        parts[k] = None
+        rows[at:at + r.size], cols[at:at + r.size], vals[at:at + r.size] = r, c, v
+        at += r.size
+    parts.clear()
+    coo = sps.coo_matrix((vals, (rows, cols)), shape=shape)
+    del rows, cols, vals
+    return coo.tocsr() if fmt == "csr" else coo.tocsc()
+
+
+def reciprocal_image(mat, h: int, col_scale: np.ndarray, factor: float = 1.0,
+                     skip_diagonal: bool = False) -> sps.csr_matrix:
+    """``factor * diag(c) mat^T diag(1 / c)``: the block that reciprocity pairs with ``mat``
+    (``c = col_scale``, the slot scale over the flux weights, see
+    :meth:`AnisoOperator.pruned`), formed from one transposed copy scaled in place.
+
+    Parameters
+    ----------
+    mat : sparse (N, N)
+    h : int
+        Ordinates per slot.
+    col_scale : ndarray (N,)
+    factor : float
+    skip_diagonal : bool
+        Leave out the entries of the ordinate pairs ``o == i`` (the image of one triangle of
+        pairs, to be added to that triangle).
+    """
+    t = sps.csc_matrix(mat).T.tocsr()     # the CSC -> CSR conversion makes the copy
+    for lo, hi, rows in _row_chunks(t):
+        cols = t.indices[lo:hi]
+        part = t.data[lo:hi]
+        part *= factor * col_scale[rows] / col_scale[cols]
+        if skip_diagonal:
+            part[rows % h == cols % h] = 0.0
+    if skip_diagonal:
+        t.eliminate_zeros()
+    return t
 
 
 def slot_pairs(mat, h: int, columns=None):
@@ -374,9 +448,69 @@ def prune_pairs(mat, h: int, relerr: float) -> sps.csr_matrix:
     keep = np.empty(mat.nnz, bool)
     for lo, hi, rows in _row_chunks(mat):
         keep[lo:hi] = np.abs(mat.data[lo:hi]) >= relerr * big[key(lo, hi, rows)]
+    return _select(mat, keep)
+
+
+def _select(mat: sps.csr_matrix, keep: np.ndarray) -> sps.csr_matrix:
+    """The entries of the CSR matrix ``mat`` where the boolean ``keep`` (nnz,) is true."""
     kept = np.concatenate([[0], np.cumsum(keep)])
     return sps.csr_matrix((mat.data[keep], mat.indices[keep], kept[mat.indptr]),
                           shape=mat.shape)
+
+
+class PairPruner:
+    """A filter for a stream of entries ``(rows, cols, values)`` that ends with the result of
+    :func:`prune_pairs` of all of them, without holding them all unpruned.
+
+    Calling it keeps the entries of a part not below ``relerr`` times the largest magnitude
+    of their ordinate pair ``(row % h, col % h)`` seen so far (this part included): every
+    entry it drops is dropped by :func:`prune_pairs` of the whole. :meth:`final` then filters
+    the kept parts against the largest magnitudes of the whole stream, which are exactly those
+    of :func:`prune_pairs` (the largest entries are never dropped).
+    """
+
+    def __init__(self, h: int, relerr: float):
+        self.h, self.relerr = int(h), float(relerr)
+        self.big = np.zeros(self.h * self.h)
+
+    def _filter(self, rows, cols, vals, update: bool):
+        key = (rows % self.h).astype(np.int64) * self.h + cols % self.h
+        mag = np.abs(vals)
+        if update:
+            np.maximum.at(self.big, key, mag)
+        sel = mag >= self.relerr * self.big[key]
+        return rows[sel], cols[sel], vals[sel]
+
+    def __call__(self, rows, cols, vals):
+        return self._filter(rows, cols, vals, True)
+
+    def final(self, parts: list) -> list:
+        """The parts (filtered by earlier calls) pruned against the whole stream's maxima."""
+        for k in range(len(parts)):
+            parts[k] = self._filter(*parts[k], False)
+        return parts
+
+
+#: Rows of the left factor per chunk in :func:`pruned_product`, as a fraction of all rows.
+PRODUCT_CHUNKS = 16
+
+
+def pruned_product(a, b, h: int, relerr: float) -> sps.csr_matrix:
+    """``prune_pairs(a @ b, h, relerr)`` without holding the unpruned product: it is formed
+    in :data:`PRODUCT_CHUNKS` chunks of rows of ``a``, each filtered by :class:`PairPruner`
+    as it comes (on Table 2 row 7 of seed 000 the product ``Rt2 Rb1`` had several times the
+    entries it keeps)."""
+    a, b = sps.csr_matrix(a), sps.csr_matrix(b)
+    keep = PairPruner(h, relerr)
+    step = max(1, -(-a.shape[0] // PRODUCT_CHUNKS))
+    parts = []
+    for start in range(0, a.shape[0], step):
+        part = sps.csr_matrix(a[start:start + step] @ b)
+        rows = np.repeat(np.arange(start, start + part.shape[0], dtype=np.int32),
+                         np.diff(part.indptr))
+        parts.append(keep(rows, part.indices, part.data))
+        del part, rows
+    return from_parts(keep.final(parts), (a.shape[0], b.shape[1]))
 
 
 def prune(mat, tolerance: float = DROP_TOLERANCE) -> sps.csr_matrix:

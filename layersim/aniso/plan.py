@@ -77,10 +77,16 @@ def interface_prepass(grid, layer, eta_above: float, ms: int, relerr: float = CO
 #: Measured fraction of the (d, s) coefficients of a pair's rectangle that survive pruning
 #: (Table 2 of seed 000: 0.41 for gold (0.05, 0.15), 0.55 for glass (0.3, 0.1)).
 FILL = 0.5
-#: Peak bytes of a solve per nonzero of its lowest anisotropic operator (its reflection is
-#: multiplied with the layers above in the adding equations) and per nonzero of the others,
-#: fitted on Table 2 of seed 000 (peak resident memory minus the interpreter's ~300 MiB).
-BYTES_LOWEST, BYTES_OTHER = 130, 45
+#: Peak bytes of a solve per (estimated) nonzero of its lowest anisotropic operator (its
+#: reflection is multiplied with the layers above in the adding equations, and the solution
+#: of the adding equations grows with it) and per nonzero of the others (held as 12-byte CSR
+#: entries while the stack is added, plus the products with them). Fitted on the peak resident
+#: memory above the baseline of an imported, warmed-up process (``benchmarks/table2.py``,
+#: ``benchmarks/memory_phases.py``) of Table 2 of seed 000 after the streaming assembly and
+#: pruning of the coupled path: measured 61-69 bytes per estimated nonzero of the lowest
+#: operator alone (rows 4, 5), ~17 per nonzero of the coating on top of it (row 7); the
+#: constants keep the estimate an upper bound with margin (ratios in benchmarks/table2.txt).
+BYTES_LOWEST, BYTES_OTHER = 80, 30
 
 
 def operator_entries(lengths: np.ndarray, md: int, ms: int) -> int:

@@ -42,11 +42,10 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sps
 
-from .. import fourier
+from .. import fourier, memory
 from ..aniso import basis, series
-from ..aniso.operator import AnisoOperator
+from ..aniso.operator import AnisoOperator, from_parts, reciprocal_image, slot_column_scale
 from ..kernels import projection as kproj
 from ..operator import Grid
 from ..scene import Conductor
@@ -81,8 +80,8 @@ K_KINK = 160
 #: Coarse samples used to bound the BSDF of a pair before projecting it.
 N_COARSE_D = 17
 #: Bound on (pairs x (phi_s samples + fit terms) x FFT length) per batch: the temporaries take
-#: ~8 bytes per element (~100 MiB).
-BATCH_ELEMENTS = 12_000_000
+#: ~8 bytes per element (~32 MiB per batch, one batch per thread).
+BATCH_ELEMENTS = 4_000_000
 
 
 @dataclass
@@ -362,7 +361,19 @@ def _truncate(F, md, stats, peak_len, relerr):
 
 def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: float, av: float,
                    dist: str, stats: AnisoProjectionStats, triangle: bool = False,
-                   relerr: float = RELERR):
+                   relerr: float = RELERR, convert=None) -> list:
+    """Project the pairs of block ``name`` (one triangle of them with ``triangle``).
+
+    Returns
+    -------
+    list
+        Chunks ``(o, i, F)``: node indices (P,) and ``F[p, d, ms + s] = f_{d,s}`` (P, md,
+        2 ms + 1), or ``convert(o, i, F)`` of each chunk, applied as soon as the chunk is
+        projected (the dense chunks of a block took several times the memory of its sparse
+        entries). Batches are projected :data:`layersim.threads.THREADS` at a time, so that
+        only those batches' dense temporaries are alive at once.
+    """
+    from ..threads import THREADS
     mu_i, mu_o, o, i = _block_pairs(grid, name, triangle)
     stats.pairs += mu_i.size
     fw = grid.flux_weight
@@ -403,7 +414,9 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
             return _project_pairs(mu_i[todo[sel]], mu_o[todo[sel]], eta, au, av, dist, ms, md,
                                   qs, geo, relerr)
 
-        for sel, (F, alias, dropped, tot, plen, nrefit) in zip(batches, _map(work, batches)):
+        for sel, (F, alias, dropped, tot, plen, nrefit) in (
+                (sel, res) for g in range(0, len(batches), THREADS)
+                for sel, res in zip(batches[g:g + THREADS], _map(work, batches[g:g + THREADS]))):
             stats.refit += nrefit
             ok = ~alias if qs < QS_MAX else np.ones(sel.size, bool)
             if (~ok).any():
@@ -417,7 +430,10 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
                 stats._num += float(np.sum(w * dropped[ok] ** 2 * tot[ok]))
                 stats._den += float(np.sum(w * tot[ok]))
                 Fk = _truncate(F[ok], md, stats, plen[ok], relerr)
-                chunks.append((o[pp], i[pp], Fk))
+                chunks.append((o[pp], i[pp], Fk) if convert is None else
+                              convert(o[pp], i[pp], Fk))
+                del Fk
+            del F
         todo = np.concatenate(redo) if redo else np.zeros(0, np.int64)
         qs *= 2
     if stats._den:
@@ -431,63 +447,41 @@ def _map(fn, items):
     return parallel_map(fn, items)
 
 
-def _mirror(chunks, scale: float = 1.0, skip_diagonal: bool = True):
-    """Chunks of the reciprocal block: ``f_{d,s}(i <- o) = f_{-d,s}(o <- i) = f_{d,-s}(o <- i)``
-    (real coefficients), times ``scale``."""
-    out = []
-    for o, i, F in chunks:
-        sel = o != i if skip_diagonal else slice(None)
-        out.append((i[sel], o[sel], F[sel][:, :, ::-1] * scale))
-    return out
-
-
-def _assemble(grid: Grid, md: int, ms: int, chunks) -> sps.csr_matrix:
-    """Real slot-basis matrix (S h, S h) of one block from chunks ``(o, i, F)`` with
-    ``F[p, d, ms + s] = f_{d,s}`` for ``d >= 0`` (real; ``f_{-d,s} = f_{d,-s}``):
-    ``B_{l,k}[o, i] = 2 pi f_{d,s} w_i mu_i`` with ``l = d + s``, ``k = d - s``."""
+def _entries(grid: Grid, md: int, ms: int, o, i, F):
+    """Real slot-basis entries ``(rows, cols, values)`` (32-bit indices, duplicates to be
+    summed) of one chunk ``(o, i, F)`` with ``F[p, d, ms + s] = f_{d,s}`` for ``d >= 0`` (real;
+    ``f_{-d,s} = f_{d,-s}``): ``B_{l,k}[o, i] = 2 pi f_{d,s} w_i mu_i`` with ``l = d + s``,
+    ``k = d - s``."""
     h = grid.h
-    N = basis.n_slots(md) * h
     fw = grid.flux_weight
     s = np.arange(-ms, ms + 1)
-
-    def entries(chunk):
-        o, i, F = chunk
-        rows, cols, vals = [], [], []
-        K = F.shape[1]
-        for sign in (1, -1):
-            if sign > 0:
-                d, G = np.arange(K), F
-            else:
-                d, G = -np.arange(1, K), F[:, 1:, ::-1]      # f_{-d,s} = f_{d,-s}
-            l = d[:, None] + s[None, :]
-            k = d[:, None] - s[None, :]
-            ok = (np.abs(l) < md) & (np.abs(k) < md) & ((l > 0) | ((l == 0) & (k >= 0)))
-            dd, ss = np.nonzero(ok)
-            if not dd.size:
-                continue
-            vp = G[:, dd, ss]                                   # (P, E)
-            pp, ee = np.nonzero(vp)
-            if not pp.size:
-                continue
-            b = vp[pp, ee] * (2.0 * np.pi) * fw[i[pp]]
-            rs, cs, v, src = basis.real_entries_real(l[dd[ee], ss[ee]], k[dd[ee], ss[ee]], b)
-            nz = v != 0.0
-            rows.append(rs[nz] * h + o[pp[src[nz]]])
-            cols.append(cs[nz] * h + i[pp[src[nz]]])
-            vals.append(v[nz])
-        return rows, cols, vals
-
     rows, cols, vals = [], [], []
-    for r, c, v in _map(entries, chunks):
-        rows += r
-        cols += c
-        vals += v
+    K = F.shape[1]
+    for sign in (1, -1):
+        if sign > 0:
+            d, G = np.arange(K), F
+        else:
+            d, G = -np.arange(1, K), F[:, 1:, ::-1]      # f_{-d,s} = f_{d,-s}
+        l = d[:, None] + s[None, :]
+        k = d[:, None] - s[None, :]
+        ok = (np.abs(l) < md) & (np.abs(k) < md) & ((l > 0) | ((l == 0) & (k >= 0)))
+        dd, ss = np.nonzero(ok)
+        if not dd.size:
+            continue
+        vp = G[:, dd, ss]                                   # (P, E)
+        pp, ee = np.nonzero(vp)
+        if not pp.size:
+            continue
+        b = vp[pp, ee] * (2.0 * np.pi) * fw[i[pp]]
+        del vp
+        rs, cs, v, src = basis.real_entries_real(l[dd[ee], ss[ee]], k[dd[ee], ss[ee]], b)
+        nz = v != 0.0
+        rows.append((rs[nz] * h + o[pp[src[nz]]]).astype(np.int32))
+        cols.append((cs[nz] * h + i[pp[src[nz]]]).astype(np.int32))
+        vals.append(v[nz])
     if not rows:
-        return sps.csr_matrix((N, N))
-    mat = sps.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                         shape=(N, N))
-    mat.sum_duplicates()
-    return mat
+        return np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0)
+    return np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
 
 
 def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: float,
@@ -525,21 +519,28 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
     au, av, dist = layer.alpha_u, layer.alpha_v, layer.distribution
     opaque = isinstance(layer, Conductor)
     names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
-    chunks = {}
+    N = basis.n_slots(md) * grid.h
+    col_scale = slot_column_scale(grid, md)
+
+    def project(name, triangle=False):
+        """The block's matrix from its (triangle of) pairs, assembled batch by batch."""
+        parts = _project_block(grid, name, md, ms, eta, au, av, dist, stats, triangle=triangle,
+                               relerr=relerr, convert=lambda o, i, F: _entries(grid, md, ms,
+                                                                               o, i, F))
+        return from_parts(parts, (N, N))
+
+    blocks = {}
     for name in names:
-        if not reciprocity:
-            chunks[name] = _project_block(grid, name, md, ms, eta, au, av, dist, stats,
-                                          relerr=relerr)
-        elif name == "Tbt":
-            chunks[name] = _mirror(chunks["Ttb"], 1.0 / eta.real ** 2, skip_diagonal=False)
-        elif name == "Ttb":
-            chunks[name] = _project_block(grid, name, md, ms, eta, au, av, dist, stats,
-                                          relerr=relerr)
-        else:
-            half = _project_block(grid, name, md, ms, eta, au, av, dist, stats, triangle=True,
-                                  relerr=relerr)
-            chunks[name] = half + _mirror(half)
-    blocks = {name: _assemble(grid, md, ms, chunks[name]) for name in names}
+        if not reciprocity or name == "Ttb":
+            blocks[name] = project(name)
+        elif name == "Tbt":     # generalized reciprocity: Tbt = D Ttb^T D^-1 / eta^2
+            blocks[name] = reciprocal_image(blocks["Ttb"], grid.h, col_scale,
+                                            1.0 / eta.real ** 2)
+        else:                   # one triangle of pairs and its reciprocal image
+            half = project(name, triangle=True)
+            blocks[name] = half + reciprocal_image(half, grid.h, col_scale, skip_diagonal=True)
+            del half
+        memory.release()
     op = AnisoOperator(grid, md, blocks, eta_top=eta_above,
                        eta_bottom=None if opaque else layer.ior.real, ms=ms)
     op = op.rotated(layer.rotation)
