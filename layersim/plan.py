@@ -53,6 +53,11 @@ THETA_FULL = 80.0
 MD_LOWER_PER_INV_ALPHA = 10.0
 #: Relative truncation of the Fourier series (same as the projection's).
 SERIES_RELERR = 1e-7
+#: Peak bytes of projecting an isotropic interface, per (order x h x h) entry: series of every
+#: block's pairs (~16) plus the dense per-block assembly and its temporaries (~24). Measured
+#: (benchmarks/memory_phases.py, Table 2 rows 1-3: 204 / 118 / 117 MiB above the baseline) the
+#: estimate is then 1.2-1.4x the peak; without this term it was 0.4-0.55x.
+PROJECTION_BYTES = 40
 DEFAULT_RULE = "gauss-lobatto"
 
 
@@ -330,6 +335,10 @@ def make_plan(scene: Scene) -> Plan:
     # the stack itself (assume as dense as the densest ingredient, at most dense) plus adding
     # temporaries: per order per thread ~12 dense h x h arrays
     stored_bytes = int(12 * min(stored * 2, 4 * md * h * h)) + 12 * 8 * h * h * 8
+    if not anisotropic:
+        # projecting an interface holds every block's per-pair series and then, per block, the
+        # dense scatter of layersim.operator._orders_to_csr with its temporaries
+        stored_bytes += PROJECTION_BYTES * md * h * h
     if anisotropic:  # --- coupled modes (layersim.aniso.plan) ---
         entries = [aplan.operator_entries(lengths, md, lp.ms) for lp, lengths in prepass
                    if lp.ms]
