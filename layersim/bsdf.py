@@ -139,6 +139,31 @@ def hat_weights(nodes: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return idx, w
 
 
+def side_energies(mu: np.ndarray, nodes: np.ndarray, energy) -> tuple[np.ndarray, np.ndarray]:
+    """Energy fractions ``(R, T)`` of beams arriving at signed elevation cosines ``mu`` (Q,),
+    interpolated linearly (:func:`hat_weights`) between the ordinates ``nodes`` (h,).
+
+    ``energy(name, q)`` gives, for the queries ``q`` (indices into ``mu``), the fraction of a
+    beam from each node that leaves through block ``name``: shape (h,) (the same for every
+    query, isotropic stacks) or (len(q), h) (azimuth-dependent, anisotropic stacks), or None
+    for a block left out. Beams from above use Rt / Ttb, from below Rb / Tbt.
+    """
+    idx, w = hat_weights(nodes, np.abs(mu))
+    R = np.zeros(mu.size)
+    T = np.zeros(mu.size)
+    top = mu > 0
+    for sel, rname, tname in ((top, "Rt", "Ttb"), (~top, "Rb", "Tbt")):
+        q = np.flatnonzero(sel)
+        if q.size == 0:
+            continue
+        for out, name in ((R, rname), (T, tname)):
+            e = energy(name, q)
+            if e is not None:
+                e = np.broadcast_to(e, (q.size, nodes.size))
+                out[q] = np.sum(w[q] * np.take_along_axis(e, idx[q], axis=1), axis=1)
+    return R, T
+
+
 # ---------------------------------------------------------------------------------------------
 # Direction handling
 # ---------------------------------------------------------------------------------------------
@@ -359,16 +384,7 @@ class BSDF:
                 x.reshape(shape) for x in aniso_bsdf.albedo_channel(self, c, wi.reshape(-1, 3))))
 
         def one(c):
-            idx, w = hat_weights(self.grid.mu, np.abs(mu))
-            R = np.zeros(mu.size)
-            T = np.zeros(mu.size)
-            top = mu > 0
-            for sel, rname, tname in ((top, "Rt", "Ttb"), (~top, "Rb", "Tbt")):
-                if not sel.any():
-                    continue
-                R[sel] = np.sum(w[sel] * self._node_energy(c, rname)[idx[sel]], axis=1)
-                if not self.opaque:
-                    T[sel] = np.sum(w[sel] * self._node_energy(c, tname)[idx[sel]], axis=1)
+            R, T = side_energies(mu, self.grid.mu, lambda name, q: self._node_energy(c, name))
             return R.reshape(shape), T.reshape(shape)
 
         return self._per_channel(one)

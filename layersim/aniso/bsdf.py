@@ -158,25 +158,11 @@ def node_energy(op, name: str, phi_in: np.ndarray) -> np.ndarray:
 
 def albedo_channel(bsdf, c: int, wi: np.ndarray):
     """(R, T) for flattened incident directions (Q, 3)."""
-    from ..bsdf import hat_weights
+    from ..bsdf import side_energies
     op = bsdf.operators[c]
-    mu = wi[:, 2]
     phi_in = np.arctan2(-wi[:, 1], -wi[:, 0])
-    idx, w = hat_weights(op.grid.mu, np.abs(mu))
-    R = np.zeros(mu.size)
-    T = np.zeros(mu.size)
-    top = mu > 0
-    for sel, rname, tname in ((top, "Rt", "Ttb"), (~top, "Rb", "Tbt")):
-        if not sel.any():
-            continue
-        q = np.flatnonzero(sel)
-        if op.blocks[rname] is not None:
-            e = node_energy(op, rname, phi_in[q])
-            R[q] = np.sum(w[q] * np.take_along_axis(e, idx[q], axis=1), axis=1)
-        if op.blocks[tname] is not None:
-            e = node_energy(op, tname, phi_in[q])
-            T[q] = np.sum(w[q] * np.take_along_axis(e, idx[q], axis=1), axis=1)
-    return R, T
+    return side_energies(wi[:, 2], op.grid.mu, lambda name, q: None if op.blocks[name] is None
+                         else node_energy(op, name, phi_in[q]))
 
 
 def bins_channel(bsdf, c: int, wi: np.ndarray, mu_edges: np.ndarray,

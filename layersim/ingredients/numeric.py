@@ -48,14 +48,21 @@ GPU_BATCH = 1 << 20
 DEVICE_DENSE_MAX = 1 << 28
 
 
+def _half_period_needed(q0, qpi, dist: str, m: int, min_samples: int):
+    """Series length of each pair (peak factor at :data:`ALIAS_RELERR` plus the smooth factor's
+    orders) and the smallest half period ``M`` (samples of [0, pi] minus one) whose trapezoidal
+    rule keeps the first ``m + EXTRA_ORDERS`` orders clean of aliasing; callers round ``M`` up
+    (FFT-friendly on the host, powers of two on the device)."""
+    length = fourier.peak_length(q0, qpi, dist, ALIAS_RELERR) + microfacet.L_FIT
+    return length, np.maximum(min_samples, m + EXTRA_ORDERS + length + 1) // 2 + 1
+
+
 def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, device,
                    max_samples, min_samples=16):
-    length = fourier.peak_length(q0, qpi, dist, ALIAS_RELERR) + microfacet.L_FIT
-    need = m + EXTRA_ORDERS + length
+    length, half = _half_period_needed(q0, qpi, dist, m, min_samples)
     # even sample counts whose half (the DCT length) is FFT-friendly, not powers of two: less
     # oversampling for the same aliasing bound
-    N = 2 * np.array([scipy.fft.next_fast_len(int(x)) for x in
-                      np.maximum(min_samples, need + 1) // 2 + 1])
+    N = 2 * np.array([scipy.fft.next_fast_len(int(x)) for x in half])
     aliased = N > max_samples
     if aliased.any():
         # too peaked to sample (near-specular lobes at grazing ordinates: ~1 / (alpha mu)
@@ -138,8 +145,7 @@ def _device_block(grid: Grid, name: str, triangle: bool, m: int, eta: complex, a
     stats.pairs += mu_i.size
     stats.projected += keep.size
     t0 = time.perf_counter()
-    length = fourier.peak_length(q0[keep], qpi[keep], dist, ALIAS_RELERR) + microfacet.L_FIT
-    need = np.maximum(min_samples, m + EXTRA_ORDERS + length + 1) // 2 + 1
+    length, need = _half_period_needed(q0[keep], qpi[keep], dist, m, min_samples)
     # power-of-two half periods: one cosine table serves every pair (the host path's
     # FFT-friendly lengths would need a table per length)
     half = 1 << np.ceil(np.log2(need)).astype(np.int64)
