@@ -274,6 +274,53 @@ def test_coupled_stack_never_creates_energy_and_is_reciprocal(coupled_layers):
     assert energy_weighted_error(aniso_adding.add(clear, slab), slab) < 1e-13
 
 
+def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(coupled_layers):
+    """``consume`` only changes when blocks are released: same result, with and without the
+    per-pair truncation of the solver, transmissive and opaque bottoms; consumed operands
+    refuse to be used again."""
+    from layersim.errors import OperatorError
+    d, hg, c, glass_out = coupled_layers
+    copy = lambda op: AnisoOperator(op.grid, op.md, {k: None if m is None else m.copy()
+                                                     for k, m in op.blocks.items()},
+                                    op.eta_top, op.eta_bottom, op.delta)
+    for bottom in (c, aniso_adding.add(hg, glass_out)):
+        for kw in ({}, {"relerr": 1e-7, "relerr_intermediate": 1e-6}):
+            ref = aniso_adding.add(d, bottom, **kw)
+            top_c, bottom_c = copy(d), copy(bottom)
+            got = aniso_adding.add(top_c, bottom_c, consume="both", **kw)
+            for name, mat in ref.blocks.items():
+                assert (mat is None) == (got.blocks[name] is None)
+                if mat is not None:
+                    assert abs(mat - got.blocks[name]).max() <= 1e-15 * abs(mat).max()
+            with pytest.raises(OperatorError, match="consumed"):
+                top_c.block("Rt")
+            with pytest.raises(OperatorError, match="consumed"):
+                bottom_c.block("Rt")
+    assert d.block("Rt").nnz                  # operands not named in consume are untouched
+    with pytest.raises(ValueError, match="consume"):
+        aniso_adding.add(d, c, consume="yes")
+
+
+def test_pruned_product_is_the_pair_pruned_product():
+    """The chunked product (CSR pieces, filtered as they come, then stacked) keeps exactly the
+    entries of prune_pairs of the whole product."""
+    from layersim.aniso.operator import PRODUCT_CHUNKS, prune_pairs, pruned_product
+    rng = np.random.default_rng(3)
+    for n, m, density in ((5 * PRODUCT_CHUNKS + 3, 250, 0.05), (97, 113, 0.2), (40, 30, 0.0)):
+        a = sps.random(n, m, density, random_state=rng, format="csr")
+        b = sps.random(m, n + 7, density, random_state=rng, format="csr")
+        a.data -= 0.5
+        b.data *= np.exp(rng.normal(0.0, 4.0, b.nnz))     # magnitudes over many decades
+        for h, relerr in ((5, 1e-6), (7, 0.3)):
+            got, ref = pruned_product(a, b, h, relerr), prune_pairs(a @ b, h, relerr)
+            assert got.shape == ref.shape and got.nnz == ref.nnz
+            assert np.array_equal(got.indptr, ref.indptr)
+            assert np.array_equal(got.indices, ref.indices)
+            assert np.array_equal(got.data, ref.data)
+            if density:
+                assert 0 < ref.nnz < (a @ b).nnz
+
+
 def test_block_lu_solver_matches_sparse_lu_on_a_banded_system():
     h, md = 6, 9
     N = basis.n_slots(md) * h

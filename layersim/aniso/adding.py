@@ -35,12 +35,13 @@ from ..operator import DROP_TOLERANCE
 from . import basis
 from .banded import PRUNE, BlockBandedLU
 from .operator import (AnisoOperator, PairPruner, as_aniso, from_parts, prune,
-                       pruned_product, slot_pairs)
+                       pruned_product, reciprocal_prune, slot_pairs)
 
 #: Relative residual above which a block-LU solve is redone with sparse LU, checked on up to
-#: RESIDUAL_COLUMNS columns.
+#: RESIDUAL_COLUMNS columns, RESIDUAL_CHUNK at a time.
 RESIDUAL_CHECK = 1e-9
 RESIDUAL_COLUMNS = 256
+RESIDUAL_CHUNK = 32
 
 
 def _memory_limit() -> int:
@@ -49,7 +50,8 @@ def _memory_limit() -> int:
 
 
 def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
-                 identity_minus: bool = False, relerr: float | None = None) -> sps.csr_matrix:
+                 identity_minus: bool = False, relerr: float | None = None,
+                 release: bool = False) -> sps.csr_matrix:
     """``Y = A^-1 B`` for a coupled-mode matrix ``A`` (slot basis) and sparse ``B``.
 
     Parameters
@@ -67,6 +69,11 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         (the result of :func:`~layersim.aniso.operator.prune_pairs`), applied while the groups
         of right-hand sides are solved (:class:`~layersim.aniso.operator.PairPruner`), so that
         the unpruned solution is never held.
+    release : bool
+        The caller does not use ``A`` and ``B`` afterwards: their arrays are released (the
+        matrices left empty) as soon as the solve no longer needs them, ``B`` once it is
+        reordered, ``A`` once the block factorisation has passed its residual check. On
+        Table 2 row 6 of seed 000 they are 370 MiB of the substitution's peak.
 
     Raises
     ------
@@ -75,7 +82,7 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
     """
     M = sps.csr_matrix(A)
     M.eliminate_zeros()
-    B = sps.csr_matrix(B)
+    B_in, B = B, sps.csr_matrix(B)
     N = M.shape[0]
     sign = -1.0 if identity_minus else 1.0
     counts = np.diff(M.indptr)
@@ -89,11 +96,6 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
     if active.size == 0:
         return B
     rest = np.flatnonzero(ident)
-    # y_rest = b_rest: move those columns to the right-hand side
-    B_a = B[active]
-    if rest.size:
-        B_rest = sps.diags(ident.astype(float)) @ B
-        B_a = B_a - sign * (M[active] @ B_rest)
     # Order the active unknowns by (component, Fourier order): components (parity, and cosine
     # vs sine for mirror-symmetric stacks) never couple, so the matrix is block banded in this
     # order with the bandwidth of its widest component, and one factorisation serves them all.
@@ -125,8 +127,15 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
             "[discretization], or n, or make the anisotropy milder")
     ordered = active[order]                                      # unknown at each position
     rows = _block_rows(M, ordered, pos, starts, bw, sign, identity_minus)
-    Bo = B_a[order].tocsc()
-    del B_a
+    Bo = B[ordered]
+    if rest.size:
+        # y_rest = b_rest: move those columns to the right-hand side
+        Bo = Bo - sign * (M[ordered] @ (sps.diags(ident.astype(float)) @ B))
+    Bo = Bo.tocsc()
+    Brest, shape = B[rest].tocoo(), B.shape    # the eliminated unknowns: y = b
+    if release:
+        _release(B_in, B)
+    del B, B_in
     parts = None
     keep = (lambda *part: part) if relerr is None else PairPruner(h, relerr)
     try:
@@ -137,11 +146,10 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         cols = np.flatnonzero(np.diff(Bo.indptr))
         sample = cols if cols.size <= RESIDUAL_COLUMNS else \
             np.random.default_rng(0).choice(cols, RESIDUAL_COLUMNS, replace=False)
-        Bs = Bo[:, sample]
-        Ys = from_parts(_solve_groups(lu, Bs, starts, blk_pos, ordered), (N, sample.size))
-        Ms = (M @ Ys)[ordered]
-        resid = Bs - (Ys[ordered] - Ms if identity_minus else Ms)
-        if not (resid.nnz and abs(resid).max() > RESIDUAL_CHECK * max(abs(Bs).max(), 1e-300)):
+        if _residual(lu, M, Bo, sample, starts, blk_pos, ordered, identity_minus) \
+                <= RESIDUAL_CHECK:
+            if release:
+                _release(A, M)
             parts = _solve_groups(lu, Bo, starts, blk_pos, ordered, keep)
         del lu
     except np.linalg.LinAlgError:
@@ -152,11 +160,39 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         Y = _sparse_lu_solve(Ao, Bo).tocoo()
         parts = [(ordered[Y.row], Y.col, Y.data)]
         del Y
-    # the eliminated unknowns (y = b), then one CSR matrix in the unknowns' numbering
-    Brest = B[rest].tocoo()
+    # the eliminated unknowns, then one CSR matrix in the unknowns' numbering
     parts.append(keep(rest[Brest.row], Brest.col, Brest.data))
     del Brest, Bo
-    return from_parts(parts if relerr is None else keep.final(parts), B.shape)
+    return from_parts(parts if relerr is None else keep.final(parts), shape)
+
+
+def _residual(lu, M, Bo, sample, starts, blk_pos, ordered, identity_minus) -> float:
+    """Largest residual of the block-LU solution of the columns ``sample`` of ``Bo`` (block
+    order), relative to their largest entry, solved :data:`RESIDUAL_CHUNK` columns at a time:
+    the unpruned solution of a column holds all the coupled unknowns (256 columns of Table 2
+    row 6 of seed 000 took 400 MiB at once)."""
+    N = M.shape[0]
+    worst, scale = 0.0, 1e-300
+    for at in range(0, sample.size, RESIDUAL_CHUNK):
+        Bs = Bo[:, sample[at:at + RESIDUAL_CHUNK]]
+        Ys = from_parts(_solve_groups(lu, Bs, starts, blk_pos, ordered), (N, Bs.shape[1]))
+        Ms = (M @ Ys)[ordered]
+        resid = Bs - (Ys[ordered] - Ms if identity_minus else Ms)
+        scale = max(scale, abs(Bs).max())
+        if resid.nnz:
+            big = abs(resid).max()
+            worst = max(worst, big) if np.isfinite(big) else np.inf
+    return worst / scale
+
+
+def _release(*mats) -> None:
+    """Empty CSR / CSC matrices in place (shape kept), releasing their arrays for callers
+    that handed them over (``banded_solve(..., release=True)``)."""
+    for mat in mats:
+        if sps.issparse(mat) and mat.format in ("csr", "csc"):
+            mat.data = np.zeros(0, mat.data.dtype)
+            mat.indices = np.zeros(0, mat.indices.dtype)
+            mat.indptr = np.zeros_like(mat.indptr)
 
 
 def _block_rows(M, ordered, pos, starts, bw, sign, identity_minus):
@@ -208,14 +244,13 @@ def _solve_groups(lu, Bc, starts, blk_pos, ordered, keep=None) -> list:
     rb = blk_pos[Bc.indices]
     first = np.minimum.reduceat(rb, Bc.indptr[cols])
     last = np.maximum.reduceat(rb, Bc.indptr[cols])
-    Bcsr = Bc.tocsr()
     unknown = ordered.astype(np.int32)
 
     def group(g):
         sel = first == g
         gcols = cols[sel].astype(np.int32)
         lo, hi = int(g), int(last[sel].max()) + 1
-        dense = Bcsr[starts[lo]:starts[hi]][:, gcols].toarray()
+        dense = Bc[:, gcols][starts[lo]:starts[hi]].toarray()
         rhs = {j: dense[starts[j] - starts[lo]:starts[j + 1] - starts[lo]] for j in range(lo, hi)}
         scale = np.abs(dense).max()
         del dense
@@ -252,7 +287,7 @@ def _sparse_lu_solve(Ac, Bc):
 
 
 def add(top, bottom, relerr: float | None = None,
-        relerr_intermediate: float | None = None) -> AnisoOperator:
+        relerr_intermediate: float | None = None, consume: str | None = None) -> AnisoOperator:
     """Operator of ``top`` stacked on ``bottom`` (coupled modes).
 
     Parameters
@@ -262,7 +297,10 @@ def add(top, bottom, relerr: float | None = None,
         ``md = max(top.md, bottom.md)``.
     relerr : float, optional
         Also drop coefficients of the result below ``relerr`` times the largest of their
-        ordinate pair, making it exactly reciprocal (:meth:`AnisoOperator.pruned`).
+        ordinate pair, making it exactly reciprocal (:meth:`AnisoOperator.pruned`); the
+        products with the solution are pruned per pair at ``relerr / 10`` as they are
+        computed (:func:`~layersim.aniso.operator.pruned_product`), so that they are never
+        held unpruned.
     relerr_intermediate : float, optional
         The same for the products ``K``, ``Rt2 Ttb1`` and the solution ``Z``
         (:func:`~layersim.aniso.operator.prune_pairs`): ``Z`` keeps entries down to
@@ -273,49 +311,81 @@ def add(top, bottom, relerr: float | None = None,
         By default only entries below :data:`~layersim.operator.DROP_TOLERANCE` of their
         block's largest are dropped; :func:`layersim.solve` passes
         :data:`layersim.aniso.plan.STACK_RELERR` and ``STACK_RELERR_INTERMEDIATE``.
+    consume : {None, "top", "bottom", "both"}
+        Operands that the caller will not use again and whose blocks it holds no other
+        reference to: they are emptied (:meth:`AnisoOperator.consume`) and each of their
+        blocks is released as soon as the equations no longer need it (below an opaque base,
+        all but ``Rt1`` and ``Tbt1`` before the solve; on Table 2 row 6 of seed 000 that is
+        460 of the operands' 710 MiB). :func:`layersim.solve` passes it for operators that
+        no later channel reuses.
 
     Returns
     -------
     AnisoOperator
     """
     md = max(top.m, bottom.m)
-    top, bottom = as_aniso(top, md), as_aniso(bottom, md)
-    _check_pair(top, bottom)
-    N = top.size
-    h = top.h
-    opaque = bottom.opaque
-    Rt1, Rb1, Ttb1, Tbt1 = (top.block(k) for k in ("Rt", "Rb", "Ttb", "Tbt"))
-    Rt2 = bottom.block("Rt")
+    top_a, bottom_a = as_aniso(top, md), as_aniso(bottom, md)
+    _check_pair(top_a, bottom_a)
+    N = top_a.size
+    h = top_a.h
+    grid, eta_top, eta_bottom = top_a.grid, top_a.eta_top, bottom_a.eta_bottom
+    opaque = bottom_a.opaque
+    delta = {}
+    if not opaque:
+        for name in ("Ttb", "Tbt"):
+            if name in top_a.delta and name in bottom_a.delta:
+                delta[name] = top_a.delta[name] * bottom_a.delta[name]
+    one, two = dict(top_a.blocks), dict(bottom_a.blocks)   # this call's references
+    if consume not in (None, "top", "bottom", "both"):
+        raise ValueError(f"consume must be None, 'top', 'bottom' or 'both', not {consume!r}")
+    for side, ops in (("top", (top, top_a)), ("bottom", (bottom, bottom_a))):
+        if consume in (side, "both"):
+            for op in ops:
+                if isinstance(op, AnisoOperator):
+                    op.consume()
+    del top, bottom, top_a, bottom_a
     if relerr_intermediate is None:
         product = lambda a, b: prune(a @ b, 1e-16)
     else:
         product = lambda a, b: pruned_product(a, b, h, relerr_intermediate)
-    K = product(Rt2, Rb1)
-    first = product(Rt2, Ttb1)
+    # below an opaque base only Rt = Rt1 + Tbt1 Z1 is formed after the solve: Ttb1, then
+    # Rt2 and Rb1 are released as soon as their products are formed
+    first = product(two["Rt"], one["Ttb"] if not opaque else one.pop("Ttb"))
+    K = product(two.pop("Rt"), one["Rb"] if not opaque else one.pop("Rb"))
     if opaque:
         rhs = first
     else:
-        Rb2, Ttb2, Tbt2 = (bottom.block(k) for k in ("Rb", "Ttb", "Tbt"))
-        rhs = sps.hstack([first, Tbt2], format="csr")
-    Z = banded_solve(K, rhs, h, md, identity_minus=True, relerr=relerr_intermediate)
-    del K, rhs, first       # the largest temporaries: free them before the products below
+        rhs = sps.hstack([first, two["Tbt"]], format="csr")
+        del two["Tbt"]
+    del first
     memory.release()
-    Z1 = Z[:, :N]
-    out = {"Rt": Rt1 + Tbt1 @ Z1}
+    Z = banded_solve(K, rhs, h, md, identity_minus=True, relerr=relerr_intermediate,
+                     release=True)
+    del K, rhs              # emptied by the solve as soon as it no longer needed them
+    memory.release()
+    if relerr is None:
+        output = lambda a, b: a @ b
+    else:
+        output = lambda a, b: pruned_product(a, b, h, 0.1 * relerr)
+    Z1 = Z if opaque else Z[:, :N]
+    Tbt1 = one.pop("Tbt")
+    blocks = {"Rt": prune(one.pop("Rt") + output(Tbt1, Z1), DROP_TOLERANCE)}
     if not opaque:
         Z2 = Z[:, N:]
+        del Z
+        Rb1, Ttb1, Ttb2, Rb2 = one.pop("Rb"), one.pop("Ttb"), two.pop("Ttb"), two.pop("Rb")
         W = Ttb2 @ Rb1
-        out["Tbt"] = Tbt1 @ Z2
-        out["Ttb"] = Ttb2 @ Ttb1 + W @ Z1
-        out["Rb"] = Rb2 + W @ Z2
-    blocks = {k: prune(v, DROP_TOLERANCE) for k, v in out.items()}
-    del out, Z, Z1
+        del Rb1
+        blocks["Tbt"] = prune(output(Tbt1, Z2), DROP_TOLERANCE)
+        blocks["Ttb"] = prune(Ttb2 @ Ttb1 + output(W, Z1), DROP_TOLERANCE)
+        del Ttb1, Ttb2, Z1
+        blocks["Rb"] = prune(Rb2 + output(W, Z2), DROP_TOLERANCE)
+        del W, Z2, Rb2
+    else:
+        del Z, Z1
+    del Tbt1
     memory.release()
-    delta = {}
-    if not opaque:
-        for name in ("Ttb", "Tbt"):
-            if name in top.delta and name in bottom.delta:
-                delta[name] = top.delta[name] * bottom.delta[name]
-    out = AnisoOperator(top.grid, md, blocks, top.eta_top,
-                        None if opaque else bottom.eta_bottom, delta)
-    return out if relerr is None else out.pruned(relerr)
+    if relerr is not None:
+        reciprocal_prune(blocks, grid, md, eta_top, eta_bottom, delta, relerr)
+        memory.release()
+    return AnisoOperator(grid, md, blocks, eta_top, None if opaque else eta_bottom, delta)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sps
 
+from .. import memory
 from ..errors import FileFormatError, OperatorError
 from ..operator import (BLOCKS, DROP_TOLERANCE, Grid, IsoOperator, header_arrays,
                         read_blocks, read_delta, write_blocks)
@@ -103,6 +104,9 @@ class AnisoOperator:
         return worst
 
     def block(self, name: str) -> sps.csr_matrix:
+        if getattr(self, "_consumed", False):
+            raise OperatorError("this operator was consumed by an adding step (consume=True) "
+                                "and no longer holds its blocks")
         mat = self.blocks[name]
         if mat is None:
             raise OperatorError(f"block {name} was left out of this operator (opaque)")
@@ -212,70 +216,19 @@ class AnisoOperator:
 
     def pruned(self, relerr: float) -> "AnisoOperator":
         """This operator made exactly reciprocal and without the coefficients below ``relerr``
-        times the largest of their ordinate pair (the truncation that the coupled projection
-        applies to each pair, see :data:`layersim.aniso.plan.COUPLED_RELERR`).
-
-        In ``S = G D / eta^2`` (``G`` the coefficients, ``D`` the slot scale of
-        :func:`reciprocity_error`, ``eta`` the index of the side light leaves to) reciprocity
-        reads ``S_Rt = S_Rt^T``, ``S_Rb = S_Rb^T``, ``S_Ttb^T = S_Tbt``. An operator computed
-        from truncated intermediates (:func:`layersim.aniso.adding.add` with ``relerr``) obeys
-        it to about the truncation only; replacing ``S`` by the mean of ``S`` and its mirror
-        image restores it exactly and, the exact operator being reciprocal, does not increase
-        the error. Magnitudes are then compared on ``S``: an entry and its reciprocal are
-        compared with the same pair maximum (over the pair and its mirror), so both are kept
-        or both dropped. The unscattered beam on the diagonal of the transmission blocks is
-        always kept and does not count in the maximum.
-        """
-        h = self.h
-        col_scale = slot_column_scale(self.grid, self.md)            # B -> G D (no 2 pi)
-        mirror = lambda m: reciprocal_image(m, h, col_scale)          # B of S^T
+        times the largest of their ordinate pair (:func:`reciprocal_prune`)."""
         blocks = dict(self.blocks)
-
-        def mean(a, b):
-            out = a + b
-            out.data *= 0.5
-            return out
-
-        for name in ("Rt", "Rb"):
-            if blocks.get(name) is not None:
-                blocks[name] = mean(blocks[name], mirror(blocks[name]))
-        if blocks.get("Ttb") is not None:
-            ratio = (self.eta_bottom / self.eta_top) ** 2
-            blocks["Ttb"] = mean(blocks["Ttb"], reciprocal_image(blocks["Tbt"], h, col_scale,
-                                                                 ratio))
-            blocks["Tbt"] = reciprocal_image(blocks["Ttb"], h, col_scale, 1.0 / ratio)
-        # reflection blocks are symmetric on their own; Ttb / eta_b^2 mirrors Tbt / eta_t^2;
-        # per-entry quantities are formed in chunks of rows (the blocks of a coupled stack
-        # have millions of entries)
-        eta = {"Rt": 1.0, "Rb": 1.0, "Ttb": self.eta_bottom, "Tbt": self.eta_top}
-        for first, second in (("Rt", None), ("Rb", None), ("Ttb", "Tbt")):
-            parts = [(name, flip, blocks[name]) for name, flip in ((first, False), (second, True))
-                     if name is not None and blocks.get(name) is not None]
-
-            def keyed(name, flip, mat, lo, hi, rows, one=second is None):
-                cols = mat.indices[lo:hi]
-                o, i = rows % h, cols % h
-                if one:                     # one symmetric block: unordered pairs
-                    o, i = np.minimum(o, i), np.maximum(o, i)
-                elif flip:                  # Tbt[y, x] pairs with Ttb[x, y]
-                    o, i = i, o
-                mag = np.abs(mat.data[lo:hi]) * col_scale[cols] / eta[name] ** 2
-                beam = (rows == cols) if name in self.delta else np.zeros(hi - lo, bool)
-                return o.astype(np.int64) * h + i, mag, beam
-
-            big = np.zeros(h * h)
-            for name, flip, mat in parts:
-                for lo, hi, rows in _row_chunks(mat):
-                    key, mag, beam = keyed(name, flip, mat, lo, hi, rows)
-                    np.maximum.at(big, key[~beam], mag[~beam])
-            for name, flip, mat in parts:
-                keep = np.empty(mat.nnz, bool)
-                for lo, hi, rows in _row_chunks(mat):
-                    key, mag, beam = keyed(name, flip, mat, lo, hi, rows)
-                    keep[lo:hi] = beam | (mag >= relerr * big[key])
-                blocks[name] = _select(mat, keep)
+        reciprocal_prune(blocks, self.grid, self.md, self.eta_top, self.eta_bottom,
+                         self.delta, relerr)
         return AnisoOperator(self.grid, self.md, blocks, self.eta_top, self.eta_bottom,
                              self.delta)
+
+    def consume(self) -> None:
+        """Give up this operator's blocks (for callers that hand an operator over and free its
+        memory as it is used, :func:`layersim.aniso.adding.add` with ``consume=True``): any
+        later use of it raises."""
+        self.blocks = dict.fromkeys(self.blocks)
+        self._consumed = True
 
     # ---- coefficients ------------------------------------------------------------------
 
@@ -336,6 +289,76 @@ def slot_column_scale(grid: Grid, md: int) -> np.ndarray:
     :func:`reciprocity_error`), in which reciprocity is a transpose."""
     return np.repeat(basis.slot_scale(md), grid.h) / np.tile(grid.flux_weight,
                                                               basis.n_slots(md))
+
+
+def reciprocal_prune(blocks: dict, grid: Grid, md: int, eta_top: float,
+                     eta_bottom: float | None, delta: dict, relerr: float) -> None:
+    """Make the blocks of an operator exactly reciprocal and drop the coefficients below
+    ``relerr`` times the largest of their ordinate pair, in place (``blocks`` is the
+    ``{name: csr}`` dict of :class:`AnisoOperator`; each block is replaced as soon as its
+    successor is formed, so a caller holding no other reference frees it then). This is the
+    truncation that the coupled projection applies to each pair (see
+    :data:`layersim.aniso.plan.COUPLED_RELERR`).
+
+    In ``S = G D / eta^2`` (``G`` the coefficients, ``D`` the slot scale of
+    :func:`reciprocity_error`, ``eta`` the index of the side light leaves to) reciprocity
+    reads ``S_Rt = S_Rt^T``, ``S_Rb = S_Rb^T``, ``S_Ttb^T = S_Tbt``. An operator computed
+    from truncated intermediates (:func:`layersim.aniso.adding.add` with ``relerr``) obeys
+    it to about the truncation only; replacing ``S`` by the mean of ``S`` and its mirror
+    image restores it exactly and, the exact operator being reciprocal, does not increase
+    the error. Magnitudes are then compared on ``S``: an entry and its reciprocal are
+    compared with the same pair maximum (over the pair and its mirror), so both are kept
+    or both dropped. The unscattered beam on the diagonal of the transmission blocks
+    (``delta``) is always kept and does not count in the maximum.
+    """
+    h = grid.h
+    col_scale = slot_column_scale(grid, md)            # B -> G D (no 2 pi)
+    mirror = lambda m: reciprocal_image(m, h, col_scale)          # B of S^T
+
+    def mean(a, b):
+        out = a + b
+        out.data *= 0.5
+        return out
+
+    for name in ("Rt", "Rb"):
+        if blocks.get(name) is not None:
+            blocks[name] = mean(blocks[name], mirror(blocks[name]))
+    if blocks.get("Ttb") is not None:
+        ratio = (eta_bottom / eta_top) ** 2
+        blocks["Ttb"] = mean(blocks["Ttb"], reciprocal_image(blocks["Tbt"], h, col_scale,
+                                                             ratio))
+        blocks["Tbt"] = reciprocal_image(blocks["Ttb"], h, col_scale, 1.0 / ratio)
+    # reflection blocks are symmetric on their own; Ttb / eta_b^2 mirrors Tbt / eta_t^2;
+    # per-entry quantities are formed in chunks of rows (the blocks of a coupled stack
+    # have millions of entries)
+    eta = {"Rt": 1.0, "Rb": 1.0, "Ttb": eta_bottom, "Tbt": eta_top}
+    for first, second in (("Rt", None), ("Rb", None), ("Ttb", "Tbt")):
+        parts = [(name, flip, blocks[name]) for name, flip in ((first, False), (second, True))
+                 if name is not None and blocks.get(name) is not None]
+
+        def keyed(name, flip, mat, lo, hi, rows, one=second is None):
+            cols = mat.indices[lo:hi]
+            o, i = rows % h, cols % h
+            if one:                     # one symmetric block: unordered pairs
+                o, i = np.minimum(o, i), np.maximum(o, i)
+            elif flip:                  # Tbt[y, x] pairs with Ttb[x, y]
+                o, i = i, o
+            mag = np.abs(mat.data[lo:hi]) * col_scale[cols] / eta[name] ** 2
+            beam = (rows == cols) if name in delta else np.zeros(hi - lo, bool)
+            return o.astype(np.int64) * h + i, mag, beam
+
+        big = np.zeros(h * h)
+        for name, flip, mat in parts:
+            for lo, hi, rows in _row_chunks(mat):
+                key, mag, beam = keyed(name, flip, mat, lo, hi, rows)
+                np.maximum.at(big, key[~beam], mag[~beam])
+        for name, flip, mat in parts:
+            keep = np.empty(mat.nnz, bool)
+            for lo, hi, rows in _row_chunks(mat):
+                key, mag, beam = keyed(name, flip, mat, lo, hi, rows)
+                keep[lo:hi] = beam | (mag >= relerr * big[key])
+            blocks[name] = _select(mat, keep)
+        parts = mat = None
 
 
 def as_aniso(op, md: int | None = None) -> AnisoOperator:
@@ -499,18 +522,55 @@ def pruned_product(a, b, h: int, relerr: float) -> sps.csr_matrix:
     """``prune_pairs(a @ b, h, relerr)`` without holding the unpruned product: it is formed
     in :data:`PRODUCT_CHUNKS` chunks of rows of ``a``, each filtered by :class:`PairPruner`
     as it comes (on Table 2 row 7 of seed 000 the product ``Rt2 Rb1`` had several times the
-    entries it keeps)."""
+    entries it keeps). The chunks are kept as CSR pieces and copied into the result one by
+    one, each released as it is copied: the result's pages become resident as the pieces
+    are freed, so that the assembly needs about one copy of the result (12 bytes per entry)
+    instead of the three of a COO -> CSR conversion (44 bytes per entry)."""
     a, b = sps.csr_matrix(a), sps.csr_matrix(b)
     keep = PairPruner(h, relerr)
     step = max(1, -(-a.shape[0] // PRODUCT_CHUNKS))
-    parts = []
+    pieces = []
     for start in range(0, a.shape[0], step):
         part = sps.csr_matrix(a[start:start + step] @ b)
-        rows = np.repeat(np.arange(start, start + part.shape[0], dtype=np.int32),
-                         np.diff(part.indptr))
-        parts.append(keep(rows, part.indices, part.data))
-        del part, rows
-    return from_parts(keep.final(parts), (a.shape[0], b.shape[1]))
+        pieces.append(_filter_piece(keep, start, part.indptr, part.indices, part.data, True))
+        del part
+    for k in range(len(pieces)):
+        pieces[k] = _filter_piece(keep, *pieces[k], False)
+    out = _stack_rows(pieces, (a.shape[0], b.shape[1]))
+    memory.release()                # the chunks' products and pieces came from the heap
+    return out
+
+
+def _filter_piece(keep: "PairPruner", start: int, indptr, indices, data, update: bool):
+    """One CSR piece of rows ``start ..`` filtered by ``keep`` (``update``: also record its
+    pair maxima), as ``(start, indptr, indices, data)`` with 32-bit indices."""
+    rows = np.repeat(np.arange(start, start + indptr.size - 1, dtype=np.int32), np.diff(indptr))
+    r, c, v = keep._filter(rows, indices, data, update)
+    counts = np.bincount(r - start, minlength=indptr.size - 1)
+    ptr = np.zeros(indptr.size, np.int64)
+    np.cumsum(counts, out=ptr[1:])
+    return start, ptr, c.astype(np.int32, copy=False), v
+
+
+def _stack_rows(pieces: list, shape: tuple) -> sps.csr_matrix:
+    """CSR matrix from consecutive row pieces ``(start, indptr, indices, data)`` (``pieces``
+    is emptied, each piece released as soon as it is copied)."""
+    total = sum(p[1][-1] for p in pieces)
+    index_type = np.int32 if max(total, shape[1]) < 2**31 else np.int64
+    indptr = np.zeros(shape[0] + 1, index_type)
+    indices, data = np.empty(total, index_type), np.empty(total)
+    at = 0
+    for k in range(len(pieces)):
+        start, ptr, c, v = pieces[k]
+        pieces[k] = None
+        n = int(ptr[-1])
+        indptr[start + 1:start + ptr.size] = at + ptr[1:]
+        indices[at:at + n], data[at:at + n] = c, v
+        at += n
+        del ptr, c, v
+    pieces.clear()
+    np.maximum.accumulate(indptr, out=indptr)         # rows of no piece: empty
+    return sps.csr_matrix((data, indices, indptr), shape=shape)
 
 
 def prune(mat, tolerance: float = DROP_TOLERANCE) -> sps.csr_matrix:
