@@ -79,7 +79,7 @@ def run_row(k: int) -> dict:
 
     def keep(plan, grid, sc, i, *args, **kwargs):
         op = original(plan, grid, sc, i, *args, **kwargs)
-        captured[i] = op
+        captured[i] = _density(op)      # now: the adding releases the layers' blocks
         return op
 
     solver._layer_operator = keep
@@ -91,7 +91,7 @@ def run_row(k: int) -> dict:
     return {
         "row": k, "total": total, "adding": bsdf.info["seconds"]["adding"],
         "projection": bsdf.info["seconds"]["projection"],
-        "top": _density(captured[0]), "bottom": _density(captured[1]), "combined": _density(op),
+        "top": captured[0], "bottom": captured[1], "combined": _density(op),
         "storage": op.memory_bytes() / 2**20,
         "rss": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
         "baseline": baseline, "estimate": bsdf.plan.memory_bytes / 2**20,

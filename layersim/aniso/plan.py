@@ -82,11 +82,12 @@ FILL = 0.5
 #: of the adding equations grows with it) and per nonzero of the others (held as 12-byte CSR
 #: entries while the stack is added, plus the products with them). Fitted on the peak resident
 #: memory above the baseline of an imported, warmed-up process (``benchmarks/table2.py``,
-#: ``benchmarks/memory_phases.py``) of Table 2 of seed 000 after the streaming assembly and
-#: pruning of the coupled path: measured 61-69 bytes per estimated nonzero of the lowest
-#: operator alone (rows 4, 5), ~17 per nonzero of the coating on top of it (row 7); the
-#: constants keep the estimate an upper bound with margin (ratios in benchmarks/table2.txt).
-BYTES_LOWEST, BYTES_OTHER = 80, 30
+#: ``benchmarks/memory_phases.py``) of Table 2 of seed 000 after the adding released its
+#: operands as it went (``add(consume=...)``): measured 43-49 bytes per estimated nonzero of
+#: the lowest operator alone (rows 4, 5), 7-12 per nonzero of the coating on top of it with 50
+#: for the base (rows 6, 7); the constants keep the estimate an upper bound with margin
+#: (1.2-1.6x, benchmarks/table2.txt).
+BYTES_LOWEST, BYTES_OTHER = 60, 18
 
 
 def operator_entries(lengths: np.ndarray, md: int, ms: int) -> int:
