@@ -19,13 +19,12 @@ Usage::
 
 Row 6 (both layers 1:3 anisotropic, the narrow axis 0.05 in the coating) needs n = 390 and
 md = 426 at the planner's accuracy (the coating's refraction lobe sets n = 390; estimated
-10.2 GiB). At that plan (``LAYERSIM_MAX_MEMORY`` raised, ``benchmarks/memory_phases.py 6
---default``, shared 2-core machine) the projection of the two layers alone took 162 s, RSS
-2.7 GiB, the first product of the adding equations (``K = Rt2 Rb1``) another 146 s (RSS
-3.6 GiB after it), and the run was stopped at 330 s (its first 40 s shared the machine with
-another benchmark of ours). It is run at ``n = 224, md = 300``: the smallest n at which the coating's discrete
-operator does not create energy (n = 196 and 210 are refused by the energy check: 1.00000x and
-1.0012), and marked as such.
+7.0 GiB). At that plan (``benchmarks/memory_phases.py 6 --default``, shared 2-core machine)
+the solve took 385 s (projection 156 s, the products of the adding equations 124 s, the solve
+58 s, the output products 48 s), peak RSS 4.4 GiB above the baseline. It is run at
+``n = 224, md = 300``: the smallest n at which the coating's discrete operator does not create
+energy (n = 196 and 210 are refused by the energy check: 1.00000x and 1.0012), and marked as
+such.
 """
 
 from __future__ import annotations
