@@ -296,6 +296,8 @@ def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(coupled
                 top_c.block("Rt")
             with pytest.raises(OperatorError, match="consumed"):
                 bottom_c.block("Rt")
+            with pytest.raises(OperatorError, match="top operator was consumed"):
+                aniso_adding.add(top_c, bottom)
     assert d.block("Rt").nnz                  # operands not named in consume are untouched
     with pytest.raises(ValueError, match="consume"):
         aniso_adding.add(d, c, consume="yes")
@@ -402,6 +404,26 @@ def test_solved_anisotropic_stack_eval_albedo_bins_and_persistence(brushed_coati
     np.testing.assert_array_equal(again.eval(a, c), b.eval(a, c))
     with np.load(path) as d:
         assert int(d["version"]) == 2
+
+
+def test_rgb_stack_shares_layers_across_channels_and_matches_per_channel_solves():
+    """The solver hands a layer operator over to the adding (which releases its blocks) only
+    at its last use: a coating shared by all channels and a base shared by channels 0 and 2
+    give, channel by channel, the stacks of separate monochrome solves."""
+    disc = {"n": 32, "md": 10, "ms": 3}
+    coat = {"kind": "dielectric", "ior": 1.5, "roughness": [0.5, 0.3]}
+    iors = [[0.2, 3.0], [0.5, 2.4], [0.2, 3.0]]
+    rgb = layersim.solve(layersim.Scene.from_dict({
+        "layer": [coat, {"kind": "conductor", "ior": iors, "roughness": [0.2, 0.35]}],
+        "discretization": disc}))
+    assert rgb.info["representation"] == "anisotropic" and len(rgb.operators) == 3
+    for c, ior in enumerate(iors):
+        mono = layersim.solve(layersim.Scene.from_dict({
+            "layer": [coat, {"kind": "conductor", "ior": ior, "roughness": [0.2, 0.35]}],
+            "discretization": disc}))
+        ref, got = mono.operators[0].blocks["Rt"], rgb.operators[c].blocks["Rt"]
+        assert abs(ref - got).max() <= 1e-14 * abs(ref).max()
+    assert abs(rgb.operators[0].blocks["Rt"] - rgb.operators[1].blocks["Rt"]).max() > 1e-3
 
 
 def test_eval_of_a_rotated_anisotropic_interface_matches_the_physics():

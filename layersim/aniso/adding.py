@@ -323,6 +323,10 @@ def add(top, bottom, relerr: float | None = None,
     -------
     AnisoOperator
     """
+    for side, op in (("top", top), ("bottom", bottom)):
+        if getattr(op, "consumed", False):
+            raise OperatorError(f"the {side} operator was consumed by an earlier adding step "
+                                "(consume=...) and no longer holds its blocks")
     md = max(top.m, bottom.m)
     top_a, bottom_a = as_aniso(top, md), as_aniso(bottom, md)
     _check_pair(top_a, bottom_a)

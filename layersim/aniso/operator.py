@@ -68,6 +68,7 @@ class AnisoOperator:
         self.delta = {} if self.opaque or not delta else {
             k: np.asarray(v, float) for k, v in delta.items() if v is not None}
         self.ms = self._coupling() if ms is None else int(ms)
+        self.consumed = False           # see consume()
 
     # ---- structure ---------------------------------------------------------------------
 
@@ -104,7 +105,7 @@ class AnisoOperator:
         return worst
 
     def block(self, name: str) -> sps.csr_matrix:
-        if getattr(self, "_consumed", False):
+        if self.consumed:
             raise OperatorError("this operator was consumed by an adding step (consume=True) "
                                 "and no longer holds its blocks")
         mat = self.blocks[name]
@@ -228,7 +229,7 @@ class AnisoOperator:
         memory as it is used, :func:`layersim.aniso.adding.add` with ``consume=True``): any
         later use of it raises."""
         self.blocks = dict.fromkeys(self.blocks)
-        self._consumed = True
+        self.consumed = True
 
     # ---- coefficients ------------------------------------------------------------------
 
