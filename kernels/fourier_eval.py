@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .runtime import device_for
+from .runtime import device_for, host_array
 
 #: Neighbouring pairs per query (4 x 4 cubic spline support).
 TAPS = 16
@@ -35,13 +35,15 @@ def cosine_sum(coef: wp.array(dtype=wp.float64), start: wp.int64, end: wp.int64,
     return s
 
 
-@wp.kernel
-def _eval_series(offsets: wp.array(dtype=wp.int64), coef: wp.array(dtype=wp.float64),
-                 pair: wp.array2d(dtype=wp.int64), weight: wp.array2d(dtype=wp.float64),
-                 dphi: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):
-    q = wp.tid()
-    c1 = wp.cos(dphi[q])
-    acc = wp.float64(0.0)
+@wp.func
+def tap_series(offsets: wp.array(dtype=wp.int64), coef: wp.array(dtype=wp.float64),
+               pair: wp.array2d(dtype=wp.int64), weight: wp.array2d(dtype=wp.float64), q: int,
+               c1: wp.float64):
+    """The interpolated series of query ``q`` over its :data:`TAPS` taps, given
+    ``c1 = cos(phi)``: ``(sum_k w_k f_0(p_k), sum_k w_k f(p_k; phi))``, its constant term and
+    its value."""
+    g0 = wp.float64(0.0)
+    g = wp.float64(0.0)
     for k in range(TAPS):
         w = weight[q, k]
         if w != wp.float64(0.0):
@@ -49,8 +51,17 @@ def _eval_series(offsets: wp.array(dtype=wp.int64), coef: wp.array(dtype=wp.floa
             start = offsets[p]
             end = offsets[p + wp.int64(1)]
             if end > start:
-                acc += w * cosine_sum(coef, start, end, c1)
-    out[q] = acc
+                g0 += w * coef[start]
+                g += w * cosine_sum(coef, start, end, c1)
+    return wp.vec2d(g0, g)
+
+
+@wp.kernel
+def _eval_series(offsets: wp.array(dtype=wp.int64), coef: wp.array(dtype=wp.float64),
+                 pair: wp.array2d(dtype=wp.int64), weight: wp.array2d(dtype=wp.float64),
+                 dphi: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):
+    q = wp.tid()
+    out[q] = tap_series(offsets, coef, pair, weight, q, wp.cos(dphi[q]))[1]
 
 
 def eval_series(offsets: np.ndarray, coef: np.ndarray, pair: np.ndarray, weight: np.ndarray,
@@ -70,10 +81,7 @@ def eval_series(offsets: np.ndarray, coef: np.ndarray, pair: np.ndarray, weight:
         return np.zeros(0)
     out = wp.empty(Q, dtype=wp.float64, device=device)
     wp.launch(_eval_series, dim=Q, device=device, inputs=[
-        wp.array(np.ascontiguousarray(offsets, np.int64), dtype=wp.int64, device=device),
-        wp.array(np.ascontiguousarray(coef, np.float64), dtype=wp.float64, device=device),
-        wp.array(np.ascontiguousarray(pair, np.int64), dtype=wp.int64, device=device),
-        wp.array(np.ascontiguousarray(weight, np.float64), dtype=wp.float64, device=device),
-        wp.array(np.ascontiguousarray(dphi, np.float64), dtype=wp.float64, device=device)],
-        outputs=[out])
+        host_array(offsets, wp.int64, device), host_array(coef, wp.float64, device),
+        host_array(pair, wp.int64, device), host_array(weight, wp.float64, device),
+        host_array(dphi, wp.float64, device)], outputs=[out])
     return out.numpy()

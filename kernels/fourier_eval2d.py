@@ -15,10 +15,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .runtime import device_for
-
-#: Neighbouring pairs per query (4 x 4 cubic spline support).
-TAPS = 16
+from .fourier_eval import TAPS
+from .runtime import device_for, host_array
 
 
 @wp.kernel
@@ -73,13 +71,12 @@ def eval_series2d(table, pair: np.ndarray, weight: np.ndarray, phi_d: np.ndarray
     Q = phi_d.shape[0]
     if Q == 0:
         return np.zeros(0)
-    arr = lambda a, t, dt: wp.array(np.ascontiguousarray(a, dt), dtype=t, device=device)
+    arr = lambda a, dtype: host_array(a, dtype, device)
     out = wp.empty(Q, dtype=wp.float64, device=device)
     wp.launch(_eval_series2d, dim=Q, device=device, inputs=[
-        arr(table.run_offsets, wp.int64, np.int64), arr(table.run_s, wp.int32, np.int32),
-        arr(table.run_d0, wp.int32, np.int32), arr(table.run_start, wp.int64, np.int64),
-        arr(table.run_len, wp.int32, np.int32), arr(table.coef_re, wp.float64, np.float64),
-        arr(table.coef_im, wp.float64, np.float64), arr(pair, wp.int64, np.int64),
-        arr(weight, wp.float64, np.float64), arr(phi_d, wp.float64, np.float64),
-        arr(phi_s, wp.float64, np.float64)], outputs=[out])
+        arr(table.run_offsets, wp.int64), arr(table.run_s, wp.int32),
+        arr(table.run_d0, wp.int32), arr(table.run_start, wp.int64),
+        arr(table.run_len, wp.int32), arr(table.coef_re, wp.float64),
+        arr(table.coef_im, wp.float64), arr(pair, wp.int64), arr(weight, wp.float64),
+        arr(phi_d, wp.float64), arr(phi_s, wp.float64)], outputs=[out])
     return out.numpy()

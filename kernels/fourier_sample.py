@@ -41,8 +41,8 @@ import math
 import numpy as np
 import warp as wp
 
-from .fourier_eval import cosine_sum
-from .runtime import device_for
+from .fourier_eval import TAPS, tap_series
+from .runtime import device_for, host_array
 
 #: (x0, width, c0, c1, c2, c3, exact): an interval of the elevation marginal (see
 #: :func:`_interval`).
@@ -50,6 +50,25 @@ vec7d = wp.types.vector(length=7, dtype=wp.float64)
 
 _PI = wp.constant(wp.float64(math.pi))
 _NEWTON_MAX = wp.constant(100)
+
+
+@wp.func
+def _newton_bisection(t: wp.float64, val: wp.float64, slope: wp.float64, a: wp.float64,
+                      b: wp.float64):
+    """One step of the safeguarded Newton iteration that inverts the samplers' increasing
+    primitives: ``val`` (primitive minus goal) and ``slope`` (the density) at ``t`` in the
+    bracket ``[a, b]``. Returns ``(a, b, t)``: the bracket shrunk to the side holding the root,
+    and the Newton point, or the bracket's midpoint where the slope vanishes (callers bisect
+    when the Newton point leaves the bracket)."""
+    if val > wp.float64(0.0):
+        b = t
+    else:
+        a = t
+    if slope > wp.float64(0.0):
+        t = t - val / slope
+    else:
+        t = wp.float64(0.5) * (a + b)
+    return wp.vec3d(a, b, t)
 
 
 @wp.func
@@ -269,15 +288,10 @@ def _sample_elevation(mu: wp.array(dtype=wp.float64), c0: wp.array(dtype=wp.floa
             val = _primitive(c, t) - goal
             if wp.abs(val) <= tol or b - a <= wp.float64(1e-15):
                 break
-            if val > zero:
-                b = t
-            else:
-                a = t
-            d = _density(c, t)
-            if d > zero:
-                t = t - val / d
-            else:
-                t = wp.float64(0.5) * (a + b)
+            step = _newton_bisection(t, val, _density(c, t), a, b)
+            a = step[0]
+            b = step[1]
+            t = step[2]
         dens = _density(c, t)
         if dens > zero:
             out_mu[q] = c[0] + c[1] * t
@@ -332,13 +346,13 @@ def _accumulate(offsets: wp.array(dtype=wp.int64), coef: wp.array(dtype=wp.float
                 scratch: wp.array2d(dtype=wp.float64), q: int, row: int):
     """Interpolated series of query ``q`` into ``scratch[row, :]``; returns its length."""
     n = wp.int64(0)
-    for k in range(16):
+    for k in range(TAPS):
         if weight[q, k] != wp.float64(0.0):
             p = pair[q, k]
             n = wp.max(n, offsets[p + wp.int64(1)] - offsets[p])
     for l in range(int(n)):
         scratch[row, l] = wp.float64(0.0)
-    for k in range(16):
+    for k in range(TAPS):
         w = weight[q, k]
         if w != wp.float64(0.0):
             p = pair[q, k]
@@ -403,14 +417,10 @@ def _sample_azimuth(offsets: wp.array(dtype=wp.int64), coef: wp.array(dtype=wp.f
             val = F - goal
             if wp.abs(val) <= tol or b - a <= wp.float64(1e-15):
                 break
-            if val > zero:
-                b = phi
-            else:
-                a = phi
-            if g > zero:
-                phi = phi - val / g
-            else:
-                phi = wp.float64(0.5) * (a + b)
+            step = _newton_bisection(phi, val, g, a, b)
+            a = step[0]
+            b = step[1]
+            phi = step[2]
         out_phi[q] = sgn * phi
         out_pdf[q] = wp.max(g, zero) / (wp.float64(2.0) * _PI * g0)
 
@@ -422,20 +432,10 @@ def _pdf_azimuth(offsets: wp.array(dtype=wp.int64), coef: wp.array(dtype=wp.floa
                  out_pdf: wp.array(dtype=wp.float64)):
     q = wp.tid()
     zero = wp.float64(0.0)
-    c1 = wp.cos(phi[q])
-    g0 = zero
-    g = zero
-    for k in range(16):
-        w = weight[q, k]
-        if w != wp.float64(0.0):
-            p = pair[q, k]
-            start = offsets[p]
-            end = offsets[p + wp.int64(1)]
-            if end > start:
-                g0 += w * coef[start]
-                g += w * cosine_sum(coef, start, end, c1)
+    series = tap_series(offsets, coef, pair, weight, q, wp.cos(phi[q]))
+    g0 = series[0]
     if g0 > zero and exact[q] != 0:
-        out_pdf[q] = wp.max(g, zero) / (wp.float64(2.0) * _PI * g0)
+        out_pdf[q] = wp.max(series[1], zero) / (wp.float64(2.0) * _PI * g0)
     else:
         out_pdf[q] = wp.float64(0.5) / _PI
 
@@ -448,17 +448,12 @@ def _pdf_azimuth(offsets: wp.array(dtype=wp.int64), coef: wp.array(dtype=wp.floa
 SCRATCH_BYTES = 64 << 20
 
 
-def _wp(a, dtype, device):
-    np_dtype = {wp.float64: np.float64, wp.int64: np.int64, wp.int32: np.int32}[dtype]
-    return wp.array(np.ascontiguousarray(a, np_dtype), dtype=dtype, device=device)
-
-
 def _elevation_inputs(mu, c0, taps, tw, base_r, base_t, device):
     h = int(mu.size)
     n_int = h + (1 if mu[-1] < 1.0 else 0)
-    return [_wp(mu, wp.float64, device), _wp(c0, wp.float64, device), h, n_int,
-            _wp(taps, wp.int64, device), _wp(tw, wp.float64, device),
-            _wp(base_r, wp.int64, device), _wp(base_t, wp.int64, device)]
+    return [host_array(mu, wp.float64, device), host_array(c0, wp.float64, device), h, n_int,
+            host_array(taps, wp.int64, device), host_array(tw, wp.float64, device),
+            host_array(base_r, wp.int64, device), host_array(base_t, wp.int64, device)]
 
 
 def side_masses(mu, c0, taps, tw, base_r, base_t, device=None):
@@ -523,7 +518,7 @@ def sample_elevation(mu, c0, taps, tw, base_r, base_t, masses, u, device=None):
     out_exact = wp.empty(Q, dtype=wp.int32, device=device)
     wp.launch(_sample_elevation, dim=Q, device=device,
               inputs=_elevation_inputs(mu, c0, taps, tw, base_r, base_t, device)
-              + [_wp(masses, wp.float64, device), _wp(u, wp.float64, device)],
+              + [host_array(masses, wp.float64, device), host_array(u, wp.float64, device)],
               outputs=[out_mu, out_side, out_pdf, out_exact])
     return out_mu.numpy(), out_side.numpy(), out_pdf.numpy(), out_exact.numpy()
 
@@ -539,8 +534,8 @@ def pdf_elevation(mu, c0, taps, tw, base_r, base_t, masses, mu_o, side, device=N
     out_exact = wp.empty(Q, dtype=wp.int32, device=device)
     wp.launch(_pdf_elevation, dim=Q, device=device,
               inputs=_elevation_inputs(mu, c0, taps, tw, base_r, base_t, device)
-              + [_wp(masses, wp.float64, device), _wp(mu_o, wp.float64, device),
-                 _wp(side, wp.int32, device)], outputs=[out, out_exact])
+              + [host_array(masses, wp.float64, device), host_array(mu_o, wp.float64, device),
+                 host_array(side, wp.int32, device)], outputs=[out, out_exact])
     return out.numpy(), out_exact.numpy()
 
 
@@ -570,9 +565,9 @@ def sample_azimuth(offsets, coef, pair, weight, exact, u, device=None):
     lengths = np.diff(offsets)
     width = max(1, int(lengths.max()) if lengths.size else 1)
     chunk = max(1, min(Q, SCRATCH_BYTES // (8 * width)))
-    args = [_wp(offsets, wp.int64, device), _wp(coef, wp.float64, device),
-            _wp(pair, wp.int64, device), _wp(weight, wp.float64, device),
-            _wp(exact, wp.int32, device), _wp(u, wp.float64, device)]
+    args = [host_array(offsets, wp.int64, device), host_array(coef, wp.float64, device),
+            host_array(pair, wp.int64, device), host_array(weight, wp.float64, device),
+            host_array(exact, wp.int32, device), host_array(u, wp.float64, device)]
     out_phi = wp.empty(Q, dtype=wp.float64, device=device)
     out_pdf = wp.empty(Q, dtype=wp.float64, device=device)
     scratch = wp.empty((chunk, width), dtype=wp.float64, device=device)
@@ -590,7 +585,7 @@ def pdf_azimuth(offsets, coef, pair, weight, exact, phi, device=None):
         return np.zeros(0)
     out = wp.empty(Q, dtype=wp.float64, device=device)
     wp.launch(_pdf_azimuth, dim=Q, device=device, inputs=[
-        _wp(offsets, wp.int64, device), _wp(coef, wp.float64, device),
-        _wp(pair, wp.int64, device), _wp(weight, wp.float64, device),
-        _wp(exact, wp.int32, device), _wp(phi, wp.float64, device)], outputs=[out])
+        host_array(offsets, wp.int64, device), host_array(coef, wp.float64, device),
+        host_array(pair, wp.int64, device), host_array(weight, wp.float64, device),
+        host_array(exact, wp.int32, device), host_array(phi, wp.float64, device)], outputs=[out])
     return out.numpy()

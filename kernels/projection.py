@@ -21,7 +21,7 @@ import scipy.fft
 import warp as wp
 
 from . import physics
-from .runtime import device_for, ensure_init
+from .runtime import device_for, ensure_init, host_array
 
 
 @wp.func
@@ -250,8 +250,7 @@ def coarse_bound(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, n_phi: int, de
     if P:
         wp.launch(_coarse_bound_kernel, dim=P, device=dev,
                   inputs=[wp.array(mu_i, dtype=wp.float64, device=dev),
-                          wp.array(np.ascontiguousarray(mu_o, dtype=np.float64),
-                                   dtype=wp.float64, device=dev), int(n_phi),
+                          host_array(mu_o, wp.float64, dev), int(n_phi),
                           *_interface_params(eta, alpha_u, alpha_v, distribution)],
                   outputs=outs)
     return tuple(o.numpy() for o in outs)
@@ -336,8 +335,8 @@ def ragged_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, half: 
     np.cumsum(half[:-1].astype(np.int64) + 1, out=start[1:])
     total = int(start[-1] + half[-1] + 1) if P else 0
     params = _interface_params(eta, alpha_u, alpha_v, distribution)
-    a_mi = wp.array(np.ascontiguousarray(mu_i, dtype=np.float64), dtype=wp.float64, device=dev)
-    a_mo = wp.array(np.ascontiguousarray(mu_o, dtype=np.float64), dtype=wp.float64, device=dev)
+    a_mi = host_array(mu_i, wp.float64, dev)
+    a_mo = host_array(mu_o, wp.float64, dev)
     a_half = wp.array(half, dtype=wp.int32, device=dev)
     a_start = wp.array(start, dtype=wp.int64, device=dev)
     f = wp.empty(max(total, 1), dtype=wp.float64, device=dev)
@@ -356,8 +355,7 @@ def ragged_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, half: 
                   outputs=[coef])
         wp.launch(_truncate_kernel, dim=P, device=dev,
                   inputs=[coef, int(m), wp.float64(relerr),
-                          wp.array(np.ascontiguousarray(taper, dtype=np.int32),
-                                   dtype=wp.int32, device=dev)], outputs=[cut])
+                          host_array(taper, wp.int32, dev)], outputs=[cut])
     return coef, cut
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import sys
 
+import numpy as np
 import warp as wp
 
 _initialised = False
@@ -50,6 +51,17 @@ def device_for(device=None):
     ensure_init()
     name = device or os.environ.get("LAYERSIM_DEVICE") or "cpu"
     return wp.get_device(name)
+
+
+#: numpy dtype of each Warp scalar type the host wrappers pass.
+_NUMPY_DTYPE = {wp.float64: np.float64, wp.float32: np.float32, wp.int64: np.int64,
+                wp.int32: np.int32}
+
+
+def host_array(a, dtype, device) -> wp.array:
+    """A Warp array of ``dtype`` on ``device`` from host data (converted to the matching numpy
+    type and made contiguous first, as ``wp.array`` needs)."""
+    return wp.array(np.ascontiguousarray(a, _NUMPY_DTYPE[dtype]), dtype=dtype, device=device)
 
 
 def cuda_available() -> bool:

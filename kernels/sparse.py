@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .runtime import device_for, ensure_init
+from .runtime import device_for, ensure_init, host_array
 
 
 @wp.kernel
@@ -117,8 +117,7 @@ class BlockAssembler:
         if P == 0:
             return
         if not isinstance(coef, wp.array):
-            coef = wp.array(np.ascontiguousarray(coef, dtype=np.float64), dtype=wp.float64,
-                            device=self.device)
+            coef = host_array(coef, wp.float64, self.device)
         dev = self.device
         wp.launch(_scatter_kernel, dim=(P, self.m), device=dev,
                   inputs=[coef, wp.array(np.asarray(o, np.int32), dtype=wp.int32, device=dev),
