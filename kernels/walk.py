@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from . import physics, rng, sampling
+from . import rng, sampling
 
 wp.set_module_options({"enable_backward": False})
 

@@ -147,14 +147,11 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
     stacks = []
     # every channel's layer keys, to know when an operator is used for the last time: the
     # coupled adding then releases its blocks as it goes (aniso_adding.add(consume=...))
-    keys = []
-    for c in range(scene.channels):
-        mono = scene.channel(c)
-        keys.append([(mono.layers[lp.index], mono.ior_above(lp.index))
-                     for lp in plan.layers if lp.action != "left out"])
-    for c in range(scene.channels):
-        mono = scene.channel(c)
-        used = [lp for lp in plan.layers if lp.action != "left out"]
+    used = [lp for lp in plan.layers if lp.action != "left out"]
+    monos = [scene.channel(c) for c in range(scene.channels)]
+    keys = [[(mono.layers[lp.index], mono.ior_above(lp.index)) for lp in used]
+            for mono in monos]
+    for c, mono in enumerate(monos):
         # projected bottom up: the base of a coated stack is the smaller operator (one block
         # below an opaque interface), so the coating's projection, the larger transient, runs
         # beside it rather than the other way round (Table 2 row 6 of seed 000: 300 MiB less)
@@ -210,6 +207,26 @@ def _add_mixed(ops, owned, threads):
     consumed by the adding steps, which release their blocks as soon as they are used."""
     from .aniso import adding as aniso_adding
     from .aniso.plan import STACK_RELERR, STACK_RELERR_INTERMEDIATE
+    reduced = _reduce_isotropic_runs(ops, owned, threads)
+    stack, own_stack = reduced.pop()
+    while reduced:
+        op, own = reduced.pop()
+        consume = {(True, True): "both", (True, False): "top",
+                   (False, True): "bottom"}.get((own, own_stack))
+        stack = aniso_adding.add(op, stack, relerr=STACK_RELERR,
+                                 relerr_intermediate=STACK_RELERR_INTERMEDIATE,
+                                 consume=consume)
+        own_stack = True
+        del op
+    return stack
+
+
+def _reduce_isotropic_runs(ops, owned, threads) -> list:
+    """``[(operator, owned), ...]`` for :func:`_add_mixed`: each run of consecutive isotropic
+    operators added into one, marked not owned (the coupled adding converts an isotropic
+    operand to a new operator: there is nothing of it to release), anisotropic ones passed
+    through with their flag. ``ops`` is emptied, so that the returned list holds the only
+    references (the locals of this function go with it)."""
     groups = []          # runs of isotropic operators (lists) and (anisotropic op, owned)
     for op, own in zip(ops, owned):
         if not isinstance(op, IsoOperator):
@@ -225,21 +242,10 @@ def _add_mixed(ops, owned, threads):
             acc = g[-1]
             for op in reversed(g[:-1]):
                 acc = adding.add(op, acc, threads)
-            reduced.append((acc, False))    # isotropic: converted to a new one when added
+            reduced.append((acc, False))
         else:
             reduced.append(g)
-    groups = g = op = acc = None    # no reference but reduced's: the adding frees them
-    stack, own_stack = reduced.pop()
-    while reduced:
-        op, own = reduced.pop()
-        consume = {(True, True): "both", (True, False): "top",
-                   (False, True): "bottom"}.get((own, own_stack))
-        stack = aniso_adding.add(op, stack, relerr=STACK_RELERR,
-                                 relerr_intermediate=STACK_RELERR_INTERMEDIATE,
-                                 consume=consume)
-        own_stack = True
-        del op
-    return stack
+    return reduced
 
 
 def add(top, bottom, threads: int | None = None):

@@ -7,6 +7,7 @@ import pytest
 import scipy.stats
 
 import layersim
+from layersim.bsdf import _bin_quadrature  # piecewise-cubic-exact bin quadrature
 from layersim.channels import LUMINANCE
 from layersim.operator import Grid, IsoOperator
 
@@ -27,16 +28,7 @@ def bin_integrals(bsdf, wi, z_edges, phi_edges, gl_z=3, gl_phi=32):
     """Integral of bsdf.pdf over (z = cos theta_o, phi_o) bins: Gauss-Legendre in z on pieces cut
     at the ordinates (where the density is piecewise polynomial) and in phi per bin."""
     nodes = np.concatenate([-bsdf.grid.mu[::-1], bsdf.grid.mu])
-    xz, wz = np.polynomial.legendre.leggauss(gl_z)
-    zs, zw, zb = [], [], []
-    for b in range(z_edges.size - 1):
-        lo, hi = z_edges[b], z_edges[b + 1]
-        cuts = np.concatenate([[lo], nodes[(nodes > lo) & (nodes < hi)], [hi]])
-        a, c = cuts[:-1], cuts[1:]
-        zs.append(((a + c) / 2)[:, None] + ((c - a) / 2)[:, None] * xz)
-        zw.append(((c - a) / 2)[:, None] * wz)
-        zb.append(np.full(zs[-1].shape, b))
-    zs, zw, zb = (np.concatenate([v.ravel() for v in arr]) for arr in (zs, zw, zb))
+    zs, zw, zb = _bin_quadrature(nodes, z_edges, gl_z)
     xp, wp = np.polynomial.legendre.leggauss(gl_phi)
     a, c = phi_edges[:-1], phi_edges[1:]
     ps = (((a + c) / 2)[:, None] + ((c - a) / 2)[:, None] * xp).ravel()
