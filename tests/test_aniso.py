@@ -274,11 +274,20 @@ def test_coupled_stack_never_creates_energy_and_is_reciprocal(coupled_layers):
     assert energy_weighted_error(aniso_adding.add(clear, slab), slab) < 1e-13
 
 
-def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(coupled_layers):
-    """``consume`` only changes when blocks are released: same result, with and without the
-    per-pair truncation of the solver, transmissive and opaque bottoms; consumed operands
-    refuse to be used again."""
+@pytest.mark.parametrize("parking", [False, True])
+def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(
+        coupled_layers, parking, tmp_path, monkeypatch):
+    """``consume`` only changes when blocks are released (and, with parking, that the idle
+    ones wait on disk): same result, with and without the per-pair truncation of the solver,
+    transmissive and opaque bottoms; consumed operands refuse to be used again; no parked
+    file is left behind."""
+    from layersim.aniso import park
     from layersim.errors import OperatorError
+    monkeypatch.setenv("LAYERSIM_PARK_DIR", str(tmp_path) if parking else "off")
+    monkeypatch.setattr(park, "PARK_MIN_BYTES", 0)
+    written = []
+    monkeypatch.setattr(park.Parked, "__init__", lambda self, mat, directory, init=park.Parked.
+                        __init__: (written.append(mat.nnz), init(self, mat, directory))[1])
     d, hg, c, glass_out = coupled_layers
     copy = lambda op: AnisoOperator(op.grid, op.md, {k: None if m is None else m.copy()
                                                      for k, m in op.blocks.items()},
@@ -301,26 +310,92 @@ def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(coupled
     assert d.block("Rt").nnz                  # operands not named in consume are untouched
     with pytest.raises(ValueError, match="consume"):
         aniso_adding.add(d, c, consume="yes")
+    # opaque bottom: Rt1, Tbt1; transmissive: those, Ttb2, Rb2, then Ttb1, Rb1 after use
+    assert len(written) == (2 * (2 + 6) if parking else 0)   # two relerr settings each
+    assert list(tmp_path.iterdir()) == []
 
 
-def test_pruned_product_is_the_pair_pruned_product():
+def test_parked_block_round_trip_and_where_parking_is_refused(tmp_path, monkeypatch):
+    from layersim.aniso import park
+    mat = sps.random(50, 40, 0.2, random_state=2, format="csr")
+    ref = mat.copy()
+    monkeypatch.setattr(park, "PARK_MIN_BYTES", 0)
+    blk = park.park(mat, str(tmp_path))
+    assert isinstance(blk, park.Parked) and mat.nnz == 0        # the caller's copy is freed
+    assert len(list(tmp_path.iterdir())) == 1
+    back = park.unpark(blk)
+    assert list(tmp_path.iterdir()) == []
+    assert back.dtype == ref.dtype and (back != ref).nnz == 0
+    with pytest.raises(RuntimeError, match="already loaded"):
+        blk.load()
+    assert park.park(ref, None) is ref                          # nowhere to park
+    monkeypatch.setattr(park, "PARK_MIN_BYTES", 1 << 40)
+    assert park.park(ref, str(tmp_path)) is ref                 # too small to bother
+    monkeypatch.setenv("LAYERSIM_PARK_DIR", "off")
+    assert park.park_directory() is None
+    monkeypatch.setenv("LAYERSIM_PARK_DIR", str(tmp_path))
+    assert park.park_directory(1) == str(tmp_path)
+    assert park.park_directory(1 << 62) is None                 # not enough free space
+    monkeypatch.setenv("LAYERSIM_PARK_DIR", str(tmp_path / "missing"))
+    assert park.park_directory() is None
+    monkeypatch.setattr(park, "_filesystem", lambda path: "tmpfs")
+    monkeypatch.setenv("LAYERSIM_PARK_DIR", str(tmp_path))
+    assert park.park_directory() is None                        # RAM-backed: no gain
+
+
+def test_pruned_product_is_the_pair_pruned_product(monkeypatch):
     """The chunked product (CSR pieces, filtered as they come, then stacked) keeps exactly the
-    entries of prune_pairs of the whole product."""
-    from layersim.aniso.operator import PRODUCT_CHUNKS, prune_pairs, pruned_product
+    entries of prune_pairs of the whole product, with chunks of one row up to one chunk."""
+    from layersim.aniso import operator as aop
     rng = np.random.default_rng(3)
-    for n, m, density in ((5 * PRODUCT_CHUNKS + 3, 250, 0.05), (97, 113, 0.2), (40, 30, 0.0)):
+    for n, m, density in ((83, 250, 0.05), (97, 113, 0.2), (40, 30, 0.0)):
         a = sps.random(n, m, density, random_state=rng, format="csr")
         b = sps.random(m, n + 7, density, random_state=rng, format="csr")
         a.data -= 0.5
         b.data *= np.exp(rng.normal(0.0, 4.0, b.nnz))     # magnitudes over many decades
-        for h, relerr in ((5, 1e-6), (7, 0.3)):
-            got, ref = pruned_product(a, b, h, relerr), prune_pairs(a @ b, h, relerr)
-            assert got.shape == ref.shape and got.nnz == ref.nnz
-            assert np.array_equal(got.indptr, ref.indptr)
-            assert np.array_equal(got.indices, ref.indices)
-            assert np.array_equal(got.data, ref.data)
-            if density:
-                assert 0 < ref.nnz < (a @ b).nnz
+        row_flops = np.array([np.diff(b.indptr)[a.indices[a.indptr[r]:a.indptr[r + 1]]].sum()
+                              for r in range(n)], int)
+        flops = int(row_flops.sum())
+        for chunk_flops, stack_every in ((1, 1), (max(1, flops // 7), 50), (flops + 1, 1 << 22)):
+            monkeypatch.setattr(aop, "PRODUCT_CHUNK_FLOPS", chunk_flops)
+            monkeypatch.setattr(aop, "RELEASE_ENTRIES", stack_every)
+            starts = aop.product_row_chunks(a, b, chunk_flops)
+            assert starts[0] == 0 and starts[-1] == n and np.all(np.diff(starts) > 0)
+            for lo, hi in zip(starts[:-1], starts[1:]):     # the bound, or a single row
+                assert hi - lo == 1 or row_flops[lo:hi].sum() <= chunk_flops
+                assert hi == n or row_flops[lo:hi + 1].sum() > chunk_flops   # greedy
+            for h, relerr in ((5, 1e-6), (7, 0.3)):
+                got, ref = aop.pruned_product(a, b, h, relerr), aop.prune_pairs(a @ b, h, relerr)
+                assert got.shape == ref.shape and got.nnz == ref.nnz
+                assert np.array_equal(got.indptr, ref.indptr)
+                assert np.array_equal(got.indices, ref.indices)
+                assert np.array_equal(got.data, ref.data)
+                if density:
+                    assert 0 < ref.nnz < (a @ b).nnz
+
+
+def test_from_parts_sums_duplicates_in_either_format(monkeypatch):
+    """from_parts (counting sort of the parts into CSR, trimming the heap as it goes) equals
+    scipy's COO conversion, duplicates summed, for CSR and CSC, with empty parts."""
+    from layersim.aniso import operator as aop
+    monkeypatch.setattr(aop, "RELEASE_ENTRIES", 10)
+    rng = np.random.default_rng(11)
+    shape = (37, 23)
+    parts = []
+    for size in (0, 50, 1, 200, 0, 75):
+        parts.append((rng.integers(0, shape[0], size).astype(np.int32),
+                      rng.integers(0, shape[1], size).astype(np.int32), rng.normal(size=size)))
+    rows, cols, vals = (np.concatenate(x) for x in zip(*parts))
+    ref = sps.coo_matrix((vals, (rows, cols)), shape=shape).tocsr()
+    assert ref.nnz < rows.size                              # there are duplicates
+    for fmt in ("csr", "csc"):
+        got = aop.from_parts(list(parts), shape, fmt)
+        assert got.format == fmt and got.shape == shape and got.nnz == ref.nnz
+        assert np.allclose(got.toarray(), ref.toarray(), rtol=1e-15, atol=1e-15)
+        assert got.has_canonical_format
+    one = list(parts)
+    aop.from_parts(one, shape)
+    assert one == []                                        # handed over and emptied
 
 
 def test_block_lu_solver_matches_sparse_lu_on_a_banded_system():

@@ -34,6 +34,7 @@ from ..adding import _check_pair  # same grid / opacity / index checks for both 
 from ..operator import DROP_TOLERANCE
 from . import basis
 from .banded import PRUNE, BlockBandedLU
+from .park import park, park_directory, unpark
 from .operator import (AnisoOperator, PairPruner, as_aniso, from_parts, prune,
                        pruned_product, reciprocal_prune, slot_pairs)
 
@@ -127,15 +128,18 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
             "[discretization], or n, or make the anisotropy milder")
     ordered = active[order]                                      # unknown at each position
     rows = _block_rows(M, ordered, pos, starts, bw, sign, identity_minus)
+    Brest, shape = B[rest], B.shape             # the eliminated unknowns: y = b
     Bo = B[ordered]
-    if rest.size:
-        # y_rest = b_rest: move those columns to the right-hand side
-        Bo = Bo - sign * (M[ordered] @ (sps.diags(ident.astype(float)) @ B))
-    Bo = Bo.tocsc()
-    Brest, shape = B[rest].tocoo(), B.shape    # the eliminated unknowns: y = b
-    if release:
+    if release:                                 # before the copies below
         _release(B_in, B)
     del B, B_in
+    if rest.size:
+        # y_rest = b_rest: move those columns to the right-hand side (through the columns
+        # of K at those unknowns: a row-permuted copy of K took 670 MiB on Table 2 row 6 of
+        # seed 000)
+        Bo = Bo - sign * (M[:, rest] @ Brest)[ordered]
+    Bo = Bo.tocsc()
+    Brest = Brest.tocoo()
     parts = None
     keep = (lambda *part: part) if relerr is None else PairPruner(h, relerr)
     try:
@@ -183,6 +187,13 @@ def _residual(lu, M, Bo, sample, starts, blk_pos, ordered, identity_minus) -> fl
             big = abs(resid).max()
             worst = max(worst, big) if np.isfinite(big) else np.inf
     return worst / scale
+
+
+def _bytes(mat) -> int:
+    """Bytes of a sparse matrix's arrays (0 for None)."""
+    if mat is None:
+        return 0
+    return mat.data.nbytes + mat.indices.nbytes + mat.indptr.nbytes
 
 
 def _release(*mats) -> None:
@@ -316,8 +327,9 @@ def add(top, bottom, relerr: float | None = None,
         reference to: they are emptied (:meth:`AnisoOperator.consume`) and each of their
         blocks is released as soon as the equations no longer need it (below an opaque base,
         all but ``Rt1`` and ``Tbt1`` before the solve; on Table 2 row 6 of seed 000 that is
-        460 of the operands' 710 MiB). :func:`layersim.solve` passes it for operators that
-        no later channel reuses.
+        460 of the operands' 710 MiB), and the blocks idle until after the solve are parked
+        on disk meanwhile (:mod:`layersim.aniso.park`; there ``Rt1`` and ``Tbt1``, 270 MiB).
+        :func:`layersim.solve` passes it for operators that no later channel reuses.
 
     Returns
     -------
@@ -348,6 +360,14 @@ def add(top, bottom, relerr: float | None = None,
                 if isinstance(op, AnisoOperator):
                     op.consume()
     del top, bottom, top_a, bottom_a
+    # blocks idle until after the solve go to disk meanwhile (layersim.aniso.park), if this
+    # call owns them: the top's Rt and Tbt, the bottom's Ttb and Rb
+    idle = [(one, "Rt"), (one, "Tbt")] if consume in ("top", "both") else []
+    if consume in ("bottom", "both") and not opaque:
+        idle += [(two, "Ttb"), (two, "Rb")]
+    directory = park_directory(sum(_bytes(d[name]) for d, name in idle))
+    for d, name in idle:
+        d[name] = park(d[name], directory)
     if relerr_intermediate is None:
         product = lambda a, b: prune(a @ b, 1e-16)
     else:
@@ -356,6 +376,8 @@ def add(top, bottom, relerr: float | None = None,
     # Rt2 and Rb1 are released as soon as their products are formed
     first = product(two["Rt"], one["Ttb"] if not opaque else one.pop("Ttb"))
     K = product(two.pop("Rt"), one["Rb"] if not opaque else one.pop("Rb"))
+    if directory is not None and consume in ("top", "both") and not opaque:
+        one["Ttb"], one["Rb"] = park(one["Ttb"], directory), park(one["Rb"], directory)
     if opaque:
         rhs = first
     else:
@@ -372,12 +394,13 @@ def add(top, bottom, relerr: float | None = None,
     else:
         output = lambda a, b: pruned_product(a, b, h, 0.1 * relerr)
     Z1 = Z if opaque else Z[:, :N]
-    Tbt1 = one.pop("Tbt")
-    blocks = {"Rt": prune(one.pop("Rt") + output(Tbt1, Z1), DROP_TOLERANCE)}
+    Tbt1 = unpark(one.pop("Tbt"))
+    blocks = {"Rt": prune(unpark(one.pop("Rt")) + output(Tbt1, Z1), DROP_TOLERANCE)}
     if not opaque:
         Z2 = Z[:, N:]
         del Z
-        Rb1, Ttb1, Ttb2, Rb2 = one.pop("Rb"), one.pop("Ttb"), two.pop("Ttb"), two.pop("Rb")
+        Rb1, Ttb1 = unpark(one.pop("Rb")), unpark(one.pop("Ttb"))
+        Ttb2, Rb2 = unpark(two.pop("Ttb")), unpark(two.pop("Rb"))
         W = Ttb2 @ Rb1
         del Rb1
         blocks["Tbt"] = prune(output(Tbt1, Z2), DROP_TOLERANCE)

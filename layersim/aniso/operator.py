@@ -372,22 +372,40 @@ def as_aniso(op, md: int | None = None) -> AnisoOperator:
     raise TypeError(f"expected an IsoOperator or AnisoOperator, got {type(op).__name__}")
 
 
-def _row_chunks(mat: sps.csr_matrix, rows_per_chunk: int = 1 << 14):
-    """``(lo, hi, rows)`` for chunks of rows of a CSR matrix: its entries ``lo:hi`` and their
-    rows. Per-entry index arrays of the operators of coupled stacks (tens of millions of
-    entries) took more memory than the matrices themselves when formed at once."""
-    for start in range(0, mat.shape[0], rows_per_chunk):
-        stop = min(mat.shape[0], start + rows_per_chunk)
+#: Entries copied by :func:`from_parts` and :func:`_stack_rows` between two returns of freed
+#: heap pages (:func:`layersim.memory.release`; 48 MiB of indices and values).
+RELEASE_ENTRIES = 1 << 22
+
+
+#: Entries per chunk of :func:`_row_chunks` (its per-entry temporaries: ~16 MiB per array).
+CHUNK_ENTRIES = 1 << 21
+
+
+def _row_chunks(mat: sps.csr_matrix, entries: int = CHUNK_ENTRIES):
+    """``(lo, hi, rows)`` for chunks of rows of a CSR matrix holding about ``entries`` entries
+    (one row at least): its entries ``lo:hi`` and their rows. Per-entry index arrays of the
+    operators of coupled stacks (tens of millions of entries) took more memory than the
+    matrices themselves when formed at once, and chunks of a fixed number of rows still took
+    300 MiB on ``K`` of Table 2 row 6 of seed 000 (320 entries per row)."""
+    n = mat.shape[0]
+    start = 0
+    while start < n:
+        stop = int(np.searchsorted(mat.indptr, mat.indptr[start] + entries, side="right")) - 1
+        stop = min(n, max(stop, start + 1))
         ptr = mat.indptr[start:stop + 1]
         yield int(ptr[0]), int(ptr[-1]), np.repeat(np.arange(start, stop), np.diff(ptr))
+        start = stop
 
 
 def from_parts(parts: list, shape: tuple, fmt: str = "csr"):
     """Sparse matrix of shape ``shape`` from ``parts``, a list of ``(rows, cols, values)``
-    triplets (duplicates are summed). The parts are copied into one set of 32-bit index and
-    value arrays and released one by one (``parts`` is emptied): the matrices of coupled
-    stacks hold tens of millions of entries, and concatenated copies of their 64-bit index
-    lists took more memory than the matrices.
+    triplets (duplicates are summed), ``parts`` emptied.
+
+    The matrices of coupled stacks hold tens of millions of entries, and the parts are
+    scattered straight into the CSR arrays (counting sort by row), each part released (and
+    the heap trimmed) as it is placed: about 16 bytes per entry at the peak, where the
+    concatenation and COO -> CSR conversion it replaces took 28 (Table 2 row 6 of seed 000:
+    the solution of the adding equations and each projected block, 8-9 M entries).
 
     Parameters
     ----------
@@ -395,18 +413,44 @@ def from_parts(parts: list, shape: tuple, fmt: str = "csr"):
     shape : (int, int)
     fmt : {"csr", "csc"}
     """
-    total = sum(r.size for r, _, _ in parts)
-    rows, cols, vals = np.empty(total, np.int32), np.empty(total, np.int32), np.empty(total)
-    at = 0
+    if fmt not in ("csr", "csc"):
+        raise ValueError(f"fmt must be 'csr' or 'csc', not {fmt!r}")
+    by_col = fmt == "csc"               # a CSC matrix is the CSR matrix of the transpose
+    n_rows, n_cols = shape[::-1] if by_col else shape
+    counts = np.zeros(n_rows, np.int64)
+    for part in parts:
+        counts += np.bincount(part[1 if by_col else 0], minlength=n_rows)
+    total = int(counts.sum())
+    index_type = np.int32 if max(total, n_cols) < 2**31 else np.int64
+    indptr = np.zeros(n_rows + 1, index_type)
+    np.cumsum(counts, out=indptr[1:])
+    del counts
+    indices, data = np.empty(total, index_type), np.empty(total)
+    fill = indptr[:-1].astype(np.int64)              # next free position of each row
+    placed = trimmed = 0
     for k in range(len(parts)):
         r, c, v = parts[k]
         parts[k] = None
-        rows[at:at + r.size], cols[at:at + r.size], vals[at:at + r.size] = r, c, v
-        at += r.size
+        if by_col:
+            r, c = c, r
+        if r.size == 0:
+            continue
+        order = np.argsort(r, kind="stable")
+        rs = r[order]
+        first = np.flatnonzero(np.concatenate([[True], rs[1:] != rs[:-1]]))
+        run = np.diff(np.append(first, rs.size))
+        pos = fill[rs] + (np.arange(rs.size) - np.repeat(first, run))
+        indices[pos], data[pos] = c[order], v[order]
+        fill[rs[first]] += run
+        placed += rs.size
+        del r, c, v, order, rs, first, run, pos
+        if placed - trimmed > RELEASE_ENTRIES:
+            memory.release()        # the parts' freed heap pages (see _stack_rows)
+            trimmed = placed
     parts.clear()
-    coo = sps.coo_matrix((vals, (rows, cols)), shape=shape)
-    del rows, cols, vals
-    return coo.tocsr() if fmt == "csr" else coo.tocsc()
+    out = sps.csr_matrix((data, indices, indptr), shape=(n_rows, n_cols))
+    out.sum_duplicates()            # sorts each row and sums its duplicates in place
+    return out.T if by_col else out
 
 
 def reciprocal_image(mat, h: int, col_scale: np.ndarray, factor: float = 1.0,
@@ -515,28 +559,51 @@ class PairPruner:
         return parts
 
 
-#: Rows of the left factor per chunk in :func:`pruned_product`, as a fraction of all rows.
-PRODUCT_CHUNKS = 16
+#: Bound on the multiply-adds of one chunk of :func:`pruned_product` (it bounds the chunk's
+#: unpruned entries): on Table 2 row 6 of seed 000, ``K = Rt2 Rb1`` (21.6 M entries kept of
+#: 50 M) took 609 MiB above its operands in 16 equal chunks of rows and ... in chunks of this
+#: bound, at the same speed.
+PRODUCT_CHUNK_FLOPS = 1 << 25
+
+
+def product_row_chunks(a: sps.csr_matrix, b: sps.csr_matrix,
+                       flops: int = PRODUCT_CHUNK_FLOPS) -> list:
+    """Starts of the row chunks of ``a`` whose products with ``b`` take at most ``flops``
+    multiply-adds each (one row at least), which bounds the entries of each chunk's unpruned
+    product (ends with ``a.shape[0]``)."""
+    per_entry = np.diff(b.indptr).astype(np.int64)
+    bound = np.zeros(a.shape[0] + 1, np.int64)     # multiply-adds of rows 0 .. r-1
+    for lo, hi, rows in _row_chunks(a):
+        if hi > lo:
+            np.add.at(bound, rows + 1, per_entry[a.indices[lo:hi]])
+    np.cumsum(bound, out=bound)
+    starts, at = [0], 0
+    while at < a.shape[0]:
+        nxt = int(np.searchsorted(bound, bound[at] + flops, side="right")) - 1
+        at = max(at + 1, min(nxt, a.shape[0]))
+        starts.append(at)
+    return starts
 
 
 def pruned_product(a, b, h: int, relerr: float) -> sps.csr_matrix:
     """``prune_pairs(a @ b, h, relerr)`` without holding the unpruned product: it is formed
-    in :data:`PRODUCT_CHUNKS` chunks of rows of ``a``, each filtered by :class:`PairPruner`
-    as it comes (on Table 2 row 7 of seed 000 the product ``Rt2 Rb1`` had several times the
-    entries it keeps). The chunks are kept as CSR pieces and copied into the result one by
-    one, each released as it is copied: the result's pages become resident as the pieces
-    are freed, so that the assembly needs about one copy of the result (12 bytes per entry)
-    instead of the three of a COO -> CSR conversion (44 bytes per entry)."""
+    in chunks of rows of ``a`` of at most :data:`PRODUCT_CHUNK_FLOPS` multiply-adds
+    (:func:`product_row_chunks`), each filtered by :class:`PairPruner` as it comes (on
+    Table 2 row 7 of seed 000 the product ``Rt2 Rb1`` had several times the entries it
+    keeps). The chunks are kept as CSR pieces and copied into the result one by one, each
+    released as it is copied: the result's pages become resident as the pieces are freed, so
+    that the assembly needs about one copy of the result (12 bytes per entry) instead of the
+    three of a COO -> CSR conversion (44 bytes per entry)."""
     from ..threads import THREADS, parallel_map
     a, b = sps.csr_matrix(a), sps.csr_matrix(b)
     keep = PairPruner(h, relerr)
-    step = max(1, -(-a.shape[0] // PRODUCT_CHUNKS))
-    starts = list(range(0, a.shape[0], step))
+    bounds = product_row_chunks(a, b)
+    chunks = list(zip(bounds[:-1], bounds[1:]))
     pieces = []
-    for at in range(0, len(starts), THREADS):      # THREADS chunks in flight at a time
-        batch = starts[at:at + THREADS]
-        parts = parallel_map(lambda s: sps.csr_matrix(a[s:s + step] @ b), batch)
-        for start, part in zip(batch, parts):
+    for at in range(0, len(chunks), THREADS):      # THREADS chunks in flight at a time
+        batch = chunks[at:at + THREADS]
+        parts = parallel_map(lambda c: sps.csr_matrix(a[c[0]:c[1]] @ b), batch)
+        for (start, _), part in zip(batch, parts):
             pieces.append(_filter_piece(keep, start, part.indptr, part.indices, part.data,
                                         True))
         del parts, part
@@ -565,7 +632,7 @@ def _stack_rows(pieces: list, shape: tuple) -> sps.csr_matrix:
     index_type = np.int32 if max(total, shape[1]) < 2**31 else np.int64
     indptr = np.zeros(shape[0] + 1, index_type)
     indices, data = np.empty(total, index_type), np.empty(total)
-    at = 0
+    at = trimmed = 0
     for k in range(len(pieces)):
         start, ptr, c, v = pieces[k]
         pieces[k] = None
@@ -574,6 +641,11 @@ def _stack_rows(pieces: list, shape: tuple) -> sps.csr_matrix:
         indices[at:at + n], data[at:at + n] = c, v
         at += n
         del ptr, c, v
+        if at - trimmed > RELEASE_ENTRIES:
+            # the pieces are small arrays from the heap, whose freed pages stay resident
+            # until trimmed: without this the assembly held two copies of the result
+            memory.release()
+            trimmed = at
     pieces.clear()
     np.maximum.accumulate(indptr, out=indptr)         # rows of no piece: empty
     return sps.csr_matrix((data, indices, indptr), shape=shape)

@@ -1,0 +1,128 @@
+"""Operator blocks parked on disk between their uses (out-of-core adding).
+
+Below an opaque base the coupled adding equations (:mod:`layersim.aniso.adding`) use the top
+layer's ``Rt1`` and ``Tbt1`` only after the solve, and the products and the factorisation
+before it are the largest transients of a solve: on Table 2 row 6 of seed 000 the two blocks
+are 270 MiB held idle through a phase that peaks at 1.2 GiB. A :class:`Parked` block is
+written to a file when it goes idle and read back (the file removed) when it is needed:
+about half a second for those two blocks on the CI machine, the file mostly still in the
+page cache, which the system reclaims under memory pressure where a resident block cannot
+be.
+
+Parking needs a directory on a disk: a RAM-backed file system (tmpfs, ramfs) would move the
+block to memory that is not even counted as the process's, so :func:`park_directory` answers
+``None`` there and the blocks stay resident. ``LAYERSIM_PARK_DIR`` names the directory
+(default: :func:`tempfile.gettempdir`); ``LAYERSIM_PARK_DIR=off`` turns parking off.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+
+import numpy as np
+import scipy.sparse as sps
+
+#: Blocks smaller than this stay resident (parking them saves little and costs a file).
+PARK_MIN_BYTES = 16 << 20
+
+#: File systems whose files live in memory.
+_RAM_FILESYSTEMS = {"tmpfs", "ramfs", "devtmpfs"}
+
+
+def _filesystem(path: str) -> str | None:
+    """Type of the file system holding ``path`` (the longest mount point above it, from
+    ``/proc/mounts``), or None where that is not readable (non-Linux)."""
+    try:
+        with open("/proc/mounts") as f:
+            mounts = [line.split()[1:3] for line in f]
+    except OSError:
+        return None
+    path = os.path.realpath(path)
+    best, kind = "", None
+    for point, fstype in mounts:
+        point = point.replace("\\040", " ")
+        inside = path == point or path.startswith(point.rstrip("/") + "/")
+        if inside and len(point) > len(best):
+            best, kind = point, fstype
+    return kind
+
+
+def park_directory(need: int = 0) -> str | None:
+    """The directory to park ``need`` bytes in, or None (parking off, the directory missing,
+    RAM-backed or without twice ``need`` bytes free)."""
+    where = os.environ.get("LAYERSIM_PARK_DIR", "").strip()
+    if where.lower() == "off":
+        return None
+    where = where or tempfile.gettempdir()
+    if not os.path.isdir(where) or _filesystem(where) in _RAM_FILESYSTEMS:
+        return None
+    try:
+        st = os.statvfs(where)
+    except OSError:
+        return None
+    return where if st.f_bavail * st.f_frsize >= 2 * need else None
+
+
+class Parked:
+    """A CSR matrix written to a file, read back once by :meth:`load`.
+
+    Parameters
+    ----------
+    mat : scipy.sparse.csr_matrix
+        Its arrays are written and the caller's reference is the only one to drop: the
+        matrix object itself is emptied (shape kept), so that its memory goes now.
+    directory : str
+    """
+
+    def __init__(self, mat: sps.csr_matrix, directory: str):
+        self.shape = mat.shape
+        self.nnz = int(mat.nnz)
+        self._arrays = [(a.dtype, a.size) for a in (mat.indptr, mat.indices, mat.data)]
+        fd, self.path = tempfile.mkstemp(prefix="layersim-block-", suffix=".bin",
+                                         dir=directory)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                for a in (mat.indptr, mat.indices, mat.data):
+                    np.ascontiguousarray(a).tofile(f)
+        except BaseException:
+            self._remove()
+            raise
+        mat.data = np.zeros(0, mat.data.dtype)
+        mat.indices = np.zeros(0, mat.indices.dtype)
+        mat.indptr = np.zeros_like(mat.indptr)
+
+    def load(self) -> sps.csr_matrix:
+        """The matrix, read back; the file is removed."""
+        if self.path is None:
+            raise RuntimeError("this parked block was already loaded")
+        with open(self.path, "rb") as f:
+            indptr, indices, data = (np.fromfile(f, dtype, size) for dtype, size in self._arrays)
+        self._remove()
+        return sps.csr_matrix((data, indices, indptr), shape=self.shape)
+
+    def _remove(self) -> None:
+        if self.path is not None:
+            try:
+                os.remove(self.path)
+            except OSError:
+                pass
+            self.path = None
+
+    def __del__(self):
+        self._remove()
+
+
+def park(mat, directory: str | None):
+    """``Parked(mat)`` for a CSR matrix of at least :data:`PARK_MIN_BYTES` when ``directory``
+    is given, else ``mat`` itself."""
+    if directory is None or not sps.issparse(mat) or mat.format != "csr":
+        return mat
+    if mat.data.nbytes + mat.indices.nbytes + mat.indptr.nbytes < PARK_MIN_BYTES:
+        return mat
+    return Parked(mat, directory)
+
+
+def unpark(item):
+    """The matrix of a :class:`Parked` block (loaded), or ``item`` itself."""
+    return item.load() if isinstance(item, Parked) else item
