@@ -5,9 +5,9 @@ layer's ``Rt1`` and ``Tbt1`` only after the solve, and the products and the fact
 before it are the largest transients of a solve: on Table 2 row 6 of seed 000 the two blocks
 are 270 MiB held idle through a phase that peaks at 1.2 GiB. A :class:`Parked` block is
 written to a file when it goes idle and read back (the file removed) when it is needed:
-about half a second for those two blocks on the CI machine, the file mostly still in the
-page cache, which the system reclaims under memory pressure where a resident block cannot
-be.
+0.7 s to write and 0.07 s to read back for those two blocks on the CI machine (ext4), the
+file mostly still in the page cache, which the system reclaims under memory pressure where a
+resident block cannot be.
 
 Parking needs a directory on a disk: a RAM-backed file system (tmpfs, ramfs) would move the
 block to memory that is not even counted as the process's, so :func:`park_directory` answers
