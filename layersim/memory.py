@@ -14,6 +14,8 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 
+import numpy as np
+
 _libc = None
 
 
@@ -26,6 +28,23 @@ def _load():
         except OSError:  # pragma: no cover - no C library to load
             _libc = False
     return _libc
+
+
+def sparse_bytes(mat) -> int:
+    """Bytes held by a CSR / CSC matrix's arrays (values, indices, pointers); 0 for None."""
+    if mat is None:
+        return 0
+    return mat.data.nbytes + mat.indices.nbytes + mat.indptr.nbytes
+
+
+def empty_sparse(*mats) -> None:
+    """Empty CSR / CSC matrices in place (shape kept), releasing their arrays for callers that
+    handed them over: whoever else refers to the matrix object sees an empty matrix."""
+    for mat in mats:
+        if mat is not None and getattr(mat, "format", None) in ("csr", "csc"):
+            mat.data = np.zeros(0, mat.data.dtype)
+            mat.indices = np.zeros(0, mat.indices.dtype)
+            mat.indptr = np.zeros_like(mat.indptr)
 
 
 def release() -> bool:

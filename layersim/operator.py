@@ -48,7 +48,7 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sps
 
-from . import quadrature
+from . import memory, quadrature
 from .errors import FileFormatError, OperatorError
 
 BLOCKS = ("Rt", "Rb", "Ttb", "Tbt")
@@ -147,7 +147,7 @@ class IsoOperator:
 
     def memory_bytes(self) -> int:
         """Bytes held by the sparse blocks (values, indices and row pointers)."""
-        return sum(mat.data.nbytes + mat.indices.nbytes + mat.indptr.nbytes
+        return sum(memory.sparse_bytes(mat)
                    for blk in self.blocks.values() if blk is not None for mat in blk)
 
     def density(self) -> float:

@@ -131,7 +131,7 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
     Brest, shape = B[rest], B.shape             # the eliminated unknowns: y = b
     Bo = B[ordered]
     if release:                                 # before the copies below
-        _release(B_in, B)
+        memory.empty_sparse(B_in, B)
     del B, B_in
     if rest.size:
         # y_rest = b_rest: move those columns to the right-hand side (through the columns
@@ -153,7 +153,7 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         if _residual(lu, M, Bo, sample, starts, blk_pos, ordered, identity_minus) \
                 <= RESIDUAL_CHECK:
             if release:
-                _release(A, M)
+                memory.empty_sparse(A, M)
             parts = _solve_groups(lu, Bo, starts, blk_pos, ordered, keep)
         del lu
     except np.linalg.LinAlgError:
@@ -187,23 +187,6 @@ def _residual(lu, M, Bo, sample, starts, blk_pos, ordered, identity_minus) -> fl
             big = abs(resid).max()
             worst = max(worst, big) if np.isfinite(big) else np.inf
     return worst / scale
-
-
-def _bytes(mat) -> int:
-    """Bytes of a sparse matrix's arrays (0 for None)."""
-    if mat is None:
-        return 0
-    return mat.data.nbytes + mat.indices.nbytes + mat.indptr.nbytes
-
-
-def _release(*mats) -> None:
-    """Empty CSR / CSC matrices in place (shape kept), releasing their arrays for callers
-    that handed them over (``banded_solve(..., release=True)``)."""
-    for mat in mats:
-        if sps.issparse(mat) and mat.format in ("csr", "csc"):
-            mat.data = np.zeros(0, mat.data.dtype)
-            mat.indices = np.zeros(0, mat.indices.dtype)
-            mat.indptr = np.zeros_like(mat.indptr)
 
 
 def _block_rows(M, ordered, pos, starts, bw, sign, identity_minus):
@@ -361,11 +344,15 @@ def add(top, bottom, relerr: float | None = None,
                     op.consume()
     del top, bottom, top_a, bottom_a
     # blocks idle until after the solve go to disk meanwhile (layersim.aniso.park), if this
-    # call owns them: the top's Rt and Tbt, the bottom's Ttb and Rb
-    idle = [(one, "Rt"), (one, "Tbt")] if consume in ("top", "both") else []
-    if consume in ("bottom", "both") and not opaque:
+    # call owns them: the top's Rt and Tbt and the bottom's Ttb and Rb now, the top's Ttb and
+    # Rb (transmissive bottom) once their products are formed; the directory is chosen for
+    # all of them
+    own_top, own_bottom = consume in ("top", "both"), consume in ("bottom", "both")
+    idle = [(one, "Rt"), (one, "Tbt")] if own_top else []
+    if own_bottom and not opaque:
         idle += [(two, "Ttb"), (two, "Rb")]
-    directory = park_directory(sum(_bytes(d[name]) for d, name in idle))
+    later = [(one, "Ttb"), (one, "Rb")] if own_top and not opaque else []
+    directory = park_directory(sum(memory.sparse_bytes(d[name]) for d, name in idle + later))
     for d, name in idle:
         d[name] = park(d[name], directory)
     if relerr_intermediate is None:
@@ -376,8 +363,8 @@ def add(top, bottom, relerr: float | None = None,
     # Rt2 and Rb1 are released as soon as their products are formed
     first = product(two["Rt"], one["Ttb"] if not opaque else one.pop("Ttb"))
     K = product(two.pop("Rt"), one["Rb"] if not opaque else one.pop("Rb"))
-    if directory is not None and consume in ("top", "both") and not opaque:
-        one["Ttb"], one["Rb"] = park(one["Ttb"], directory), park(one["Rb"], directory)
+    for d, name in later:
+        d[name] = park(d[name], directory)
     if opaque:
         rhs = first
     else:

@@ -117,8 +117,7 @@ class AnisoOperator:
         return sum(m.nnz for m in self.blocks.values() if m is not None)
 
     def memory_bytes(self) -> int:
-        return sum(m.data.nbytes + m.indices.nbytes + m.indptr.nbytes
-                   for m in self.blocks.values() if m is not None)
+        return sum(memory.sparse_bytes(m) for m in self.blocks.values())
 
     def density(self) -> float:
         """Fraction of nonzero entries over the present blocks, counted on the complex
@@ -377,6 +376,25 @@ def as_aniso(op, md: int | None = None) -> AnisoOperator:
 RELEASE_ENTRIES = 1 << 22
 
 
+def _csr_arrays(n_rows: int, n_cols: int, total: int):
+    """Zero row pointers and uninitialised indices and values for a CSR matrix of ``total``
+    entries, with 32-bit indices where they fit (scipy would otherwise copy them down)."""
+    index_type = np.int32 if max(total, n_cols) < 2**31 else np.int64
+    return np.zeros(n_rows + 1, index_type), np.empty(total, index_type), np.empty(total)
+
+
+def _trim(placed: int, trimmed: int) -> int:
+    """Return the freed heap pages (:func:`layersim.memory.release`) once
+    :data:`RELEASE_ENTRIES` more entries were placed since the last time (``trimmed``); the
+    count at the last release. The parts and pieces that assemblies copy from are small arrays
+    from the heap, whose freed pages stay resident until trimmed: without this, assembling
+    ``K`` held two copies of it."""
+    if placed - trimmed > RELEASE_ENTRIES:
+        memory.release()
+        return placed
+    return trimmed
+
+
 #: Entries per chunk of :func:`_row_chunks` (its per-entry temporaries: ~16 MiB per array).
 CHUNK_ENTRIES = 1 << 21
 
@@ -403,9 +421,10 @@ def from_parts(parts: list, shape: tuple, fmt: str = "csr"):
 
     The matrices of coupled stacks hold tens of millions of entries, and the parts are
     scattered straight into the CSR arrays (counting sort by row), each part released (and
-    the heap trimmed) as it is placed: about 16 bytes per entry at the peak, where the
-    concatenation and COO -> CSR conversion it replaces took 28 (Table 2 row 6 of seed 000:
-    the solution of the adding equations and each projected block, 8-9 M entries).
+    the heap trimmed, :func:`_trim`) as it is placed, with no concatenated or COO copy: on the
+    coating blocks of Table 2 row 6 of seed 000 (7-9 M entries) the resident memory now falls
+    by 12-190 MiB across the assembly, where the concatenation and COO -> CSR conversion it
+    replaces raised it by 88-105 MiB.
 
     Parameters
     ----------
@@ -420,12 +439,9 @@ def from_parts(parts: list, shape: tuple, fmt: str = "csr"):
     counts = np.zeros(n_rows, np.int64)
     for part in parts:
         counts += np.bincount(part[1 if by_col else 0], minlength=n_rows)
-    total = int(counts.sum())
-    index_type = np.int32 if max(total, n_cols) < 2**31 else np.int64
-    indptr = np.zeros(n_rows + 1, index_type)
+    indptr, indices, data = _csr_arrays(n_rows, n_cols, int(counts.sum()))
     np.cumsum(counts, out=indptr[1:])
     del counts
-    indices, data = np.empty(total, index_type), np.empty(total)
     fill = indptr[:-1].astype(np.int64)              # next free position of each row
     placed = trimmed = 0
     for k in range(len(parts)):
@@ -444,9 +460,7 @@ def from_parts(parts: list, shape: tuple, fmt: str = "csr"):
         fill[rs[first]] += run
         placed += rs.size
         del r, c, v, order, rs, first, run, pos
-        if placed - trimmed > RELEASE_ENTRIES:
-            memory.release()        # the parts' freed heap pages (see _stack_rows)
-            trimmed = placed
+        trimmed = _trim(placed, trimmed)
     parts.clear()
     out = sps.csr_matrix((data, indices, indptr), shape=(n_rows, n_cols))
     out.sum_duplicates()            # sorts each row and sums its duplicates in place
@@ -560,9 +574,10 @@ class PairPruner:
 
 
 #: Bound on the multiply-adds of one chunk of :func:`pruned_product` (it bounds the chunk's
-#: unpruned entries): on Table 2 row 6 of seed 000, ``K = Rt2 Rb1`` (21.6 M entries kept of
-#: 50 M) took 609 MiB above its operands in 16 equal chunks of rows and ... in chunks of this
-#: bound, at the same speed.
+#: unpruned entries whatever the operators' size): on Table 2 row 6 of seed 000,
+#: ``K = Rt2 Rb1`` (21.6 M entries kept of 50 M, 14.6 G multiply-adds, 330 chunks) took 609 MiB
+#: above its operands in 16 equal chunks of rows and 363 MiB in chunks of this bound with the
+#: heap trimmed during assembly (:func:`_trim`), in the same time (22 s).
 PRODUCT_CHUNK_FLOPS = 1 << 25
 
 
@@ -628,10 +643,7 @@ def _filter_piece(keep: "PairPruner", start: int, indptr, indices, data, update:
 def _stack_rows(pieces: list, shape: tuple) -> sps.csr_matrix:
     """CSR matrix from consecutive row pieces ``(start, indptr, indices, data)`` (``pieces``
     is emptied, each piece released as soon as it is copied)."""
-    total = sum(p[1][-1] for p in pieces)
-    index_type = np.int32 if max(total, shape[1]) < 2**31 else np.int64
-    indptr = np.zeros(shape[0] + 1, index_type)
-    indices, data = np.empty(total, index_type), np.empty(total)
+    indptr, indices, data = _csr_arrays(shape[0], shape[1], int(sum(p[1][-1] for p in pieces)))
     at = trimmed = 0
     for k in range(len(pieces)):
         start, ptr, c, v = pieces[k]
@@ -641,11 +653,7 @@ def _stack_rows(pieces: list, shape: tuple) -> sps.csr_matrix:
         indices[at:at + n], data[at:at + n] = c, v
         at += n
         del ptr, c, v
-        if at - trimmed > RELEASE_ENTRIES:
-            # the pieces are small arrays from the heap, whose freed pages stay resident
-            # until trimmed: without this the assembly held two copies of the result
-            memory.release()
-            trimmed = at
+        trimmed = _trim(at, trimmed)
     pieces.clear()
     np.maximum.accumulate(indptr, out=indptr)         # rows of no piece: empty
     return sps.csr_matrix((data, indices, indptr), shape=shape)

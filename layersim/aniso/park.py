@@ -23,6 +23,8 @@ import tempfile
 import numpy as np
 import scipy.sparse as sps
 
+from ..memory import empty_sparse, sparse_bytes
+
 #: Blocks smaller than this stay resident (parking them saves little and costs a file).
 PARK_MIN_BYTES = 16 << 20
 
@@ -88,9 +90,7 @@ class Parked:
         except BaseException:
             self._remove()
             raise
-        mat.data = np.zeros(0, mat.data.dtype)
-        mat.indices = np.zeros(0, mat.indices.dtype)
-        mat.indptr = np.zeros_like(mat.indptr)
+        empty_sparse(mat)
 
     def load(self) -> sps.csr_matrix:
         """The matrix, read back; the file is removed."""
@@ -118,7 +118,7 @@ def park(mat, directory: str | None):
     is given, else ``mat`` itself."""
     if directory is None or not sps.issparse(mat) or mat.format != "csr":
         return mat
-    if mat.data.nbytes + mat.indices.nbytes + mat.indptr.nbytes < PARK_MIN_BYTES:
+    if sparse_bytes(mat) < PARK_MIN_BYTES:
         return mat
     return Parked(mat, directory)
 
