@@ -125,6 +125,8 @@ def main(argv) -> int:
     s.wrap(adding, "_solve_groups", "    substitutions")
     s.wrap(adding.AnisoOperator, "pruned", "  pruned (result)")
     s.wrap(adding, "pruned_product", "  product (pruned)")
+    s.wrap(adding, "prune", "  prune (sums)")
+    s.wrap(adding, "reciprocal_prune", "  reciprocal prune (result)")
     from layersim import plan as lplan
     s.wrap(solver, "make_plan", "plan")
     t0 = time.perf_counter()

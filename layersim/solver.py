@@ -33,7 +33,7 @@ PROJECTIONS = ("numeric", "semi-analytic")
 
 
 def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionStats,
-                    projection: str = "numeric", device=None):
+                    projection: str = "numeric", device=None, park_dir: str | None = None):
     layer = scene.layers[i]
     eta_above = scene.ior_above(i)
     if isinstance(layer, (Dielectric, Conductor)) and layer.anisotropic:
@@ -42,7 +42,7 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
         lp = next(lp for lp in plan.layers if lp.index == i)
         from .aniso.plan import COUPLED_RELERR
         op = aniso_interface_operator(grid, plan.md, lp.ms, layer, eta_above, stats,
-                                      relerr=COUPLED_RELERR)
+                                      relerr=COUPLED_RELERR, park_dir=park_dir)
         _check_energy(op, i, layer, plan)
         return op
     if isinstance(layer, (Dielectric, Conductor)):
@@ -151,20 +151,26 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
     monos = [scene.channel(c) for c in range(scene.channels)]
     keys = [[(mono.layers[lp.index], mono.ior_above(lp.index)) for lp in used]
             for mono in monos]
+    memory.release()                # the plan's temporaries (~100 MiB on Table 2 row 6)
     for c, mono in enumerate(monos):
+        later = {k for ks in keys[c + 1:] for k in ks}
+        owned = [key not in later and keys[c].count(key) == 1 for key in keys[c]]
+        # anisotropic operators that a coupled adding step will consume wait on disk as their
+        # blocks are built (aniso_interface_operator(park_dir=...)): the directory, if any
+        from .aniso.park import park_directory
+        park_dir = park_directory(plan.memory_bytes) \
+            if plan.representation == "anisotropic" and len(keys[c]) > 1 else None
         # projected bottom up: the base of a coated stack is the smaller operator (one block
         # below an opaque interface), so the coating's projection, the larger transient, runs
         # beside it rather than the other way round (Table 2 row 6 of seed 000: 300 MiB less)
-        for lp, key in reversed(list(zip(used, keys[c]))):
+        for lp, key, own in reversed(list(zip(used, keys[c], owned))):
             if key not in cache:
                 t0 = time.perf_counter()
                 cache[key] = _layer_operator(plan, grid, mono, lp.index, stats, projection,
-                                             device)
+                                             device, park_dir if own else None)
                 memory.release()
                 t_layers += time.perf_counter() - t0
         ops = [cache[key] for key in keys[c]]
-        later = {k for ks in keys[c + 1:] for k in ks}
-        owned = [key not in later and keys[c].count(key) == 1 for key in keys[c]]
         for key in set(keys[c]) - later:
             del cache[key]
         t0 = time.perf_counter()

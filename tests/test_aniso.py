@@ -286,8 +286,9 @@ def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(
     monkeypatch.setenv("LAYERSIM_PARK_DIR", str(tmp_path) if parking else "off")
     monkeypatch.setattr(park, "PARK_MIN_BYTES", 0)
     written = []
-    monkeypatch.setattr(park.Parked, "__init__", lambda self, mat, directory, init=park.Parked.
-                        __init__: (written.append(mat.nnz), init(self, mat, directory))[1])
+    init = park.Parked.__init__
+    monkeypatch.setattr(park.Parked, "__init__", lambda self, mat, directory, head=0: (
+        written.append(mat.nnz), init(self, mat, directory, head))[1])
     d, hg, c, glass_out = coupled_layers
     copy = lambda op: AnisoOperator(op.grid, op.md, {k: None if m is None else m.copy()
                                                      for k, m in op.blocks.items()},
@@ -311,7 +312,9 @@ def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(
     with pytest.raises(ValueError, match="consume"):
         aniso_adding.add(d, c, consume="yes")
     # opaque bottom: Rt1, Tbt1; transmissive: those, Ttb2, Rb2, then Ttb1, Rb1 after use
-    assert len(written) == (2 * (2 + 6) if parking else 0)   # two relerr settings each
+    # (two relerr settings each); and the right-hand side Rt2 Ttb1 of every adding step
+    # while K is formed (9 steps: 8 above and the transmissive bottom)
+    assert len(written) == (2 * (2 + 6) + 9 if parking else 0)
     assert list(tmp_path.iterdir()) == []
 
 
@@ -343,9 +346,40 @@ def test_parked_block_round_trip_and_where_parking_is_refused(tmp_path, monkeypa
     assert park.park_directory() is None                        # RAM-backed: no gain
 
 
-def test_pruned_product_is_the_pair_pruned_product(monkeypatch):
-    """The chunked product (CSR pieces, filtered as they come, then stacked) keeps exactly the
-    entries of prune_pairs of the whole product, with chunks of one row up to one chunk."""
+@pytest.mark.parametrize("on_disk", [False, True])
+def test_spooled_parts_assemble_as_a_list_of_them_does(on_disk, tmp_path):
+    """A Spool reads its tuples back in order, as often as asked, and from_parts of a spool
+    (with a pair pruning applied as the parts are read) equals from_parts of the list; the
+    file goes once the spool is drained."""
+    from layersim.aniso import operator as aop
+    from layersim.aniso.park import Spool
+    rng = np.random.default_rng(5)
+    shape, h = (30, 24), 6
+    parts = [(rng.integers(0, shape[0], k).astype(np.int32),
+              rng.integers(0, shape[1], k).astype(np.int32),
+              rng.normal(size=k) * np.exp(rng.normal(0, 5, k))) for k in (40, 0, 90, 7)]
+    spool = Spool(str(tmp_path) if on_disk else None)
+    for part in parts:
+        spool.append(part)
+    assert spool.on_disk == on_disk and len(spool) == 4
+    assert len(list(tmp_path.iterdir())) == int(on_disk)
+    for _ in range(2):
+        for got, ref in zip(spool, parts):
+            assert all(np.array_equal(x, y) and x.dtype == y.dtype for x, y in zip(got, ref))
+    keep = aop.PairPruner(h, 1e-3)
+    for part in parts:
+        keep(*part)                                 # the stream's pair maxima
+    ref = aop.from_parts([keep.final_filter(*p) for p in parts], shape)
+    got = aop.from_parts(spool, shape, select=keep.final_filter)
+    assert sum(keep.final_filter(*p)[0].size for p in parts) < sum(p[0].size for p in parts)
+    assert (got != ref).nnz == 0 and np.array_equal(got.indices, ref.indices)
+    assert len(spool) == 0 and list(tmp_path.iterdir()) == []
+
+
+def test_pruned_product_is_the_pair_pruned_product(monkeypatch, tmp_path):
+    """The chunked product (CSR pieces, filtered as they come, then stacked, or kept as row
+    pieces in memory or in a file) keeps exactly the entries of prune_pairs of the whole
+    product, with chunks of one row up to one chunk."""
     from layersim.aniso import operator as aop
     rng = np.random.default_rng(3)
     for n, m, density in ((83, 250, 0.05), (97, 113, 0.2), (40, 30, 0.0)):
@@ -372,6 +406,15 @@ def test_pruned_product_is_the_pair_pruned_product(monkeypatch):
                 assert np.array_equal(got.data, ref.data)
                 if density:
                     assert 0 < ref.nnz < (a @ b).nnz
+                for where in (None, str(tmp_path)):             # pieces in memory, on disk
+                    pieces = aop.pruned_product(a, b, h, relerr, pieces=True, directory=where)
+                    assert pieces.on_disk == (where is not None) and pieces.nnz == ref.nnz
+                    whole = pieces.to_csr()
+                    assert np.array_equal(whole.indptr, ref.indptr)
+                    assert np.array_equal(whole.indices, ref.indices)
+                    assert np.array_equal(whole.data, ref.data)
+                    pieces.close()
+                    assert list(tmp_path.iterdir()) == []       # the filtered copy's file too
 
 
 def test_from_parts_sums_duplicates_in_either_format(monkeypatch):
@@ -409,6 +452,45 @@ def test_block_lu_solver_matches_sparse_lu_on_a_banded_system():
     Y = banded_solve(A, B, h, md)
     np.testing.assert_allclose(Y.toarray(), np.linalg.solve(A.toarray(), B.toarray()),
                                atol=1e-12)
+
+
+@pytest.mark.parametrize("on_disk", [False, True])
+def test_banded_solve_reads_a_matrix_in_row_pieces(on_disk, tmp_path, monkeypatch):
+    """``I - K`` with ``K`` given as row pieces (in memory or in a file; rows left out of
+    every piece, pieces of one row) solves as the assembled matrix does, and the pieces read
+    back as the matrix they hold (counts, products, columns, diagonal, slot pairs)."""
+    from layersim.aniso import rowpieces
+    from layersim.aniso.operator import slot_pairs
+    h, md = 6, 9
+    N = basis.n_slots(md) * h
+    mode = basis.slot_mode(md)[np.arange(N) // h]
+    K = sps.random(N, N, density=0.3, random_state=7, format="csr")
+    K = sps.csr_matrix(K.multiply(np.abs(mode[:, None] - mode[None, :]) <= 2) * 0.1)
+    keep = np.ones(N)
+    keep[10:17] = 0.0                               # empty rows: eliminated unknowns
+    K = sps.csr_matrix(sps.diags(keep) @ K)
+    K.eliminate_zeros()
+    B = sps.random(N, 20, density=0.2, random_state=8, format="csr")
+    pieces = rowpieces.RowPieces(K.shape, str(tmp_path) if on_disk else None)
+    bounds = [0, 1, 10, 17, 40, 41, N]              # rows 10 .. 16 in no piece
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        if lo != 10:
+            part = K[lo:hi]
+            pieces.append(lo, part.indptr, part.indices, part.data)
+    assert len(list(tmp_path.iterdir())) == int(on_disk)
+    assert np.array_equal(pieces.row_counts(), np.diff(K.indptr))
+    assert abs(pieces.to_csr() - K).max() == 0.0
+    assert abs(pieces.matmul(B) - K @ B).max() < 1e-15
+    assert abs(pieces.columns([3, 50, 7]) - K[:, [3, 50, 7]]).max() == 0.0
+    assert np.array_equal(pieces.diagonal(), K.diagonal())
+    assert all(np.array_equal(x, y) for x, y in zip(slot_pairs(pieces, h), slot_pairs(K, h)))
+    monkeypatch.setattr(rowpieces, "PIECE_ENTRIES", 100)       # RowPieces.of: many pieces
+    wrapped = rowpieces.RowPieces.of(K)
+    assert len(list(wrapped)) > 5 and abs(wrapped.to_csr() - K).max() == 0.0
+    ref = np.linalg.solve(np.eye(N) - K.toarray(), B.toarray())
+    Y = banded_solve(pieces, B, h, md, identity_minus=True, release=True)
+    np.testing.assert_allclose(Y.toarray(), ref, atol=1e-12)
+    assert pieces.nnz == 0 and list(tmp_path.iterdir()) == []   # released: file removed
 
 
 # ---- plan, solve, BSDF ----------------------------------------------------------------------
@@ -481,10 +563,20 @@ def test_solved_anisotropic_stack_eval_albedo_bins_and_persistence(brushed_coati
         assert int(d["version"]) == 2
 
 
-def test_rgb_stack_shares_layers_across_channels_and_matches_per_channel_solves():
+@pytest.mark.parametrize("parking", [False, True])
+def test_rgb_stack_shares_layers_across_channels_and_matches_per_channel_solves(
+        parking, tmp_path, monkeypatch):
     """The solver hands a layer operator over to the adding (which releases its blocks) only
     at its last use: a coating shared by all channels and a base shared by channels 0 and 2
-    give, channel by channel, the stacks of separate monochrome solves."""
+    give, channel by channel, the stacks of separate monochrome solves; with parking, the
+    operators projected for their last use wait on disk (same result, no file left)."""
+    from layersim.aniso import park
+    monkeypatch.setenv("LAYERSIM_PARK_DIR", str(tmp_path) if parking else "off")
+    monkeypatch.setattr(park, "PARK_MIN_BYTES", 0)
+    written = []
+    init = park.Parked.__init__
+    monkeypatch.setattr(park.Parked, "__init__", lambda self, mat, directory, head=0: (
+        written.append(head), init(self, mat, directory, head))[1])
     disc = {"n": 32, "md": 10, "ms": 3}
     coat = {"kind": "dielectric", "ior": 1.5, "roughness": [0.5, 0.3]}
     iors = [[0.2, 3.0], [0.5, 2.4], [0.2, 3.0]]
@@ -499,6 +591,46 @@ def test_rgb_stack_shares_layers_across_channels_and_matches_per_channel_solves(
         ref, got = mono.operators[0].blocks["Rt"], rgb.operators[c].blocks["Rt"]
         assert abs(ref - got).max() <= 1e-14 * abs(ref).max()
     assert abs(rgb.operators[0].blocks["Rt"] - rgb.operators[1].blocks["Rt"]).max() > 1e-3
+    # parked by the projection (slot-0 rows kept): operators projected for their only use,
+    # the base of channel 1 (the shared ones are projected for channel 0), and the coating
+    # (4 blocks) and base of each monochrome solve
+    projected = sum(1 for head in written if head)
+    assert projected == ((1 + 3 * (4 + 1)) if parking else 0)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_projection_parks_the_blocks_of_an_operator_handed_to_the_adding(
+        coupled_layers, tmp_path, monkeypatch):
+    """aniso_interface_operator(park_dir=...) parks each block as it is built (rotated, its
+    slot-0 rows kept): the energy check reads the same albedos, a parked block refuses direct
+    use, and a consuming adding step gives the stack of the resident operators."""
+    from layersim.aniso import park
+    from layersim.errors import OperatorError
+    monkeypatch.setattr(park, "PARK_MIN_BYTES", 0)
+    d, _, c, _ = coupled_layers
+    top = aniso_interface_operator(G32, 16, 3, Dielectric(ior=1.5, alpha_u=0.2, alpha_v=0.35,
+                                                          rotation=0.4), 1.0,
+                                   park_dir=str(tmp_path))
+    base = aniso_interface_operator(G32, 16, 3, Conductor(ior=complex(0.2, 3.0), alpha_u=0.35,
+                                                          alpha_v=0.2), 1.5,
+                                    park_dir=str(tmp_path))
+    assert all(isinstance(m, park.Parked) for m in top.blocks.values())
+    assert len(list(tmp_path.iterdir())) == 5 and base.ms == c.ms and top.memory_bytes() == 0
+    for name, alb in d.albedo_slots().items():
+        assert np.array_equal(top.albedo_slots()[name], alb)
+    with pytest.raises(OperatorError, match="parked"):
+        top.block("Rt")
+    for kw in ({}, {"relerr": 1e-7, "relerr_intermediate": 1e-6}):
+        if kw:      # a second pair: the first was consumed
+            top = aniso_interface_operator(G32, 16, 3, Dielectric(
+                ior=1.5, alpha_u=0.2, alpha_v=0.35, rotation=0.4), 1.0, park_dir=str(tmp_path))
+            base = aniso_interface_operator(G32, 16, 3, Conductor(
+                ior=complex(0.2, 3.0), alpha_u=0.35, alpha_v=0.2), 1.5, park_dir=str(tmp_path))
+        ref = aniso_adding.add(d, c, **kw)
+        got = aniso_adding.add(top, base, consume="both", **kw)
+        assert abs(ref.blocks["Rt"] - got.blocks["Rt"]).max() == 0.0
+        del top, base
+        assert list(tmp_path.iterdir()) == []
 
 
 def test_eval_of_a_rotated_anisotropic_interface_matches_the_physics():

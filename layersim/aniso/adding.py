@@ -34,13 +34,18 @@ from ..adding import _check_pair  # same grid / opacity / index checks for both 
 from ..operator import DROP_TOLERANCE
 from . import basis
 from .banded import PRUNE, BlockBandedLU
-from .park import park, park_directory, unpark
+from .park import Parked, Spool, park, park_directory, unpark
+from .rowpieces import RowPieces
 from .operator import (AnisoOperator, PairPruner, as_aniso, from_parts, prune,
                        pruned_product, reciprocal_prune, slot_pairs)
 
 #: Relative residual above which a block-LU solve is redone with sparse LU, checked on up to
 #: RESIDUAL_COLUMNS columns, RESIDUAL_CHUNK at a time.
 RESIDUAL_CHECK = 1e-9
+#: Bytes of the dense solution of one group of right-hand sides in the substitutions, at
+#: most (if it spread over all the coupled unknowns): on Table 2 row 6 of seed 000 the
+#: groups of the first blocks held up to 1231 columns, 290 MiB each, two in flight.
+GROUP_BYTES = 32 << 20
 RESIDUAL_COLUMNS = 256
 RESIDUAL_CHUNK = 32
 
@@ -52,14 +57,16 @@ def _memory_limit() -> int:
 
 def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
                  identity_minus: bool = False, relerr: float | None = None,
-                 release: bool = False) -> sps.csr_matrix:
+                 release: bool = False, directory: str | None = None) -> sps.csr_matrix:
     """``Y = A^-1 B`` for a coupled-mode matrix ``A`` (slot basis) and sparse ``B``.
 
     Parameters
     ----------
-    A : sparse (N, N)
+    A : sparse (N, N) or RowPieces
         Banded by Fourier order (unknown ``slot * h + node``); with ``identity_minus`` the
-        matrix ``K`` of ``A = I - K`` (never formed).
+        matrix ``K`` of ``A = I - K`` (never formed). Read piece by piece
+        (:class:`~layersim.aniso.rowpieces.RowPieces`, e.g. from a file, never assembled
+        unless the sparse-LU fallback runs).
     B : sparse (N, C)
     h, md : int
         Ordinates per slot and Fourier orders.
@@ -72,21 +79,30 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         the unpruned solution is never held.
     release : bool
         The caller does not use ``A`` and ``B`` afterwards: their arrays are released (the
-        matrices left empty) as soon as the solve no longer needs them, ``B`` once it is
-        reordered, ``A`` once the block factorisation has passed its residual check. On
-        Table 2 row 6 of seed 000 they are 370 MiB of the substitution's peak.
+        matrices left empty, a RowPieces closed) as soon as the solve no longer needs them,
+        ``B`` once it is reordered, ``A`` once the block factorisation has passed its
+        residual check. On Table 2 row 6 of seed 000 they are 370 MiB of the substitution's
+        peak.
+    directory : str, optional
+        Keep the parts of the solution in a file there while the substitutions run
+        (:class:`~layersim.aniso.park.Spool`; :func:`~layersim.aniso.park.park_directory`).
 
     Raises
     ------
     InfeasibleError
         If the dense factors would exceed the memory limit.
     """
-    M = sps.csr_matrix(A)
-    M.eliminate_zeros()
+    if isinstance(A, RowPieces):
+        M = A
+    else:
+        A_csr = sps.csr_matrix(A)
+        A_csr.eliminate_zeros()
+        M = RowPieces.of(A_csr)
+        del A_csr
     B_in, B = B, sps.csr_matrix(B)
     N = M.shape[0]
     sign = -1.0 if identity_minus else 1.0
-    counts = np.diff(M.indptr)
+    counts = M.row_counts()
     if identity_minus:
         ident = counts == 0
     else:
@@ -127,7 +143,7 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
             f"unknowns, {J} blocks, a coupling band of {bw} orders; lower md or ms in "
             "[discretization], or n, or make the anisotropy milder")
     ordered = active[order]                                      # unknown at each position
-    rows = _block_rows(M, ordered, pos, starts, bw, sign, identity_minus)
+    rows = _block_rows(M, pos, starts, blk_pos, bw, sign, identity_minus)
     Brest, shape = B[rest], B.shape             # the eliminated unknowns: y = b
     Bo = B[ordered]
     if release:                                 # before the copies below
@@ -137,7 +153,7 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         # y_rest = b_rest: move those columns to the right-hand side (through the columns
         # of K at those unknowns: a row-permuted copy of K took 670 MiB on Table 2 row 6 of
         # seed 000)
-        Bo = Bo - sign * (M[:, rest] @ Brest)[ordered]
+        Bo = Bo - sign * (M.columns(rest) @ Brest)[ordered]
     Bo = Bo.tocsc()
     Brest = Brest.tocoo()
     parts = None
@@ -153,21 +169,22 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         if _residual(lu, M, Bo, sample, starts, blk_pos, ordered, identity_minus) \
                 <= RESIDUAL_CHECK:
             if release:
-                memory.empty_sparse(A, M)
-            parts = _solve_groups(lu, Bo, starts, blk_pos, ordered, keep)
+                _release_matrix(A, M)
+            parts = _solve_groups(lu, Bo, starts, blk_pos, ordered, keep,
+                                  out=Spool(directory))
         del lu
     except np.linalg.LinAlgError:
         parts = None
     if parts is None:
-        Ao = M[ordered][:, ordered]
+        Ao = M.to_csr()[ordered][:, ordered]
         Ao = (sps.identity(order.size) - Ao) if identity_minus else Ao
         Y = _sparse_lu_solve(Ao, Bo).tocoo()
-        parts = [(ordered[Y.row], Y.col, Y.data)]
+        parts = [keep(ordered[Y.row], Y.col, Y.data)]
         del Y
     # the eliminated unknowns, then one CSR matrix in the unknowns' numbering
     parts.append(keep(rest[Brest.row], Brest.col, Brest.data))
     del Brest, Bo
-    return from_parts(parts if relerr is None else keep.final(parts), shape)
+    return from_parts(parts, shape, select=None if relerr is None else keep.final_filter)
 
 
 def _residual(lu, M, Bo, sample, starts, blk_pos, ordered, identity_minus) -> float:
@@ -180,7 +197,7 @@ def _residual(lu, M, Bo, sample, starts, blk_pos, ordered, identity_minus) -> fl
     for at in range(0, sample.size, RESIDUAL_CHUNK):
         Bs = Bo[:, sample[at:at + RESIDUAL_CHUNK]]
         Ys = from_parts(_solve_groups(lu, Bs, starts, blk_pos, ordered), (N, Bs.shape[1]))
-        Ms = (M @ Ys)[ordered]
+        Ms = M.matmul(Ys)[ordered]
         resid = Bs - (Ys[ordered] - Ms if identity_minus else Ms)
         scale = max(scale, abs(Bs).max())
         if resid.nnz:
@@ -189,23 +206,41 @@ def _residual(lu, M, Bo, sample, starts, blk_pos, ordered, identity_minus) -> fl
     return worst / scale
 
 
-def _block_rows(M, ordered, pos, starts, bw, sign, identity_minus):
+def _release_matrix(A, M) -> None:
+    """Release the system matrix of :func:`banded_solve` (``A`` as passed, ``M`` its pieces)."""
+    if isinstance(A, RowPieces):
+        A.close()
+    else:
+        memory.empty_sparse(A)
+    M.close()
+
+
+def _block_rows(M, pos, starts, blk_pos, bw, sign, identity_minus):
     """Dense block rows over the band of ``A`` (``I - M`` or ``M``) in the block order
-    (``ordered[p]`` is the unknown at position ``p``, ``pos`` its inverse, -1 if eliminated)."""
+    (``pos`` is the position of each unknown, -1 if eliminated; ``blk_pos`` the block of each
+    position), filled piece by piece of ``M`` (:class:`RowPieces`)."""
     J = starts.size - 1
-    rows = []
-    for i in range(J):
-        lo, hi = max(0, i - bw), min(J, i + bw + 1)
-        c0, c1 = starts[lo], starts[hi]
-        sub = M[ordered[starts[i]:starts[i + 1]]].tocoo()
-        cpos = pos[sub.col]
-        ok = cpos >= 0
-        blk = np.zeros((starts[i + 1] - starts[i], c1 - c0))
-        blk[sub.row[ok], cpos[ok] - c0] = sign * sub.data[ok]
-        if identity_minus:
+    rows = [np.zeros(BlockBandedLU.band_shape(starts, bw, i)) for i in range(J)]
+    col0 = starts[np.maximum(0, np.arange(J) - bw)]        # first column of each block row
+    for start, piece in M:
+        sub = piece.tocoo()
+        del piece
+        p, c = pos[sub.row + start], pos[sub.col]
+        ok = (p >= 0) & (c >= 0)
+        p, c, v = p[ok], c[ok], sign * sub.data[ok]
+        del sub, ok
+        blk = blk_pos[p]
+        order = np.argsort(blk, kind="stable")
+        p, c, v, blk = p[order], c[order], v[order], blk[order]
+        cuts = np.flatnonzero(np.diff(blk)) + 1
+        for a, z in zip(np.concatenate([[0], cuts]), np.concatenate([cuts, [blk.size]])):
+            if z > a:
+                i = int(blk[a])
+                rows[i][p[a:z] - starts[i], c[a:z] - col0[i]] = v[a:z]
+    if identity_minus:
+        for i in range(J):
             d = np.arange(starts[i + 1] - starts[i])
-            blk[d, starts[i] - c0 + d] += 1.0
-        rows.append(blk)
+            rows[i][d, starts[i] - col0[i] + d] += 1.0
     return rows
 
 
@@ -222,34 +257,45 @@ def _slot_keys(M, h, md):
     return label * (md + 1) + mode
 
 
-def _solve_groups(lu, Bc, starts, blk_pos, ordered, keep=None) -> list:
+def _solve_groups(lu, Bc, starts, blk_pos, ordered, keep=None, out=None):
     """Pruned block substitution, right-hand sides grouped by the first block they touch.
 
+    Groups with more columns than fit :data:`GROUP_BYTES` of dense solution are split.
     Returns the solution as parts ``(rows, cols, values)`` (32-bit indices, rows in the
     unknowns' numbering ``ordered[position]``) for :func:`~layersim.aniso.operator.from_parts`.
     Groups are solved :data:`layersim.threads.THREADS` at a time and each round's parts go
     through ``keep`` (a :class:`~layersim.aniso.operator.PairPruner`) as they come, so that
-    the unpruned solution (several times the pruned one) is never held.
+    the unpruned solution (several times the pruned one) is never held, and into ``out``
+    (a list, or a :class:`~layersim.aniso.park.Spool` that keeps them in a file: on Table 2
+    row 6 of seed 000 they were 330 MiB beside the factors).
     """
     from ..threads import THREADS
     cols = np.flatnonzero(np.diff(Bc.indptr))
+    parts = [] if out is None else out
     if cols.size == 0:
-        return []
+        return parts
     rb = blk_pos[Bc.indices]
     first = np.minimum.reduceat(rb, Bc.indptr[cols])
     last = np.maximum.reduceat(rb, Bc.indptr[cols])
     unknown = ordered.astype(np.int32)
 
-    def group(g):
-        sel = first == g
+    def group(task):
+        g, sel = task
         gcols = cols[sel].astype(np.int32)
         lo, hi = int(g), int(last[sel].max()) + 1
-        dense = Bc[:, gcols][starts[lo]:starts[hi]].toarray()
-        rhs = {j: dense[starts[j] - starts[lo]:starts[j + 1] - starts[lo]] for j in range(lo, hi)}
-        scale = np.abs(dense).max()
-        del dense
+        # one dense array per block (the solve releases each as it is used: a dense array
+        # of all of them, viewed by the blocks, stayed whole until the end)
+        sub = Bc[:, gcols][starts[lo]:starts[hi]].tocsr()
+        rhs = {j: sub[starts[j] - starts[lo]:starts[j + 1] - starts[lo]].toarray()
+               for j in range(lo, hi)
+               if sub.indptr[starts[j + 1] - starts[lo]] > sub.indptr[starts[j] - starts[lo]]}
+        scale = np.abs(sub.data).max()
+        del sub
         rows, cs, vals = [], [], []
-        for j, y in lu.solve(rhs, lo, hi).items():
+        Y = lu.solve(rhs, lo, hi)
+        del rhs
+        for j in sorted(Y):
+            y = Y.pop(j)
             r, c = np.nonzero(np.abs(y) > PRUNE * scale)
             rows.append(unknown[r + starts[j]])
             cs.append(gcols[c])
@@ -258,8 +304,13 @@ def _solve_groups(lu, Bc, starts, blk_pos, ordered, keep=None) -> list:
             return np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0)
         return np.concatenate(rows), np.concatenate(cs), np.concatenate(vals)
 
-    todo = list(np.unique(first))
-    parts = []
+    # groups of at most GROUP_BYTES of dense solution: the solution of one source order
+    # spreads over the orders it couples to, up to every active unknown
+    width = max(1, GROUP_BYTES // (8 * int(starts[-1])))
+    todo = []
+    for g in np.unique(first):
+        sel = np.flatnonzero(first == g)
+        todo += [(g, sel[at:at + width]) for at in range(0, sel.size, width)]
     for at in range(0, len(todo), THREADS):
         for part in _map(group, todo[at:at + THREADS]):
             parts.append(part if keep is None else keep(*part))
@@ -278,6 +329,11 @@ def _sparse_lu_solve(Ac, Bc):
     from ..adding import _solve_columns, _sparse_lu
     solve = _sparse_lu(sps.csc_matrix(Ac))
     return sps.csr_matrix(_solve_columns(solve, sps.csc_matrix(Bc)))
+
+
+def _bytes(block) -> int:
+    """Bytes of a block, resident or parked."""
+    return block.bytes if isinstance(block, Parked) else memory.sparse_bytes(block)
 
 
 def add(top, bottom, relerr: float | None = None,
@@ -352,28 +408,43 @@ def add(top, bottom, relerr: float | None = None,
     if own_bottom and not opaque:
         idle += [(two, "Ttb"), (two, "Rb")]
     later = [(one, "Ttb"), (one, "Rb")] if own_top and not opaque else []
-    directory = park_directory(sum(memory.sparse_bytes(d[name]) for d, name in idle + later))
+    # (and the right-hand side Rt2 Ttb1 and the pieces of K = Rt2 Rb1, estimated by the
+    # bytes of their factors)
+    need = sum(_bytes(d[name]) for d, name in idle + later) \
+        + 2 * _bytes(two["Rt"]) + _bytes(one["Ttb"]) + _bytes(one["Rb"])
+    directory = park_directory(need)
     for d, name in idle:
         d[name] = park(d[name], directory)
     if relerr_intermediate is None:
-        product = lambda a, b: prune(a @ b, 1e-16)
+        product = lambda a, b, **_: prune(a @ b, 1e-16)
     else:
-        product = lambda a, b: pruned_product(a, b, h, relerr_intermediate)
+        product = lambda a, b, **kw: pruned_product(a, b, h, relerr_intermediate, **kw)
     # below an opaque base only Rt = Rt1 + Tbt1 Z1 is formed after the solve: Ttb1, then
-    # Rt2 and Rb1 are released as soon as their products are formed
-    first = product(two["Rt"], one["Ttb"] if not opaque else one.pop("Ttb"))
-    K = product(two.pop("Rt"), one["Rb"] if not opaque else one.pop("Rb"))
+    # Rt2 and Rb1 are released as soon as their products are formed; the right-hand side is
+    # parked while K is formed, and K itself goes to a file piece by piece as it is formed
+    # (the banded solve reads it piece by piece: layersim.aniso.rowpieces)
+    # (blocks parked by the projection, aniso_interface_operator(park_dir=...), are read
+    # back as they are needed)
+    Rt2, Ttb1 = unpark(two.pop("Rt")), unpark(one.pop("Ttb"))
+    first = park(product(Rt2, Ttb1), directory)
+    if not opaque:
+        one["Ttb"] = Ttb1
+    del Ttb1
+    Rb1 = unpark(one.pop("Rb"))
+    K = product(Rt2, Rb1, pieces=True, directory=directory)
+    if not opaque:
+        one["Rb"] = Rb1
+    del Rt2, Rb1
     for d, name in later:
         d[name] = park(d[name], directory)
     if opaque:
-        rhs = first
+        rhs = unpark(first)
     else:
-        rhs = sps.hstack([first, two["Tbt"]], format="csr")
-        del two["Tbt"]
+        rhs = sps.hstack([unpark(first), unpark(two.pop("Tbt"))], format="csr")
     del first
     memory.release()
     Z = banded_solve(K, rhs, h, md, identity_minus=True, relerr=relerr_intermediate,
-                     release=True)
+                     release=True, directory=directory)
     del K, rhs              # emptied by the solve as soon as it no longer needed them
     memory.release()
     if relerr is None:
@@ -382,7 +453,11 @@ def add(top, bottom, relerr: float | None = None,
         output = lambda a, b: pruned_product(a, b, h, 0.1 * relerr)
     Z1 = Z if opaque else Z[:, :N]
     Tbt1 = unpark(one.pop("Tbt"))
-    blocks = {"Rt": prune(unpark(one.pop("Rt")) + output(Tbt1, Z1), DROP_TOLERANCE)}
+    top = output(Tbt1, Z1)              # Rt1 read back after the product (150 MiB on row 6)
+    if opaque:
+        del Z, Z1, Tbt1
+    blocks = {"Rt": prune(unpark(one.pop("Rt")) + top, DROP_TOLERANCE)}
+    del top
     if not opaque:
         Z2 = Z[:, N:]
         del Z
@@ -394,10 +469,7 @@ def add(top, bottom, relerr: float | None = None,
         blocks["Ttb"] = prune(Ttb2 @ Ttb1 + output(W, Z1), DROP_TOLERANCE)
         del Ttb1, Ttb2, Z1
         blocks["Rb"] = prune(Rb2 + output(W, Z2), DROP_TOLERANCE)
-        del W, Z2, Rb2
-    else:
-        del Z, Z1
-    del Tbt1
+        del W, Z2, Rb2, Tbt1
     memory.release()
     if relerr is not None:
         reciprocal_prune(blocks, grid, md, eta_top, eta_bottom, delta, relerr)

@@ -103,7 +103,10 @@ class BlockBandedLU:
         Parameters
         ----------
         rhs : dict
-            ``{block j: dense (r_j, ncols)}`` for ``lo <= j < hi`` (missing blocks are zero).
+            ``{block j: dense (r_j, ncols)}`` for ``lo <= j < hi`` (missing blocks are zero);
+            emptied, each block released as the forward substitution uses it (and each block
+            of the forward solution as the backward one does: the three sets of blocks held
+            at once took 270 MiB on Table 2 row 6 of seed 000).
         tol : float
             Blocks of the solution below ``tol`` times the largest right-hand side entry are
             dropped; the substitution stops after ``b`` such blocks beyond the support.
@@ -131,7 +134,7 @@ class BlockBandedLU:
         Z: dict = {}
         quiet = 0
         for j in range(lo, J):
-            t = rhs.get(j)
+            t = rhs.pop(j, None)
             a = max(lo, j - b)
             prev = stacked(Z, a, j) if j > a else None
             if prev is not None:
@@ -149,7 +152,7 @@ class BlockBandedLU:
         Y: dict = {}
         quiet = 0
         for j in range(max(Z), -1, -1):
-            t = Z.get(j)
+            t = Z.pop(j, None)
             z = min(J, j + b + 1)
             nxt = stacked(Y, j + 1, z) if z > j + 1 else None
             if nxt is not None:

@@ -23,6 +23,8 @@ from ..errors import FileFormatError, OperatorError
 from ..operator import (BLOCKS, DROP_TOLERANCE, Grid, IsoOperator, header_arrays,
                         read_blocks, read_delta, write_blocks)
 from . import basis
+from .park import Parked, Spool
+from .rowpieces import RowPieces
 
 
 class AnisoOperator:
@@ -56,7 +58,8 @@ class AnisoOperator:
         for name in BLOCKS:
             mat = blocks.get(name)
             if mat is not None:
-                mat = sps.csr_matrix(mat)
+                if not isinstance(mat, Parked):     # parked: see aniso_interface_operator
+                    mat = sps.csr_matrix(mat)
                 if mat.shape != (N, N):
                     raise OperatorError(f"block {name} has shape {mat.shape}, expected ({N}, {N})"
                                         f" for md = {self.md} and h = {grid.h}")
@@ -96,9 +99,11 @@ class AnisoOperator:
     def _coupling(self) -> int:
         mode = basis.slot_mode(self.md)
         worst = 0
-        for mat in self.blocks.values():
+        for name, mat in self.blocks.items():
             if mat is None or mat.nnz == 0:
                 continue
+            if isinstance(mat, Parked):
+                raise OperatorError(f"block {name} is parked: pass ms")
             rs, cs = slot_pairs(mat, self.h)
             # |l - k| / 2 over the complex modes +-lo, +-li that the real entry stands for
             worst = max(worst, int(np.abs(mode[rs] - mode[cs]).max()) // 2)
@@ -111,13 +116,18 @@ class AnisoOperator:
         mat = self.blocks[name]
         if mat is None:
             raise OperatorError(f"block {name} was left out of this operator (opaque)")
+        if isinstance(mat, Parked):
+            raise OperatorError(f"block {name} is parked on disk for an adding step that "
+                                "consumes this operator (layersim.aniso.park)")
         return mat
 
     def nnz(self) -> int:
         return sum(m.nnz for m in self.blocks.values() if m is not None)
 
     def memory_bytes(self) -> int:
-        return sum(memory.sparse_bytes(m) for m in self.blocks.values())
+        """Resident bytes of the blocks (parked blocks not counted)."""
+        return sum(memory.sparse_bytes(m) for m in self.blocks.values()
+                   if not isinstance(m, Parked))
 
     def density(self) -> float:
         """Fraction of nonzero entries over the present blocks, counted on the complex
@@ -207,9 +217,7 @@ class AnisoOperator:
         ``Rot(angle) B Rot(-angle)``, i.e. ``f_{d,s} exp(-2 i s angle)``."""
         if angle == 0.0:
             return self
-        rot = basis.rotation_matrix(self.md, self.h, angle)
-        inv = basis.rotation_matrix(self.md, self.h, -angle)
-        blocks = {name: None if mat is None else prune(rot @ mat @ inv)
+        blocks = {name: None if mat is None else rotate_block(mat, self.md, self.h, angle)
                   for name, mat in self.blocks.items()}
         return AnisoOperator(self.grid, self.md, blocks, self.eta_top, self.eta_bottom,
                              self.delta)
@@ -253,7 +261,9 @@ class AnisoOperator:
         for name, mat in self.blocks.items():
             if mat is None:
                 continue
-            row0 = mat[:h]
+            row0 = mat.head if isinstance(mat, Parked) else mat[:h]
+            if row0 is None or row0.shape[0] != h:
+                raise OperatorError(f"block {name} is parked without its slot-0 rows")
             out[name] = ((row0.T @ fw) / np.tile(fw, self.slots)).reshape(self.slots, h)
         return out
 
@@ -281,6 +291,15 @@ class AnisoOperator:
         except (KeyError, ValueError, TypeError, OperatorError) as exc:
             raise FileFormatError(f"not a layersim anisotropic operator ({exc})") from None
         return op
+
+
+def rotate_block(mat, md: int, h: int, angle: float) -> sps.csr_matrix:
+    """One block of :meth:`AnisoOperator.rotated`: ``Rot(angle) B Rot(-angle)``."""
+    if angle == 0.0:
+        return mat
+    rot = basis.rotation_matrix(md, h, angle)
+    inv = basis.rotation_matrix(md, h, -angle)
+    return prune(rot @ mat @ inv)
 
 
 def slot_column_scale(grid: Grid, md: int) -> np.ndarray:
@@ -415,9 +434,10 @@ def _row_chunks(mat: sps.csr_matrix, entries: int = CHUNK_ENTRIES):
         start = stop
 
 
-def from_parts(parts: list, shape: tuple, fmt: str = "csr"):
-    """Sparse matrix of shape ``shape`` from ``parts``, a list of ``(rows, cols, values)``
-    triplets (duplicates are summed), ``parts`` emptied.
+def from_parts(parts, shape: tuple, fmt: str = "csr", select=None):
+    """Sparse matrix of shape ``shape`` from ``parts``, a list or a
+    :class:`~layersim.aniso.park.Spool` of ``(rows, cols, values)`` triplets (duplicates are
+    summed), ``parts`` emptied.
 
     The matrices of coupled stacks hold tens of millions of entries, and the parts are
     scattered straight into the CSR arrays (counting sort by row), each part released (and
@@ -428,25 +448,29 @@ def from_parts(parts: list, shape: tuple, fmt: str = "csr"):
 
     Parameters
     ----------
-    parts : list of (int ndarray (E,), int ndarray (E,), float ndarray (E,))
+    parts : list or Spool of (int ndarray (E,), int ndarray (E,), float ndarray (E,))
     shape : (int, int)
     fmt : {"csr", "csc"}
+    select : callable, optional
+        ``select(rows, cols, values)`` -> the triplet of the entries to keep, applied to
+        every part as it is read (e.g. :meth:`PairPruner.final_filter` for a spool).
     """
     if fmt not in ("csr", "csc"):
         raise ValueError(f"fmt must be 'csr' or 'csc', not {fmt!r}")
     by_col = fmt == "csc"               # a CSC matrix is the CSR matrix of the transpose
     n_rows, n_cols = shape[::-1] if by_col else shape
+    select = select or (lambda *part: part)
     counts = np.zeros(n_rows, np.int64)
     for part in parts:
-        counts += np.bincount(part[1 if by_col else 0], minlength=n_rows)
+        counts += np.bincount(select(*part)[1 if by_col else 0], minlength=n_rows)
     indptr, indices, data = _csr_arrays(n_rows, n_cols, int(counts.sum()))
     np.cumsum(counts, out=indptr[1:])
     del counts
     fill = indptr[:-1].astype(np.int64)              # next free position of each row
     placed = trimmed = 0
-    for k in range(len(parts)):
-        r, c, v = parts[k]
-        parts[k] = None
+    for part in (parts.drain() if isinstance(parts, Spool) else _drain(parts)):
+        r, c, v = select(*part)
+        del part
         if by_col:
             r, c = c, r
         if r.size == 0:
@@ -461,10 +485,18 @@ def from_parts(parts: list, shape: tuple, fmt: str = "csr"):
         placed += rs.size
         del r, c, v, order, rs, first, run, pos
         trimmed = _trim(placed, trimmed)
-    parts.clear()
     out = sps.csr_matrix((data, indices, indptr), shape=(n_rows, n_cols))
     out.sum_duplicates()            # sorts each row and sums its duplicates in place
     return out.T if by_col else out
+
+
+def _drain(items: list):
+    """Iterate over a list, releasing each item as it is handed out (the list is emptied)."""
+    for k in range(len(items)):
+        item, items[k] = items[k], None
+        yield item
+        del item
+    items.clear()
 
 
 def reciprocal_image(mat, h: int, col_scale: np.ndarray, factor: float = 1.0,
@@ -501,18 +533,21 @@ def slot_pairs(mat, h: int, columns=None):
     (slots of ``h`` rows / columns), optionally only entries in the columns where the boolean
     mask ``columns`` is true.
 
+    ``mat`` may also be a :class:`~layersim.aniso.rowpieces.RowPieces` (read piece by piece).
+
     Returns
     -------
     rows, cols : int ndarray
     """
-    mat = sps.csr_matrix(mat)
+    pieces = mat if isinstance(mat, RowPieces) else [(0, sps.csr_matrix(mat))]
     mark = np.zeros((-(-mat.shape[0] // h), -(-mat.shape[1] // h)), bool)
-    for lo, hi, rows in _row_chunks(mat):
-        cols = mat.indices[lo:hi]
-        if columns is not None:
-            sel = columns[cols]
-            rows, cols = rows[sel], cols[sel]
-        mark[rows // h, cols // h] = True
+    for start, piece in pieces:
+        for lo, hi, rows in _row_chunks(piece):
+            cols = piece.indices[lo:hi]
+            if columns is not None:
+                sel = columns[cols]
+                rows, cols = rows[sel], cols[sel]
+            mark[(rows + start) // h, cols // h] = True
     return np.nonzero(mark)
 
 
@@ -546,7 +581,7 @@ class PairPruner:
 
     Calling it keeps the entries of a part not below ``relerr`` times the largest magnitude
     of their ordinate pair ``(row % h, col % h)`` seen so far (this part included): every
-    entry it drops is dropped by :func:`prune_pairs` of the whole. :meth:`final` then filters
+    entry it drops is dropped by :func:`prune_pairs` of the whole. :meth:`final_filter` then filters
     the kept parts against the largest magnitudes of the whole stream, which are exactly those
     of :func:`prune_pairs` (the largest entries are never dropped).
     """
@@ -566,11 +601,9 @@ class PairPruner:
     def __call__(self, rows, cols, vals):
         return self._filter(rows, cols, vals, True)
 
-    def final(self, parts: list) -> list:
-        """The parts (filtered by earlier calls) pruned against the whole stream's maxima."""
-        for k in range(len(parts)):
-            parts[k] = self._filter(*parts[k], False)
-        return parts
+    def final_filter(self, rows, cols, vals):
+        """One part (filtered by earlier calls) pruned against the whole stream's maxima."""
+        return self._filter(rows, cols, vals, False)
 
 
 #: Bound on the multiply-adds of one chunk of :func:`pruned_product` (it bounds the chunk's
@@ -600,7 +633,8 @@ def product_row_chunks(a: sps.csr_matrix, b: sps.csr_matrix,
     return starts
 
 
-def pruned_product(a, b, h: int, relerr: float) -> sps.csr_matrix:
+def pruned_product(a, b, h: int, relerr: float, pieces: bool = False,
+                   directory: str | None = None):
     """``prune_pairs(a @ b, h, relerr)`` without holding the unpruned product: it is formed
     in chunks of rows of ``a`` of at most :data:`PRODUCT_CHUNK_FLOPS` multiply-adds
     (:func:`product_row_chunks`), each filtered by :class:`PairPruner` as it comes (on
@@ -608,23 +642,37 @@ def pruned_product(a, b, h: int, relerr: float) -> sps.csr_matrix:
     keeps). The chunks are kept as CSR pieces and copied into the result one by one, each
     released as it is copied: the result's pages become resident as the pieces are freed, so
     that the assembly needs about one copy of the result (12 bytes per entry) instead of the
-    three of a COO -> CSR conversion (44 bytes per entry)."""
+    three of a COO -> CSR conversion (44 bytes per entry).
+
+    With ``pieces`` the result is a :class:`~layersim.aniso.rowpieces.RowPieces` instead,
+    its pieces written to a file in ``directory`` as they are formed (kept in memory without
+    one) and never assembled: only the operands and the pieces in flight are resident (for
+    ``K`` of the adding equations, which the banded solve reads piece by piece)."""
     from ..threads import THREADS, parallel_map
     a, b = sps.csr_matrix(a), sps.csr_matrix(b)
     keep = PairPruner(h, relerr)
     bounds = product_row_chunks(a, b)
     chunks = list(zip(bounds[:-1], bounds[1:]))
-    pieces = []
+    shape = (a.shape[0], b.shape[1])
+    store = RowPieces(shape, directory) if pieces else None
+    kept = []
     for at in range(0, len(chunks), THREADS):      # THREADS chunks in flight at a time
         batch = chunks[at:at + THREADS]
         parts = parallel_map(lambda c: sps.csr_matrix(a[c[0]:c[1]] @ b), batch)
         for (start, _), part in zip(batch, parts):
-            pieces.append(_filter_piece(keep, start, part.indptr, part.indices, part.data,
-                                        True))
-        del parts, part
-    for k in range(len(pieces)):
-        pieces[k] = _filter_piece(keep, *pieces[k], False)
-    out = _stack_rows(pieces, (a.shape[0], b.shape[1]))
+            piece = _filter_piece(keep, start, part.indptr, part.indices, part.data, True)
+            if store is None:
+                kept.append(piece)
+            else:
+                store.append(*piece)
+        del parts, part, piece
+    final = lambda *piece: _filter_piece(keep, *piece, False)
+    if store is not None:
+        out = store.filtered(final)
+    else:
+        for k in range(len(kept)):
+            kept[k] = final(*kept[k])
+        out = _stack_rows(kept, shape)
     memory.release()                # the chunks' products and pieces came from the heap
     return out
 

@@ -75,11 +75,17 @@ class Parked:
         Its arrays are written and the caller's reference is the only one to drop: the
         matrix object itself is emptied (shape kept), so that its memory goes now.
     directory : str
+    head : int
+        Keep a copy of the first ``head`` rows resident (:attr:`head`; e.g. the slot-0 rows
+        that the energy check of a projected operator reads,
+        :meth:`~layersim.aniso.operator.AnisoOperator.albedo_slots`).
     """
 
-    def __init__(self, mat: sps.csr_matrix, directory: str):
+    def __init__(self, mat: sps.csr_matrix, directory: str, head: int = 0):
         self.shape = mat.shape
         self.nnz = int(mat.nnz)
+        self.bytes = sparse_bytes(mat)
+        self.head = mat[:head].copy() if head else None
         self._arrays = [(a.dtype, a.size) for a in (mat.indptr, mat.indices, mat.data)]
         fd, self.path = tempfile.mkstemp(prefix="layersim-block-", suffix=".bin",
                                          dir=directory)
@@ -113,16 +119,91 @@ class Parked:
         self._remove()
 
 
-def park(mat, directory: str | None):
-    """``Parked(mat)`` for a CSR matrix of at least :data:`PARK_MIN_BYTES` when ``directory``
-    is given, else ``mat`` itself."""
+def park(mat, directory: str | None, head: int = 0):
+    """``Parked(mat, directory, head)`` for a CSR matrix of at least :data:`PARK_MIN_BYTES`
+    when ``directory`` is given, else ``mat`` itself."""
     if directory is None or not sps.issparse(mat) or mat.format != "csr":
         return mat
     if sparse_bytes(mat) < PARK_MIN_BYTES:
         return mat
-    return Parked(mat, directory)
+    return Parked(mat, directory, head)
 
 
 def unpark(item):
     """The matrix of a :class:`Parked` block (loaded), or ``item`` itself."""
     return item.load() if isinstance(item, Parked) else item
+
+
+class Spool:
+    """Tuples of arrays appended one by one and read back in order, in a temporary file in
+    ``directory`` (removed by :meth:`close` or when the object goes) or, without one, in
+    memory: the parts of a result formed piece by piece (the pieces of ``K`` of the adding
+    equations, :class:`~layersim.aniso.rowpieces.RowPieces`; the solution's parts in the
+    banded solve) wait on disk instead of beside the work that forms them.
+
+    Parameters
+    ----------
+    directory : str, optional
+    """
+
+    def __init__(self, directory: str | None = None):
+        self._items: list = []          # arrays (in memory) or [(offset, ((dtype, size), ..))]
+        self._file = self.path = None
+        if directory is not None:
+            fd, self.path = tempfile.mkstemp(prefix="layersim-spool-", suffix=".bin",
+                                             dir=directory)
+            self._file = os.fdopen(fd, "w+b")
+
+    @property
+    def on_disk(self) -> bool:
+        return self.path is not None
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def append(self, arrays: tuple) -> None:
+        """Add one tuple of (1-D) arrays (as ``list.append``)."""
+        if self._file is None:
+            self._items.append(tuple(arrays))
+            return
+        offset = self._file.seek(0, os.SEEK_END)
+        layout = []
+        for a in arrays:
+            a = np.ascontiguousarray(a)
+            a.tofile(self._file)
+            layout.append((a.dtype, a.size))
+        self._items.append((offset, tuple(layout)))
+
+    def _read(self, item) -> tuple:
+        if self._file is None:
+            return item
+        offset, layout = item
+        self._file.seek(offset)
+        return tuple(np.fromfile(self._file, dtype, size) for dtype, size in layout)
+
+    def __iter__(self):
+        for item in self._items:
+            yield self._read(item)
+
+    def drain(self):
+        """Iterate once more, releasing each tuple as it is read (and the file at the end)."""
+        for k in range(len(self._items)):
+            item, self._items[k] = self._items[k], None
+            yield self._read(item)
+            del item
+        self.close()
+
+    def close(self) -> None:
+        self._items = []
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+        if self.path is not None:
+            try:
+                os.remove(self.path)
+            except OSError:
+                pass
+            self.path = None
+
+    def __del__(self):
+        self.close()

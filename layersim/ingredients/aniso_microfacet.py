@@ -45,7 +45,9 @@ import numpy as np
 
 from .. import fourier, memory
 from ..aniso import basis, series
-from ..aniso.operator import AnisoOperator, from_parts, reciprocal_image, slot_column_scale
+from ..aniso.operator import (AnisoOperator, from_parts, reciprocal_image, rotate_block,
+                              slot_column_scale)
+from ..aniso.park import park
 from ..kernels import projection as kproj
 from ..operator import Grid
 from ..scene import Conductor
@@ -486,7 +488,8 @@ def _entries(grid: Grid, md: int, ms: int, o, i, F):
 
 def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: float,
                              stats: AnisoProjectionStats | None = None,
-                             reciprocity: bool = True, relerr: float = RELERR) -> AnisoOperator:
+                             reciprocity: bool = True, relerr: float = RELERR,
+                             park_dir: str | None = None) -> AnisoOperator:
     """Operator of an anisotropic (or rotated) rough interface in the slot basis.
 
     Parameters
@@ -510,6 +513,12 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
         (default: the isotropic projection's ``RELERR``; :func:`layersim.solve` passes the
         plan's :data:`layersim.aniso.plan.COUPLED_RELERR`). Truncation is per pair, and mirrored
         blocks reuse the projected pairs, so reciprocity stays exact at any ``relerr``.
+    park_dir : str, optional
+        Park each block on disk there as soon as it is built (:mod:`layersim.aniso.park`,
+        its slot-0 rows kept for the energy check), for a caller that hands the operator to
+        an adding step that consumes it: the blocks of a coating wait on disk while the
+        others are projected (on Table 2 row 6 of seed 000 the coating's first two blocks
+        and the base, 525 MiB, were resident through the projection of the third).
     """
     if layer.smooth:
         raise ValueError("aniso_interface_operator needs a rough interface")
@@ -529,20 +538,34 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
                                                                                o, i, F))
         return from_parts(parts, (N, N))
 
+    def done(*names):
+        """Blocks complete (no other derives from them): rotated and parked if asked."""
+        if park_dir is None:
+            return
+        for name in names:
+            blocks[name] = park(rotate_block(blocks[name], md, grid.h, layer.rotation),
+                                park_dir, head=grid.h)
+        memory.release()
+
     blocks = {}
     for name in names:
         if not reciprocity or name == "Ttb":
             blocks[name] = project(name)
+            if not (reciprocity and name == "Ttb"):     # else done with its image
+                done(name)
         elif name == "Tbt":     # generalized reciprocity: Tbt = D Ttb^T D^-1 / eta^2
             blocks[name] = reciprocal_image(blocks["Ttb"], grid.h, col_scale,
                                             1.0 / eta.real ** 2)
+            done("Ttb", "Tbt")
         else:                   # one triangle of pairs and its reciprocal image
             half = project(name, triangle=True)
             blocks[name] = half + reciprocal_image(half, grid.h, col_scale, skip_diagonal=True)
             del half
+            done(name)
         memory.release()
     op = AnisoOperator(grid, md, blocks, eta_top=eta_above,
                        eta_bottom=None if opaque else layer.ior.real, ms=ms)
-    op = op.rotated(layer.rotation)
+    if park_dir is None:
+        op = op.rotated(layer.rotation)
     stats.seconds += time.perf_counter() - t0
     return op
