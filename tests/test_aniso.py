@@ -417,6 +417,38 @@ def test_pruned_product_is_the_pair_pruned_product(monkeypatch, tmp_path):
                     assert list(tmp_path.iterdir()) == []       # the filtered copy's file too
 
 
+@pytest.mark.parametrize("on_disk", [False, True])
+def test_sums_and_reciprocal_pruning_in_pieces_equal_the_whole(coupled_layers, on_disk,
+                                                                 tmp_path, monkeypatch):
+    """sum_pieces (row chunks, in memory or in a file, assembled one piece at a time) equals
+    scipy's sum, and reciprocal_prune through many pieces (in memory or in files) equals it
+    in one piece; the pruned stack is exactly reciprocal and lost entries; no file is left."""
+    from layersim.aniso import operator as aop
+    monkeypatch.setattr(aop, "CHUNK_ENTRIES", 5000)             # many pieces
+    where = str(tmp_path) if on_disk else None
+    d, hg, c, glass_out = coupled_layers
+    a, b = d.blocks["Rt"], glass_out.blocks["Tbt"]
+    for alpha, beta in ((1.0, 1.0), (0.5, -0.5)):
+        pieces = aop.sum_pieces(a, b, alpha, beta, where)
+        assert pieces.on_disk == on_disk and len(list(pieces)) > 3
+        got, ref = pieces.to_csr(release=True), alpha * a + beta * b
+        assert got.nnz == ref.nnz and abs(got - ref).max() <= 1e-15 * abs(ref).max()
+        assert pieces.nnz == 0 and list(tmp_path.iterdir()) == []
+    slab = aniso_adding.add(d, aniso_adding.add(hg, glass_out))     # all four blocks
+    ref, got = dict(slab.blocks), dict(slab.blocks)
+    args = (slab.grid, slab.md, slab.eta_top, slab.eta_bottom, slab.delta, 1e-5)
+    with monkeypatch.context() as m:                # the reference: one piece each
+        m.setattr(aop, "CHUNK_ENTRIES", 10 ** 9)
+        aop.reciprocal_prune(ref, *args)
+    aop.reciprocal_prune(got, *args, directory=where)
+    for name in ref:
+        assert (got[name] != ref[name]).nnz == 0 and got[name].nnz == ref[name].nnz
+        assert got[name].nnz < slab.blocks[name].nnz
+    assert reciprocity_error(AnisoOperator(slab.grid, slab.md, got, slab.eta_top,
+                                           slab.eta_bottom, slab.delta)) < 1e-14
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_from_parts_sums_duplicates_in_either_format(monkeypatch):
     """from_parts (counting sort of the parts into CSR, trimming the heap as it goes) equals
     scipy's COO conversion, duplicates summed, for CSR and CSC, with empty parts."""

@@ -37,7 +37,7 @@ from .banded import PRUNE, BlockBandedLU
 from .park import Parked, Spool, park, park_directory, unpark
 from .rowpieces import RowPieces
 from .operator import (AnisoOperator, PairPruner, as_aniso, from_parts, prune,
-                       pruned_product, reciprocal_prune, slot_pairs)
+                       pruned_product, reciprocal_prune, slot_pairs, sum_pieces)
 
 #: Relative residual above which a block-LU solve is redone with sparse LU, checked on up to
 #: RESIDUAL_COLUMNS columns, RESIDUAL_CHUNK at a time.
@@ -331,6 +331,18 @@ def _sparse_lu_solve(Ac, Bc):
     return sps.csr_matrix(_solve_columns(solve, sps.csc_matrix(Bc)))
 
 
+def _sum(terms: list, directory) -> sps.csr_matrix:
+    """``prune(a + b)`` of ``terms = [a, b]``, handed over (the list is emptied): summed in
+    pieces (:func:`~layersim.aniso.operator.sum_pieces`, in a file in ``directory``), the
+    terms released before the sum is assembled (on Table 2 row 6 of seed 000,
+    ``Rt1 + Tbt1 Z1`` held 3 x 170 MiB at once)."""
+    a, b = terms
+    terms.clear()
+    pieces = sum_pieces(a, b, directory=directory)
+    del a, b
+    return prune(pieces.to_csr(release=True), DROP_TOLERANCE)
+
+
 def _bytes(block) -> int:
     """Bytes of a block, resident or parked."""
     return block.bytes if isinstance(block, Parked) else memory.sparse_bytes(block)
@@ -368,6 +380,10 @@ def add(top, bottom, relerr: float | None = None,
         all but ``Rt1`` and ``Tbt1`` before the solve; on Table 2 row 6 of seed 000 that is
         460 of the operands' 710 MiB), and the blocks idle until after the solve are parked
         on disk meanwhile (:mod:`layersim.aniso.park`; there ``Rt1`` and ``Tbt1``, 270 MiB).
+        Blocks that arrive parked (projected with ``park_dir``) are read back when needed.
+        Whatever ``consume``, the right-hand side waits on disk while ``K`` is formed, and
+        ``K`` and the solution's parts are written to files as they are formed, where
+        :func:`~layersim.aniso.park.park_directory` allows.
         :func:`layersim.solve` passes it for operators that no later channel reuses.
 
     Returns
@@ -453,25 +469,25 @@ def add(top, bottom, relerr: float | None = None,
         output = lambda a, b: pruned_product(a, b, h, 0.1 * relerr)
     Z1 = Z if opaque else Z[:, :N]
     Tbt1 = unpark(one.pop("Tbt"))
-    top = output(Tbt1, Z1)              # Rt1 read back after the product (150 MiB on row 6)
+    terms = [None, output(Tbt1, Z1)]    # Rt1 read back after the product (150 MiB on row 6)
     if opaque:
         del Z, Z1, Tbt1
-    blocks = {"Rt": prune(unpark(one.pop("Rt")) + top, DROP_TOLERANCE)}
-    del top
+    terms[0] = unpark(one.pop("Rt"))
+    blocks = {"Rt": _sum(terms, directory)}
     if not opaque:
         Z2 = Z[:, N:]
         del Z
         Rb1, Ttb1 = unpark(one.pop("Rb")), unpark(one.pop("Ttb"))
-        Ttb2, Rb2 = unpark(two.pop("Ttb")), unpark(two.pop("Rb"))
+        Ttb2 = unpark(two.pop("Ttb"))
         W = Ttb2 @ Rb1
         del Rb1
         blocks["Tbt"] = prune(output(Tbt1, Z2), DROP_TOLERANCE)
-        blocks["Ttb"] = prune(Ttb2 @ Ttb1 + output(W, Z1), DROP_TOLERANCE)
+        blocks["Ttb"] = _sum([Ttb2 @ Ttb1, output(W, Z1)], directory)
         del Ttb1, Ttb2, Z1
-        blocks["Rb"] = prune(Rb2 + output(W, Z2), DROP_TOLERANCE)
-        del W, Z2, Rb2, Tbt1
+        blocks["Rb"] = _sum([unpark(two.pop("Rb")), output(W, Z2)], directory)
+        del W, Z2, Tbt1
     memory.release()
     if relerr is not None:
-        reciprocal_prune(blocks, grid, md, eta_top, eta_bottom, delta, relerr)
+        reciprocal_prune(blocks, grid, md, eta_top, eta_bottom, delta, relerr, directory)
         memory.release()
     return AnisoOperator(grid, md, blocks, eta_top, None if opaque else eta_bottom, delta)

@@ -311,7 +311,8 @@ def slot_column_scale(grid: Grid, md: int) -> np.ndarray:
 
 
 def reciprocal_prune(blocks: dict, grid: Grid, md: int, eta_top: float,
-                     eta_bottom: float | None, delta: dict, relerr: float) -> None:
+                     eta_bottom: float | None, delta: dict, relerr: float,
+                     directory: str | None = None) -> None:
     """Make the blocks of an operator exactly reciprocal and drop the coefficients below
     ``relerr`` times the largest of their ordinate pair, in place (``blocks`` is the
     ``{name: csr}`` dict of :class:`AnisoOperator`; each block is replaced as soon as its
@@ -329,6 +330,10 @@ def reciprocal_prune(blocks: dict, grid: Grid, md: int, eta_top: float,
     compared with the same pair maximum (over the pair and its mirror), so both are kept
     or both dropped. The unscattered beam on the diagonal of the transmission blocks
     (``delta``) is always kept and does not count in the maximum.
+
+    With ``directory`` the means of the reflection blocks and the pruned blocks wait in files
+    there between their passes (:func:`sum_pieces`), so that a reflection block, its image
+    and their mean are never resident together.
     """
     h = grid.h
     col_scale = slot_column_scale(grid, md)            # B -> G D (no 2 pi)
@@ -339,9 +344,12 @@ def reciprocal_prune(blocks: dict, grid: Grid, md: int, eta_top: float,
         out.data *= 0.5
         return out
 
-    for name in ("Rt", "Rb"):
+    for name in ("Rt", "Rb"):           # pieces of the mean, pruned below
         if blocks.get(name) is not None:
-            blocks[name] = mean(blocks[name], mirror(blocks[name]))
+            a = blocks.pop(name)
+            image = mirror(a)
+            blocks[name] = sum_pieces(a, image, 0.5, 0.5, directory)
+            del a, image
     if blocks.get("Ttb") is not None:
         ratio = (eta_bottom / eta_top) ** 2
         blocks["Ttb"] = mean(blocks["Ttb"], reciprocal_image(blocks["Tbt"], h, col_scale,
@@ -352,32 +360,41 @@ def reciprocal_prune(blocks: dict, grid: Grid, md: int, eta_top: float,
     # have millions of entries)
     eta = {"Rt": 1.0, "Rb": 1.0, "Ttb": eta_bottom, "Tbt": eta_top}
     for first, second in (("Rt", None), ("Rb", None), ("Ttb", "Tbt")):
-        parts = [(name, flip, blocks[name]) for name, flip in ((first, False), (second, True))
+        parts = [(name, flip, RowPieces.of(blocks[name]))
+                 for name, flip in ((first, False), (second, True))
                  if name is not None and blocks.get(name) is not None]
 
-        def keyed(name, flip, mat, lo, hi, rows, one=second is None):
-            cols = mat.indices[lo:hi]
+        def keyed(name, flip, piece, start, lo, hi, rows, one=second is None):
+            cols = piece.indices[lo:hi]
+            rows = rows + start
             o, i = rows % h, cols % h
             if one:                     # one symmetric block: unordered pairs
                 o, i = np.minimum(o, i), np.maximum(o, i)
             elif flip:                  # Tbt[y, x] pairs with Ttb[x, y]
                 o, i = i, o
-            mag = np.abs(mat.data[lo:hi]) * col_scale[cols] / eta[name] ** 2
+            mag = np.abs(piece.data[lo:hi]) * col_scale[cols] / eta[name] ** 2
             beam = (rows == cols) if name in delta else np.zeros(hi - lo, bool)
             return o.astype(np.int64) * h + i, mag, beam
 
         big = np.zeros(h * h)
         for name, flip, mat in parts:
-            for lo, hi, rows in _row_chunks(mat):
-                key, mag, beam = keyed(name, flip, mat, lo, hi, rows)
-                np.maximum.at(big, key[~beam], mag[~beam])
+            for start, piece in mat:
+                for lo, hi, rows in _row_chunks(piece):
+                    key, mag, beam = keyed(name, flip, piece, start, lo, hi, rows)
+                    np.maximum.at(big, key[~beam], mag[~beam])
         for name, flip, mat in parts:
-            keep = np.empty(mat.nnz, bool)
-            for lo, hi, rows in _row_chunks(mat):
-                key, mag, beam = keyed(name, flip, mat, lo, hi, rows)
-                keep[lo:hi] = beam | (mag >= relerr * big[key])
-            blocks[name] = _select(mat, keep)
-        parts = mat = None
+            kept = RowPieces(mat.shape, directory)
+            for start, piece in mat:
+                keep = np.empty(piece.nnz, bool)
+                for lo, hi, rows in _row_chunks(piece):
+                    key, mag, beam = keyed(name, flip, piece, start, lo, hi, rows)
+                    keep[lo:hi] = beam | (mag >= relerr * big[key])
+                piece = _select(piece, keep)
+                kept.append(start, piece.indptr, piece.indices, piece.data)
+            blocks[name] = None
+            mat.close()
+            blocks[name] = kept.to_csr(release=True)
+        parts = mat = piece = None
 
 
 def as_aniso(op, md: int | None = None) -> AnisoOperator:
@@ -688,23 +705,47 @@ def _filter_piece(keep: "PairPruner", start: int, indptr, indices, data, update:
     return start, ptr, c.astype(np.int32, copy=False), v
 
 
-def _stack_rows(pieces: list, shape: tuple) -> sps.csr_matrix:
-    """CSR matrix from consecutive row pieces ``(start, indptr, indices, data)`` (``pieces``
-    is emptied, each piece released as soon as it is copied)."""
-    indptr, indices, data = _csr_arrays(shape[0], shape[1], int(sum(p[1][-1] for p in pieces)))
+def _stack_rows(pieces, shape: tuple, total: int | None = None) -> sps.csr_matrix:
+    """CSR matrix from consecutive row pieces ``(start, indptr, indices, data)``: a list
+    (emptied, each piece released as soon as it is copied), or any iterable of them with
+    their ``total`` entries (e.g. read one by one from a file)."""
+    if total is None:
+        total = int(sum(p[1][-1] for p in pieces))
+    indptr, indices, data = _csr_arrays(shape[0], shape[1], int(total))
     at = trimmed = 0
-    for k in range(len(pieces)):
-        start, ptr, c, v = pieces[k]
-        pieces[k] = None
+    for start, ptr, c, v in (_drain(pieces) if isinstance(pieces, list) else pieces):
         n = int(ptr[-1])
         indptr[start + 1:start + ptr.size] = at + ptr[1:]
         indices[at:at + n], data[at:at + n] = c, v
         at += n
         del ptr, c, v
         trimmed = _trim(at, trimmed)
-    pieces.clear()
     np.maximum.accumulate(indptr, out=indptr)         # rows of no piece: empty
     return sps.csr_matrix((data, indices, indptr), shape=shape)
+
+
+def sum_pieces(a, b, alpha: float = 1.0, beta: float = 1.0,
+               directory: str | None = None) -> RowPieces:
+    """``alpha a + beta b`` as :class:`~layersim.aniso.rowpieces.RowPieces`, summed in chunks
+    of rows of about :data:`CHUNK_ENTRIES` entries, kept in a file in ``directory`` (in memory
+    without one): the caller releases ``a`` and ``b`` before assembling the sum
+    (``to_csr(release=True)``), which then takes the result's memory only, where a sum
+    formed at once holds both operands beside it (on Table 2 row 6 of seed 000, the mean of
+    the result and its reciprocal image: 3 x 180 MiB)."""
+    a, b = sps.csr_matrix(a), sps.csr_matrix(b)
+    if a.shape != b.shape:
+        raise ValueError(f"sum_pieces: shapes {a.shape} and {b.shape} differ")
+    out = RowPieces(a.shape, directory)
+    both = a.indptr.astype(np.int64) + b.indptr
+    start, n = 0, a.shape[0]
+    while start < n:
+        stop = int(np.searchsorted(both, both[start] + CHUNK_ENTRIES, side="right")) - 1
+        stop = min(n, max(stop, start + 1))
+        part = sps.csr_matrix(alpha * a[start:stop] + beta * b[start:stop])
+        out.append(start, part.indptr, part.indices, part.data)
+        del part
+        start = stop
+    return out
 
 
 def prune(mat, tolerance: float = DROP_TOLERANCE) -> sps.csr_matrix:

@@ -9,6 +9,14 @@ written to a file when it goes idle and read back (the file removed) when it is 
 file mostly still in the page cache, which the system reclaims under memory pressure where a
 resident block cannot be.
 
+What is parked in a solve (:func:`layersim.solve` of an anisotropic stack): the blocks of an
+operator that an adding step will consume, as the projection builds them
+(:func:`~layersim.ingredients.aniso_microfacet.aniso_interface_operator` with ``park_dir``;
+read back by the adding step when it needs them, the top's ``Rt`` and ``Tbt`` after the
+solve); the right-hand side ``Rt2 Ttb1`` while ``K`` is formed; ``K`` itself, written piece by
+piece as it is formed (:class:`~layersim.aniso.rowpieces.RowPieces` on a :class:`Spool`); the
+parts of the solution while the substitutions run (a :class:`Spool`).
+
 Parking needs a directory on a disk: a RAM-backed file system (tmpfs, ramfs) would move the
 block to memory that is not even counted as the process's, so :func:`park_directory` answers
 ``None`` there and the blocks stay resident. ``LAYERSIM_PARK_DIR`` names the directory

@@ -122,12 +122,19 @@ class RowPieces:
         pieces = [piece[:, cols] for _, piece in self]
         return _vstack_at(pieces, self._starts, (self.shape[0], len(cols)))
 
-    def to_csr(self) -> sps.csr_matrix:
-        """The whole matrix (for the sparse-LU fallback of the banded solve)."""
+    def to_csr(self, release: bool = False) -> sps.csr_matrix:
+        """The whole matrix, its pieces read and copied one at a time (with ``release``,
+        each dropped once copied and this object closed: no second copy of the matrix)."""
         if self._csr is not None:
-            return self._csr
-        return _vstack_at([piece for _, piece in self], self._starts,
-                          self.shape)
+            out = self._csr
+        else:
+            from .operator import _stack_rows
+            nnz = self.nnz
+            items = zip(self._starts, self._spool.drain() if release else self._spool)
+            out = _stack_rows(((start, *arrays) for start, arrays in items), self.shape, nnz)
+        if release:
+            self.close()
+        return out
 
     def diagonal(self) -> np.ndarray:
         """The main diagonal, (min(shape),)."""
