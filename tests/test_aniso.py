@@ -318,6 +318,25 @@ def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(
     assert list(tmp_path.iterdir()) == []
 
 
+def test_malloc_arena_cap_follows_the_environment(monkeypatch):
+    """layersim caps glibc's malloc arenas at LAYERSIM_MALLOC_ARENAS (default 1), 0 leaves
+    glibc's default; a value that is not an integer falls back to the default."""
+    from layersim import memory
+    if not memory._load() or not hasattr(memory._load(), "mallopt"):
+        pytest.skip("not glibc")
+    try:
+        monkeypatch.setenv("LAYERSIM_MALLOC_ARENAS", "0")
+        assert memory.limit_arenas() is False
+        monkeypatch.setenv("LAYERSIM_MALLOC_ARENAS", "2")
+        assert memory.limit_arenas() is True
+        monkeypatch.setenv("LAYERSIM_MALLOC_ARENAS", "many")
+        assert memory.limit_arenas() is True
+        assert memory.limit_arenas(0) is False
+    finally:
+        monkeypatch.delenv("LAYERSIM_MALLOC_ARENAS")
+        memory.limit_arenas()
+
+
 def test_parked_block_round_trip_and_where_parking_is_refused(tmp_path, monkeypatch):
     from layersim.aniso import park
     mat = sps.random(50, 40, 0.2, random_state=2, format="csr")
