@@ -42,12 +42,13 @@ from .operator import (AnisoOperator, PairPruner, as_aniso, from_parts, prune,
 #: Relative residual above which a block-LU solve is redone with sparse LU, checked on up to
 #: RESIDUAL_COLUMNS columns, RESIDUAL_CHUNK at a time.
 RESIDUAL_CHECK = 1e-9
+RESIDUAL_COLUMNS = 256
+RESIDUAL_CHUNK = 32
+
 #: Bytes of the dense solution of one group of right-hand sides in the substitutions, at
 #: most (if it spread over all the coupled unknowns): on Table 2 row 6 of seed 000 the
 #: groups of the first blocks held up to 1231 columns, 290 MiB each, two in flight.
 GROUP_BYTES = 32 << 20
-RESIDUAL_COLUMNS = 256
-RESIDUAL_CHUNK = 32
 
 
 def _memory_limit() -> int:
@@ -438,9 +439,8 @@ def add(top, bottom, relerr: float | None = None,
     # below an opaque base only Rt = Rt1 + Tbt1 Z1 is formed after the solve: Ttb1, then
     # Rt2 and Rb1 are released as soon as their products are formed; the right-hand side is
     # parked while K is formed, and K itself goes to a file piece by piece as it is formed
-    # (the banded solve reads it piece by piece: layersim.aniso.rowpieces)
-    # (blocks parked by the projection, aniso_interface_operator(park_dir=...), are read
-    # back as they are needed)
+    # (the banded solve reads it piece by piece: layersim.aniso.rowpieces); blocks parked by
+    # the projection (aniso_interface_operator(park_dir=...)) are read back when needed
     Rt2, Ttb1 = unpark(two.pop("Rt")), unpark(one.pop("Ttb"))
     first = park(product(Rt2, Ttb1), directory)
     if not opaque:
