@@ -116,15 +116,20 @@ class Parked:
         return sps.csr_matrix((data, indices, indptr), shape=self.shape)
 
     def _remove(self) -> None:
-        if self.path is not None:
-            try:
-                os.remove(self.path)
-            except OSError:
-                pass
-            self.path = None
+        _unlink(self.path)
+        self.path = None
 
     def __del__(self):
         self._remove()
+
+
+def _unlink(path: str | None) -> None:
+    """Remove a file of ours if there is one (already gone is fine)."""
+    if path is not None:
+        try:
+            os.remove(path)
+        except OSError:
+            pass
 
 
 def park(mat, directory: str | None, head: int = 0):
@@ -206,12 +211,8 @@ class Spool:
         if self._file is not None:
             self._file.close()
             self._file = None
-        if self.path is not None:
-            try:
-                os.remove(self.path)
-            except OSError:
-                pass
-            self.path = None
+        _unlink(self.path)
+        self.path = None
 
     def __del__(self):
         self.close()
