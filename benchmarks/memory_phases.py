@@ -94,7 +94,7 @@ class Sampler:
 def main(argv) -> int:
     import layersim
     from layersim import solver
-    from layersim.aniso import adding, banded
+    from layersim.aniso import adding, banded, operator
     from layersim.ingredients import aniso_microfacet as am
     sys.path.insert(0, os.path.dirname(__file__))
     import table2
@@ -123,6 +123,11 @@ def main(argv) -> int:
     s.wrap(adding, "_block_rows", "    dense block rows")
     s.wrap(banded.BlockBandedLU, "__init__", "    block LU")
     s.wrap(adding, "_solve_groups", "    substitutions")
+    s.wrap(adding, "_residual", "    residual check")
+    s.wrap(adding, "from_parts", "    assemble solution")
+    s.wrap(adding, "_sum", "  sum")
+    s.wrap(operator, "reciprocal_image", "    reciprocal image")
+    s.wrap(operator, "sum_pieces", "    sum in pieces")
     s.wrap(adding.AnisoOperator, "pruned", "  pruned (result)")
     s.wrap(adding, "pruned_product", "  product (pruned)")
     s.wrap(adding, "prune", "  prune (sums)")

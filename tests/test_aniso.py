@@ -312,9 +312,9 @@ def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(
     with pytest.raises(ValueError, match="consume"):
         aniso_adding.add(d, c, consume="yes")
     # opaque bottom: Rt1, Tbt1; transmissive: those, Ttb2, Rb2, then Ttb1, Rb1 after use
-    # (two relerr settings each); and the right-hand side Rt2 Ttb1 of every adding step
-    # while K is formed (9 steps: 8 above and the transmissive bottom)
-    assert len(written) == (2 * (2 + 6) + 9 if parking else 0)
+    # (two relerr settings each; the right-hand side Rt2 Ttb1, K and Tbt1 Z1 go to files
+    # as row pieces as they are formed, not through Parked)
+    assert len(written) == (2 * (2 + 6) if parking else 0)
     assert list(tmp_path.iterdir()) == []
 
 
@@ -397,9 +397,11 @@ def test_spooled_parts_assemble_as_a_list_of_them_does(on_disk, tmp_path):
 
 def test_pruned_product_is_the_pair_pruned_product(monkeypatch, tmp_path):
     """The chunked product (CSR pieces, filtered as they come, then stacked, or kept as row
-    pieces in memory or in a file) keeps exactly the entries of prune_pairs of the whole
-    product, with chunks of one row up to one chunk."""
-    from layersim.aniso import operator as aop
+    pieces in memory or in a file; the left factor whole or read in row pieces from a file)
+    keeps exactly the entries of prune_pairs of the whole product, with chunks of one row up
+    to one chunk."""
+    from layersim.aniso import operator as aop, rowpieces
+    monkeypatch.setattr(rowpieces, "PIECE_ENTRIES", 150)       # a written in several pieces
     rng = np.random.default_rng(3)
     for n, m, density in ((83, 250, 0.05), (97, 113, 0.2), (40, 30, 0.0)):
         a = sps.random(n, m, density, random_state=rng, format="csr")
@@ -426,13 +428,17 @@ def test_pruned_product_is_the_pair_pruned_product(monkeypatch, tmp_path):
                 if density:
                     assert 0 < ref.nnz < (a @ b).nnz
                 for where in (None, str(tmp_path)):             # pieces in memory, on disk
-                    pieces = aop.pruned_product(a, b, h, relerr, pieces=True, directory=where)
-                    assert pieces.on_disk == (where is not None) and pieces.nnz == ref.nnz
-                    whole = pieces.to_csr()
-                    assert np.array_equal(whole.indptr, ref.indptr)
-                    assert np.array_equal(whole.indices, ref.indices)
-                    assert np.array_equal(whole.data, ref.data)
-                    pieces.close()
+                    left = rowpieces.RowPieces.written(a, where)   # a read piece by piece
+                    for factor in (a, left):
+                        pieces = aop.pruned_product(factor, b, h, relerr, pieces=True,
+                                                    directory=where)
+                        assert pieces.on_disk == (where is not None) and pieces.nnz == ref.nnz
+                        whole = pieces.to_csr()
+                        assert np.array_equal(whole.indptr, ref.indptr)
+                        assert np.array_equal(whole.indices, ref.indices)
+                        assert np.array_equal(whole.data, ref.data)
+                        pieces.close()
+                    left.close()
                     assert list(tmp_path.iterdir()) == []       # the filtered copy's file too
 
 
@@ -442,8 +448,9 @@ def test_sums_and_reciprocal_pruning_in_pieces_equal_the_whole(coupled_layers, o
     """sum_pieces (row chunks, in memory or in a file, assembled one piece at a time) equals
     scipy's sum, and reciprocal_prune through many pieces (in memory or in files) equals it
     in one piece; the pruned stack is exactly reciprocal and lost entries; no file is left."""
-    from layersim.aniso import operator as aop
+    from layersim.aniso import operator as aop, rowpieces
     monkeypatch.setattr(aop, "CHUNK_ENTRIES", 5000)             # many pieces
+    monkeypatch.setattr(rowpieces, "PIECE_ENTRIES", 3000)       # blocks written in pieces
     where = str(tmp_path) if on_disk else None
     d, hg, c, glass_out = coupled_layers
     a, b = d.blocks["Rt"], glass_out.blocks["Tbt"]
@@ -465,6 +472,36 @@ def test_sums_and_reciprocal_pruning_in_pieces_equal_the_whole(coupled_layers, o
         assert got[name].nnz < slab.blocks[name].nnz
     assert reciprocity_error(AnisoOperator(slab.grid, slab.md, got, slab.eta_top,
                                            slab.eta_bottom, slab.delta)) < 1e-14
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("on_disk", [False, True])
+def test_transpose_and_sum_of_a_matrix_in_row_pieces(on_disk, tmp_path):
+    """A matrix given as row pieces (rows in no piece, pieces of one row) transposes by the
+    counting sort over its pieces to scipy's transpose, exactly and in canonical form, and
+    sums piece by piece (rows between pieces taken from the other term) to the whole sum."""
+    from layersim.aniso import operator as aop
+    from layersim.aniso.rowpieces import RowPieces
+    rng = np.random.default_rng(4)
+    A = sps.random(60, 45, density=0.2, random_state=rng, format="csr")
+    A = sps.csr_matrix(sps.diags((np.arange(60) % 7 != 3).astype(float)) @ A)   # empty rows
+    A.eliminate_zeros()
+    B = sps.random(60, 45, density=0.2, random_state=rng, format="csr")
+    pieces = RowPieces(A.shape, str(tmp_path) if on_disk else None)
+    held = np.zeros(60)
+    for lo, hi in ((0, 1), (1, 9), (12, 13), (13, 40), (52, 58)):   # rows 9-11, 40-51, 58-59
+        part = A[lo:hi]                                               # in no piece
+        pieces.append(lo, part.indptr, part.indices, part.data)
+        held[lo:hi] = 1.0
+    A = sps.csr_matrix(sps.diags(held) @ A)
+    A.eliminate_zeros()
+    T = aop._transposed(pieces)
+    assert T.has_canonical_format and T.shape == (45, 60) and T.nnz == A.nnz
+    assert np.array_equal(T.toarray(), A.T.toarray())
+    got = aop.sum_pieces(pieces, B, 0.5, -2.0, str(tmp_path) if on_disk else None)
+    assert np.allclose(got.to_csr(release=True).toarray(), (0.5 * A - 2.0 * B).toarray(),
+                       rtol=0, atol=1e-15)
+    pieces.close()
     assert list(tmp_path.iterdir()) == []
 
 
@@ -503,6 +540,26 @@ def test_block_lu_solver_matches_sparse_lu_on_a_banded_system():
     Y = banded_solve(A, B, h, md)
     np.testing.assert_allclose(Y.toarray(), np.linalg.solve(A.toarray(), B.toarray()),
                                atol=1e-12)
+
+
+def test_banded_solve_with_a_singular_diagonal_block_falls_back_to_sparse_lu():
+    """A coupled system that needs pivoting across Fourier orders (the block of order 0 is
+    zero, orders 0 and 2 swap): the block LU (no pivoting across blocks) detects the singular
+    block and the sparse LU solves it exactly."""
+    h, md = 4, 5
+    N = basis.n_slots(md) * h
+    mode = basis.slot_mode(md)
+    s0, s2 = int(np.flatnonzero(mode == 0)[0]), int(np.flatnonzero(mode == 2)[0])
+    A = sps.lil_matrix(np.eye(N))
+    for a, b in ((s0, s0), (s2, s2)):
+        A[a * h:(a + 1) * h, b * h:(b + 1) * h] = 0.0
+    for a, b in ((s0, s2), (s2, s0)):
+        A[a * h:(a + 1) * h, b * h:(b + 1) * h] = np.eye(h) * 2.0
+    A = sps.csr_matrix(A)
+    B = sps.random(N, 7, density=0.5, random_state=3, format="csr")
+    Y = banded_solve(A, B, h, md)
+    np.testing.assert_allclose(Y.toarray(), np.linalg.solve(A.toarray(), B.toarray()),
+                               atol=1e-13)
 
 
 @pytest.mark.parametrize("on_disk", [False, True])

@@ -25,6 +25,9 @@ anisotropic layer to an isotropic one works, and the result is anisotropic.
 
 from __future__ import annotations
 
+import functools
+import itertools
+
 import numpy as np
 import scipy.sparse as sps
 
@@ -144,7 +147,6 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
             f"unknowns, {J} blocks, a coupling band of {bw} orders; lower md or ms in "
             "[discretization], or n, or make the anisotropy milder")
     ordered = active[order]                                      # unknown at each position
-    rows = _block_rows(M, pos, starts, blk_pos, bw, sign, identity_minus)
     Brest, shape = B[rest], B.shape             # the eliminated unknowns: y = b
     Bo = B[ordered]
     if release:                                 # before the copies below
@@ -157,6 +159,15 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         Bo = Bo - sign * (M.columns(rest) @ Brest)[ordered]
     Bo = Bo.tocsc()
     Brest = Brest.tocoo()
+    # the residual check's sample of columns, then the right-hand sides by group (in a file
+    # where there is one: on Table 2 row 6 of seed 000 they took 118 MiB beside the factors)
+    cols = np.flatnonzero(np.diff(Bo.indptr))
+    sample = cols if cols.size <= RESIDUAL_COLUMNS else \
+        np.random.default_rng(0).choice(cols, RESIDUAL_COLUMNS, replace=False)
+    Bs = Bo[:, sample]
+    groups = _rhs_groups(Bo, starts, blk_pos, Spool(directory))
+    del Bo
+    rows = _block_rows(M, pos, starts, blk_pos, bw, sign, identity_minus)
     parts = None
     keep = (lambda *part: part) if relerr is None else PairPruner(h, relerr)
     try:
@@ -164,14 +175,10 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
         del rows
         # verify on a sample of columns (the block LU does not pivot across blocks), solved
         # without the pruning of ``relerr``
-        cols = np.flatnonzero(np.diff(Bo.indptr))
-        sample = cols if cols.size <= RESIDUAL_COLUMNS else \
-            np.random.default_rng(0).choice(cols, RESIDUAL_COLUMNS, replace=False)
-        if _residual(lu, M, Bo, sample, starts, blk_pos, ordered, identity_minus) \
-                <= RESIDUAL_CHECK:
+        if _residual(lu, M, Bs, starts, blk_pos, ordered, identity_minus) <= RESIDUAL_CHECK:
             if release:
                 _release_matrix(A, M)
-            parts = _solve_groups(lu, Bo, starts, blk_pos, ordered, keep,
+            parts = _solve_groups(lu, groups.drain(), starts, ordered, keep,
                                   out=Spool(directory))
         del lu
     except np.linalg.LinAlgError:
@@ -179,28 +186,32 @@ def banded_solve(A, B, h: int, md: int, what: str = "the adding equations",
     if parts is None:
         Ao = M.to_csr()[ordered][:, ordered]
         Ao = (sps.identity(order.size) - Ao) if identity_minus else Ao
+        Bo = from_parts(groups, (order.size, shape[1]), "csc",
+                        select=lambda *g: _group_triplets(starts, *g))
         Y = _sparse_lu_solve(Ao, Bo).tocoo()
         parts = [keep(ordered[Y.row], Y.col, Y.data)]
-        del Y
+        del Y, Bo
+    groups.close()
     # the eliminated unknowns, then one CSR matrix in the unknowns' numbering
     parts.append(keep(rest[Brest.row], Brest.col, Brest.data))
-    del Brest, Bo
+    del Brest
     return from_parts(parts, shape, select=None if relerr is None else keep.final_filter)
 
 
-def _residual(lu, M, Bo, sample, starts, blk_pos, ordered, identity_minus) -> float:
-    """Largest residual of the block-LU solution of the columns ``sample`` of ``Bo`` (block
+def _residual(lu, M, Bs, starts, blk_pos, ordered, identity_minus) -> float:
+    """Largest residual of the block-LU solution of the right-hand sides ``Bs`` (CSC, block
     order), relative to their largest entry, solved :data:`RESIDUAL_CHUNK` columns at a time:
     the unpruned solution of a column holds all the coupled unknowns (256 columns of Table 2
     row 6 of seed 000 took 400 MiB at once)."""
     N = M.shape[0]
     worst, scale = 0.0, 1e-300
-    for at in range(0, sample.size, RESIDUAL_CHUNK):
-        Bs = Bo[:, sample[at:at + RESIDUAL_CHUNK]]
-        Ys = from_parts(_solve_groups(lu, Bs, starts, blk_pos, ordered), (N, Bs.shape[1]))
+    for at in range(0, Bs.shape[1], RESIDUAL_CHUNK):
+        Bc = Bs[:, at:at + RESIDUAL_CHUNK]
+        Ys = from_parts(_solve_groups(lu, _rhs_groups(Bc, starts, blk_pos), starts, ordered),
+                        (N, Bc.shape[1]))
         Ms = M.matmul(Ys)[ordered]
-        resid = Bs - (Ys[ordered] - Ms if identity_minus else Ms)
-        scale = max(scale, abs(Bs).max())
+        resid = Bc - (Ys[ordered] - Ms if identity_minus else Ms)
+        scale = max(scale, abs(Bc).max())
         if resid.nnz:
             big = abs(resid).max()
             worst = max(worst, big) if np.isfinite(big) else np.inf
@@ -258,10 +269,45 @@ def _slot_keys(M, h, md):
     return label * (md + 1) + mode
 
 
-def _solve_groups(lu, Bc, starts, blk_pos, ordered, keep=None, out=None):
-    """Pruned block substitution, right-hand sides grouped by the first block they touch.
+def _rhs_groups(Bc, starts, blk_pos, out=None):
+    """The right-hand sides ``Bc`` (CSC, rows in block order) in groups for
+    :func:`_solve_groups`: columns grouped by the first block they touch, groups with more
+    columns than fit :data:`GROUP_BYTES` of dense solution split (the solution of one source
+    order spreads over the orders it couples to, up to every active unknown).
 
-    Groups with more columns than fit :data:`GROUP_BYTES` of dense solution are split.
+    Returns ``out`` (a list by default, or a :class:`~layersim.aniso.park.Spool`) holding,
+    per group, ``(columns, [lo, hi], indptr, indices, data)``: its columns of ``Bc`` (int32),
+    the blocks ``lo .. hi - 1`` they touch and the CSR arrays of ``Bc[rows of those blocks,
+    columns]``."""
+    out = [] if out is None else out
+    cols = np.flatnonzero(np.diff(Bc.indptr))
+    if cols.size == 0:
+        return out
+    rb = blk_pos[Bc.indices]
+    first = np.minimum.reduceat(rb, Bc.indptr[cols])
+    last = np.maximum.reduceat(rb, Bc.indptr[cols])
+    width = max(1, GROUP_BYTES // (8 * int(starts[-1])))
+    for g in np.unique(first):
+        sel = np.flatnonzero(first == g)
+        for at in range(0, sel.size, width):
+            part = sel[at:at + width]
+            gcols = cols[part].astype(np.int32)
+            lo, hi = int(g), int(last[part].max()) + 1
+            sub = Bc[:, gcols][starts[lo]:starts[hi]].tocsr()
+            out.append((gcols, np.array([lo, hi]), sub.indptr, sub.indices, sub.data))
+    return out
+
+
+def _group_triplets(starts, gcols, bounds, indptr, indices, data):
+    """``(positions, columns, values)`` of one group of :func:`_rhs_groups`."""
+    rows = starts[bounds[0]] + np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+    return rows, gcols[indices], data
+
+
+def _solve_groups(lu, groups, starts, ordered, keep=None, out=None):
+    """Pruned block substitution of the groups of right-hand sides of :func:`_rhs_groups`
+    (any iterable of them, read in order, e.g. ``Spool.drain()``).
+
     Returns the solution as parts ``(rows, cols, values)`` (32-bit indices, rows in the
     unknowns' numbering ``ordered[position]``) for :func:`~layersim.aniso.operator.from_parts`.
     Groups are solved :data:`layersim.threads.THREADS` at a time and each round's parts go
@@ -271,27 +317,20 @@ def _solve_groups(lu, Bc, starts, blk_pos, ordered, keep=None, out=None):
     row 6 of seed 000 they were 330 MiB beside the factors).
     """
     from ..threads import THREADS
-    cols = np.flatnonzero(np.diff(Bc.indptr))
     parts = [] if out is None else out
-    if cols.size == 0:
-        return parts
-    rb = blk_pos[Bc.indices]
-    first = np.minimum.reduceat(rb, Bc.indptr[cols])
-    last = np.maximum.reduceat(rb, Bc.indptr[cols])
     unknown = ordered.astype(np.int32)
 
     def group(task):
-        g, sel = task
-        gcols = cols[sel].astype(np.int32)
-        lo, hi = int(g), int(last[sel].max()) + 1
+        gcols, (lo, hi), indptr, indices, data = task
+        lo, hi = int(lo), int(hi)
         # one dense array per block (the solve releases each as it is used: a dense array
         # of all of them, viewed by the blocks, stayed whole until the end)
-        sub = Bc[:, gcols][starts[lo]:starts[hi]].tocsr()
+        sub = sps.csr_matrix((data, indices, indptr), shape=(indptr.size - 1, gcols.size))
         rhs = {j: sub[starts[j] - starts[lo]:starts[j + 1] - starts[lo]].toarray()
                for j in range(lo, hi)
                if sub.indptr[starts[j + 1] - starts[lo]] > sub.indptr[starts[j] - starts[lo]]}
         scale = np.abs(sub.data).max()
-        del sub
+        del sub, task, indptr, indices, data
         rows, cs, vals = [], [], []
         Y = lu.solve(rhs, lo, hi)
         del rhs
@@ -305,17 +344,14 @@ def _solve_groups(lu, Bc, starts, blk_pos, ordered, keep=None, out=None):
             return np.zeros(0, np.int32), np.zeros(0, np.int32), np.zeros(0)
         return np.concatenate(rows), np.concatenate(cs), np.concatenate(vals)
 
-    # groups of at most GROUP_BYTES of dense solution: the solution of one source order
-    # spreads over the orders it couples to, up to every active unknown
-    width = max(1, GROUP_BYTES // (8 * int(starts[-1])))
-    todo = []
-    for g in np.unique(first):
-        sel = np.flatnonzero(first == g)
-        todo += [(g, sel[at:at + width]) for at in range(0, sel.size, width)]
-    for at in range(0, len(todo), THREADS):
-        for part in _map(group, todo[at:at + THREADS]):
+    groups = iter(groups)
+    while True:
+        todo = list(itertools.islice(groups, THREADS))
+        if not todo:
+            return parts
+        for part in _map(group, todo):
             parts.append(part if keep is None else keep(*part))
-    return parts
+        del todo
 
 
 def _map(fn, items):
@@ -342,6 +378,19 @@ def _sum(terms: list, directory) -> sps.csr_matrix:
     pieces = sum_pieces(a, b, directory=directory)
     del a, b
     return prune(pieces.to_csr(release=True), DROP_TOLERANCE)
+
+
+def _multiply(a, b, h: int, relerr: float | None, floor: float | None = None,
+              pieces: bool = False, directory: str | None = None):
+    """``a @ b`` pruned per ordinate pair at ``relerr`` as it is formed
+    (:func:`~layersim.aniso.operator.pruned_product`), or whole and without the entries below
+    ``floor`` times its largest (``relerr`` None); with ``pieces`` as
+    :class:`~layersim.aniso.rowpieces.RowPieces` in a file in ``directory``."""
+    if relerr is not None:
+        return pruned_product(a, b, h, relerr, pieces=pieces, directory=directory)
+    out = a.matmul(b) if isinstance(a, RowPieces) else a @ b
+    out = out if floor is None else prune(out, floor)
+    return RowPieces.written(out, directory) if pieces else out
 
 
 def _bytes(block) -> int:
@@ -382,9 +431,11 @@ def add(top, bottom, relerr: float | None = None,
         460 of the operands' 710 MiB), and the blocks idle until after the solve are parked
         on disk meanwhile (:mod:`layersim.aniso.park`; there ``Rt1`` and ``Tbt1``, 270 MiB).
         Blocks that arrive parked (projected with ``park_dir``) are read back when needed.
-        Whatever ``consume``, the right-hand side waits on disk while ``K`` is formed, and
-        ``K`` and the solution's parts are written to files as they are formed, where
-        :func:`~layersim.aniso.park.park_directory` allows.
+        With ``consume`` naming the bottom, its ``Rt`` is read piece by piece from a file by
+        both products. Whatever ``consume``, the right-hand side ``Rt2 Ttb1``, ``K``, the
+        right-hand sides grouped for the substitutions, the solution's parts and
+        ``Tbt1 Z1`` are written to files as they are formed and read back piece by piece,
+        where :func:`~layersim.aniso.park.park_directory` allows.
         :func:`layersim.solve` passes it for operators that no later channel reuses.
 
     Returns
@@ -425,24 +476,26 @@ def add(top, bottom, relerr: float | None = None,
     if own_bottom and not opaque:
         idle += [(two, "Ttb"), (two, "Rb")]
     later = [(one, "Ttb"), (one, "Rb")] if own_top and not opaque else []
-    # (and the right-hand side Rt2 Ttb1 and the pieces of K = Rt2 Rb1, estimated by the
-    # bytes of their factors)
+    # (and Rt2, the pieces of the right-hand side Rt2 Ttb1, of K = Rt2 Rb1 and of Tbt1 Z1,
+    # estimated by the bytes of their factors and of Rt1)
     need = sum(_bytes(d[name]) for d, name in idle + later) \
-        + 2 * _bytes(two["Rt"]) + _bytes(one["Ttb"]) + _bytes(one["Rb"])
+        + 3 * _bytes(two["Rt"]) + _bytes(one["Ttb"]) + _bytes(one["Rb"]) + _bytes(one["Rt"])
     directory = park_directory(need)
     for d, name in idle:
         d[name] = park(d[name], directory)
-    if relerr_intermediate is None:
-        product = lambda a, b, **_: prune(a @ b, 1e-16)
-    else:
-        product = lambda a, b, **kw: pruned_product(a, b, h, relerr_intermediate, **kw)
+    product = functools.partial(_multiply, h=h, relerr=relerr_intermediate, floor=1e-16)
+    output = functools.partial(_multiply, h=h, relerr=None if relerr is None else 0.1 * relerr)
     # below an opaque base only Rt = Rt1 + Tbt1 Z1 is formed after the solve: Ttb1, then
-    # Rt2 and Rb1 are released as soon as their products are formed; the right-hand side is
-    # parked while K is formed, and K itself goes to a file piece by piece as it is formed
-    # (the banded solve reads it piece by piece: layersim.aniso.rowpieces); blocks parked by
-    # the projection (aniso_interface_operator(park_dir=...)) are read back when needed
-    Rt2, Ttb1 = unpark(two.pop("Rt")), unpark(one.pop("Ttb"))
-    first = park(product(Rt2, Ttb1), directory)
+    # Rt2 and Rb1 are released as soon as their products are formed; Rt2, the left factor
+    # of both, is read piece by piece from a file where this call owns it; the right-hand
+    # side and K go to files piece by piece as they are formed (the banded solve reads K
+    # piece by piece: layersim.aniso.rowpieces); blocks parked by the projection
+    # (aniso_interface_operator(park_dir=...)) are read back when needed
+    Rt2 = unpark(two.pop("Rt"))
+    if own_bottom:
+        Rt2 = RowPieces.written(Rt2, directory)
+    Ttb1 = unpark(one.pop("Ttb"))
+    first = product(Rt2, Ttb1, pieces=True, directory=directory)
     if not opaque:
         one["Ttb"] = Ttb1
     del Ttb1
@@ -454,25 +507,22 @@ def add(top, bottom, relerr: float | None = None,
     for d, name in later:
         d[name] = park(d[name], directory)
     if opaque:
-        rhs = unpark(first)
+        rhs = first.to_csr(release=True)
     else:
-        rhs = sps.hstack([unpark(first), unpark(two.pop("Tbt"))], format="csr")
+        rhs = sps.hstack([first.to_csr(release=True), unpark(two.pop("Tbt"))], format="csr")
     del first
     memory.release()
     Z = banded_solve(K, rhs, h, md, identity_minus=True, relerr=relerr_intermediate,
                      release=True, directory=directory)
     del K, rhs              # emptied by the solve as soon as it no longer needed them
     memory.release()
-    if relerr is None:
-        output = lambda a, b: a @ b
-    else:
-        output = lambda a, b: pruned_product(a, b, h, 0.1 * relerr)
     Z1 = Z if opaque else Z[:, :N]
     Tbt1 = unpark(one.pop("Tbt"))
-    terms = [None, output(Tbt1, Z1)]    # Rt1 read back after the product (150 MiB on row 6)
+    # Tbt1 Z1 to a file as it is formed, Rt1 read back after it (150 MiB on row 6)
+    terms = [output(Tbt1, Z1, pieces=True, directory=directory), None]
     if opaque:
         del Z, Z1, Tbt1
-    terms[0] = unpark(one.pop("Rt"))
+    terms[1] = unpark(one.pop("Rt"))
     blocks = {"Rt": _sum(terms, directory)}
     if not opaque:
         Z2 = Z[:, N:]

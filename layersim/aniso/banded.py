@@ -26,6 +26,8 @@ once with UMFPACK and runs custom sparse-sparse substitutions (sec. 3.3). Here
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import scipy.linalg as sla
 
@@ -42,7 +44,8 @@ class BlockBandedLU:
     rows : list of ndarray
         ``rows[i]`` has shape ``(r_i, c_i)``: block row ``i`` over the column blocks
         ``lo(i) .. hi(i) - 1`` with ``lo(i) = max(0, i - b)``, ``hi(i) = min(J, i + b + 1)``
-        (overwritten by the factors).
+        (overwritten by the factors: the multipliers left of the diagonal, the inverse of
+        the diagonal block, ``U`` right of it).
     starts : int ndarray (J + 1,)
         Block boundaries of the unknowns.
     bandwidth : int
@@ -53,28 +56,38 @@ class BlockBandedLU:
         self.J = J = self.starts.size - 1
         self.b = b = int(bandwidth)
         self.R = rows
-        self.D: list = [None] * J
         for j in range(J):
             Rj = self.R[j]
             cj = self._cols(j, j, j + 1)
-            self.D[j] = sla.lu_factor(Rj[:, cj], check_finite=False)
+            with warnings.catch_warnings():     # an exactly singular block: the caller
+                warnings.simplefilter("error", sla.LinAlgWarning)  # falls back to sparse LU
+                try:
+                    D = sla.lu_factor(Rj[:, cj], check_finite=False)
+                except sla.LinAlgWarning as exc:
+                    raise np.linalg.LinAlgError(f"block LU: {exc}") from None
+            inverse = sla.lu_solve(D, np.eye(D[0].shape[0]), check_finite=False)
+            if not np.all(np.isfinite(inverse)):
+                raise np.linalg.LinAlgError("singular diagonal block in the block LU")
             hi = min(J, j + b + 1)
-            if hi == j + 1:
-                continue
-            U = Rj[:, self._cols(j, j + 1, hi)]
-            for i in range(j + 1, hi):
-                Ri = self.R[i]
-                ci = self._cols(i, j, j + 1)
-                Lij = sla.lu_solve(self.D[j], Ri[:, ci].T, trans=1, check_finite=False).T
-                Ri[:, ci] = Lij
-                Ri[:, self._cols(i, j + 1, hi)] -= Lij @ U
-        if not all(np.all(np.isfinite(d[0])) for d in self.D):
-            raise np.linalg.LinAlgError("singular diagonal block in the block LU")
-        # Explicit inverses of the diagonal blocks for the substitutions: those run in worker
-        # threads, and scipy.linalg's LAPACK wrappers gave corrupted results when called
-        # concurrently on the CI machine (numpy's matmul does not).
-        self.Dinv = [sla.lu_solve(d, np.eye(d[0].shape[0]), check_finite=False)
-                     for d in self.D]
+            if hi > j + 1:
+                U = Rj[:, self._cols(j, j + 1, hi)]
+                for i in range(j + 1, hi):
+                    Ri = self.R[i]
+                    ci = self._cols(i, j, j + 1)
+                    Lij = sla.lu_solve(D, Ri[:, ci].T, trans=1, check_finite=False).T
+                    Ri[:, ci] = Lij
+                    Ri[:, self._cols(i, j + 1, hi)] -= Lij @ U
+            # The explicit inverse of the diagonal block replaces it in its block row (no
+            # later step reads it): the substitutions run in worker threads, and
+            # scipy.linalg's LAPACK wrappers gave corrupted results when called concurrently
+            # on the CI machine (numpy's matmul does not). Kept beside the rows, the factors
+            # and the inverses took 2 x 8 sum(r_j^2) bytes more.
+            Rj[:, cj] = inverse
+            del D, inverse
+
+    def _inverse(self, j: int) -> np.ndarray:
+        """Inverse of the diagonal block ``j`` (a view into its block row)."""
+        return self.R[j][:, self._cols(j, j, j + 1)]
 
     def _lo(self, i: int) -> int:
         return max(0, i - self.b)
@@ -159,7 +172,7 @@ class BlockBandedLU:
                 u = self.R[j][:, self._cols(j, j + 1, z)] @ nxt
                 t = -u if t is None else t - u
             if t is not None:
-                y = self.Dinv[j] @ t
+                y = self._inverse(j) @ t
                 if np.abs(y).max() > cut:
                     Y[j] = y
                     quiet = 0

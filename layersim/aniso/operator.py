@@ -24,7 +24,7 @@ from ..operator import (BLOCKS, DROP_TOLERANCE, Grid, IsoOperator, header_arrays
                         read_blocks, read_delta, write_blocks)
 from . import basis
 from .park import Parked, Spool
-from .rowpieces import RowPieces
+from .rowpieces import RowPieces, row_spans
 
 
 class AnisoOperator:
@@ -337,23 +337,15 @@ def reciprocal_prune(blocks: dict, grid: Grid, md: int, eta_top: float,
     """
     h = grid.h
     col_scale = slot_column_scale(grid, md)            # B -> G D (no 2 pi)
-    mirror = lambda m: reciprocal_image(m, h, col_scale)          # B of S^T
-
-    def mean(a, b):
-        out = a + b
-        out.data *= 0.5
-        return out
-
     for name in ("Rt", "Rb"):           # pieces of the mean, pruned below
         if blocks.get(name) is not None:
-            a = blocks.pop(name)
-            image = mirror(a)
-            blocks[name] = sum_pieces(a, image, 0.5, 0.5, directory)
-            del a, image
+            blocks[name] = with_reciprocal_image(blocks.pop(name), h, col_scale, 0.5, 0.5,
+                                                 directory=directory)
     if blocks.get("Ttb") is not None:
         ratio = (eta_bottom / eta_top) ** 2
-        blocks["Ttb"] = mean(blocks["Ttb"], reciprocal_image(blocks["Tbt"], h, col_scale,
-                                                             ratio))
+        image = reciprocal_image(blocks["Tbt"], h, col_scale, ratio)
+        blocks["Ttb"] = sum_pieces(blocks.pop("Ttb"), image, 0.5, 0.5).to_csr(release=True)
+        del image
         blocks["Tbt"] = reciprocal_image(blocks["Ttb"], h, col_scale, 1.0 / ratio)
     # reflection blocks are symmetric on their own; Ttb / eta_b^2 mirrors Tbt / eta_t^2;
     # per-entry quantities are formed in chunks of rows (the blocks of a coupled stack
@@ -524,7 +516,9 @@ def reciprocal_image(mat, h: int, col_scale: np.ndarray, factor: float = 1.0,
 
     Parameters
     ----------
-    mat : sparse (N, N)
+    mat : sparse (N, N) or RowPieces
+        Read piece by piece if given as :class:`~layersim.aniso.rowpieces.RowPieces` (see
+        :func:`_transposed`).
     h : int
         Ordinates per slot.
     col_scale : ndarray (N,)
@@ -533,7 +527,7 @@ def reciprocal_image(mat, h: int, col_scale: np.ndarray, factor: float = 1.0,
         Leave out the entries of the ordinate pairs ``o == i`` (the image of one triangle of
         pairs, to be added to that triangle).
     """
-    t = sps.csc_matrix(mat).T.tocsr()     # the CSC -> CSR conversion makes the copy
+    t = _transposed(mat)
     for lo, hi, rows in _row_chunks(t):
         cols = t.indices[lo:hi]
         part = t.data[lo:hi]
@@ -543,6 +537,55 @@ def reciprocal_image(mat, h: int, col_scale: np.ndarray, factor: float = 1.0,
     if skip_diagonal:
         t.eliminate_zeros()
     return t
+
+
+def _transposed(mat) -> sps.csr_matrix:
+    """``mat^T`` in CSR. A matrix in a file (:class:`~layersim.aniso.rowpieces.RowPieces`) is
+    transposed by a counting sort over its pieces, read twice (column counts, then each
+    piece's entries scattered to their rows of the transpose), so that only the transpose
+    and one piece are resident; the one conversion of scipy (C++) otherwise."""
+    if isinstance(mat, RowPieces) and mat.wrapped is not None:
+        mat = mat.wrapped
+    if not isinstance(mat, RowPieces):
+        return sps.csc_matrix(mat).T.tocsr()     # the CSC -> CSR conversion makes the copy
+    n_rows, n_cols = mat.shape
+    counts = np.zeros(n_cols, np.int64)
+    for _, piece in mat:
+        counts += np.bincount(piece.indices, minlength=n_cols)
+    indptr, indices, data = _csr_arrays(n_cols, n_rows, int(counts.sum()))
+    np.cumsum(counts, out=indptr[1:])
+    free = indptr[:-1].astype(np.int64)          # next free place in each row of mat^T
+    for start, piece in mat:
+        by_col = piece.tocsc()                   # rows ascending within each column
+        del piece
+        n = np.diff(by_col.indptr)
+        col = np.repeat(np.arange(n_cols, dtype=np.int32), n)
+        at = free[col] + (np.arange(by_col.nnz) - by_col.indptr[col])
+        indices[at] = by_col.indices + start
+        data[at] = by_col.data
+        free += n
+        del by_col, col, at
+    return sps.csr_matrix((data, indices, indptr), shape=(n_cols, n_rows))
+
+
+def with_reciprocal_image(mat, h: int, col_scale: np.ndarray, alpha: float, beta: float,
+                          skip_diagonal: bool = False,
+                          directory: str | None = None) -> RowPieces:
+    """``alpha mat + beta reciprocal_image(mat)`` (:func:`reciprocal_image`) in pieces of rows
+    (:func:`sum_pieces`), for the mean of a reflection block and its image and for a block
+    projected on one triangle of ordinate pairs.
+
+    With ``directory`` the matrix is first written there piece by piece and its image built
+    from the file (:func:`_transposed`), so that ``mat``, its image and their sum are never
+    resident together: the caller hands ``mat`` over (no reference of its own left) and
+    assembles the result once this returns (``to_csr(release=True)``). On Table 2 row 6 of
+    seed 000 the result's mean with its image held 3 x 180 MiB at once.
+    """
+    mat = RowPieces.written(mat, directory)
+    image = reciprocal_image(mat, h, col_scale, skip_diagonal=skip_diagonal)
+    out = sum_pieces(mat, image, alpha, beta, directory)
+    mat.close()
+    return out
 
 
 def slot_pairs(mat, h: int, columns=None):
@@ -664,30 +707,36 @@ def pruned_product(a, b, h: int, relerr: float, pieces: bool = False,
     With ``pieces`` the result is a :class:`~layersim.aniso.rowpieces.RowPieces` instead,
     its pieces written to a file in ``directory`` as they are formed (kept in memory without
     one) and never assembled: only the operands and the pieces in flight are resident (for
-    ``K`` of the adding equations, which the banded solve reads piece by piece)."""
+    ``K`` of the adding equations, which the banded solve reads piece by piece).
+
+    ``a`` may be given as :class:`~layersim.aniso.rowpieces.RowPieces` (e.g. in a file), read
+    piece by piece: then only ``b`` is resident whole."""
     from ..threads import THREADS, parallel_map
-    a, b = sps.csr_matrix(a), sps.csr_matrix(b)
+    b = sps.csr_matrix(b)
     keep = PairPruner(h, relerr)
-    bounds = product_row_chunks(a, b)
-    chunks = list(zip(bounds[:-1], bounds[1:]))
     shape = (a.shape[0], b.shape[1])
     store = RowPieces(shape, directory) if pieces else None
     kept = []
     formed = trimmed = 0
-    for at in range(0, len(chunks), THREADS):      # THREADS chunks in flight at a time
-        batch = chunks[at:at + THREADS]
-        parts = parallel_map(lambda c: sps.csr_matrix(a[c[0]:c[1]] @ b), batch)
-        for (start, _), part in zip(batch, parts):
-            formed += part.nnz
-            piece = _filter_piece(keep, start, part.indptr, part.indices, part.data, True)
-            if store is None:
-                kept.append(piece)
-            else:
-                store.append(*piece)
-        del parts, part, piece
-        # the chunks' temporaries come from the heap, whose freed pages otherwise pile up
-        # (K on Table 2 row 6 of seed 000: +135 MiB over the product written to a file)
-        trimmed = _trim(formed, trimmed)
+    for offset, rows in (a if isinstance(a, RowPieces) else [(0, sps.csr_matrix(a))]):
+        bounds = product_row_chunks(rows, b)
+        chunks = list(zip(bounds[:-1], bounds[1:]))
+        for at in range(0, len(chunks), THREADS):      # THREADS chunks in flight at a time
+            batch = chunks[at:at + THREADS]
+            parts = parallel_map(lambda c: sps.csr_matrix(rows[c[0]:c[1]] @ b), batch)
+            for (start, _), part in zip(batch, parts):
+                formed += part.nnz
+                piece = _filter_piece(keep, offset + start, part.indptr, part.indices,
+                                      part.data, True)
+                if store is None:
+                    kept.append(piece)
+                else:
+                    store.append(*piece)
+            del parts, part, piece
+            # the chunks' temporaries come from the heap, whose freed pages otherwise pile
+            # up (K on Table 2 row 6 of seed 000: +135 MiB over the product written to a file)
+            trimmed = _trim(formed, trimmed)
+        del rows
     final = lambda *piece: _filter_piece(keep, *piece, False)
     if store is not None:
         out = store.filtered(final)
@@ -732,25 +781,47 @@ def _stack_rows(pieces, shape: tuple, total: int | None = None) -> sps.csr_matri
 def sum_pieces(a, b, alpha: float = 1.0, beta: float = 1.0,
                directory: str | None = None) -> RowPieces:
     """``alpha a + beta b`` as :class:`~layersim.aniso.rowpieces.RowPieces`, summed in chunks
-    of rows of about :data:`CHUNK_ENTRIES` entries, kept in a file in ``directory`` (in memory
-    without one): the caller releases ``a`` and ``b`` before assembling the sum
-    (``to_csr(release=True)``), which then takes the result's memory only, where a sum
-    formed at once holds both operands beside it (on Table 2 row 6 of seed 000, the mean of
-    the result and its reciprocal image: 3 x 180 MiB)."""
-    a, b = sps.csr_matrix(a), sps.csr_matrix(b)
+    of rows of about :data:`CHUNK_ENTRIES` entries (read piece by piece of ``a`` if it is
+    given as RowPieces), kept in a file in ``directory`` (in memory without one): the caller
+    releases ``a`` and ``b`` before assembling the sum (``to_csr(release=True)``), which then
+    takes the result's memory only, where a sum formed at once holds both operands beside it
+    (on Table 2 row 6 of seed 000, ``Rt1 + Tbt1 Z1``: 3 x 170 MiB)."""
+    b = sps.csr_matrix(b)
     if a.shape != b.shape:
         raise ValueError(f"sum_pieces: shapes {a.shape} and {b.shape} differ")
     out = RowPieces(a.shape, directory)
-    both = a.indptr.astype(np.int64) + b.indptr
-    start, n = 0, a.shape[0]
-    while start < n:
-        stop = int(np.searchsorted(both, both[start] + CHUNK_ENTRIES, side="right")) - 1
-        stop = min(n, max(stop, start + 1))
-        part = sps.csr_matrix(alpha * a[start:stop] + beta * b[start:stop])
+    for start, stop, rows in _summed_rows(a, b):
+        part = beta * b[start:stop]
+        part = sps.csr_matrix(part if rows is None else alpha * rows + part)
         out.append(start, part.indptr, part.indices, part.data)
-        del part
-        start = stop
+        del part, rows
     return out
+
+
+def _summed_rows(a, b):
+    """``(start, stop, rows of a or None)`` over all rows for :func:`sum_pieces`: spans of
+    about :data:`CHUNK_ENTRIES` entries of ``a + b``, within the pieces of ``a`` if it is
+    given as RowPieces (and over the rows between them, ``a`` empty there)."""
+    if isinstance(a, RowPieces) and a.wrapped is not None:
+        a = a.wrapped
+    n = a.shape[0]
+    if not isinstance(a, RowPieces):
+        a = sps.csr_matrix(a)
+        both = a.indptr.astype(np.int64) + b.indptr
+        for start, stop in row_spans(both, 0, n, CHUNK_ENTRIES):
+            yield start, stop, a[start:stop]
+        return
+    done = 0
+    for start, piece in a:
+        for span in row_spans(b.indptr, done, start, CHUNK_ENTRIES):
+            yield *span, None
+        done = start + piece.shape[0]
+        both = piece.indptr.astype(np.int64) + (b.indptr[start:done + 1] - b.indptr[start])
+        for lo, hi in row_spans(both, 0, piece.shape[0], CHUNK_ENTRIES):
+            yield start + lo, start + hi, piece[lo:hi]
+        del piece
+    for span in row_spans(b.indptr, done, n, CHUNK_ENTRIES):
+        yield *span, None
 
 
 def prune(mat, tolerance: float = DROP_TOLERANCE) -> sps.csr_matrix:

@@ -32,6 +32,19 @@ PIECE_ENTRIES = 1 << 21
 _INDPTR, _INDICES, _DATA = np.dtype(np.int64), np.dtype(np.int32), np.dtype(np.float64)
 
 
+def row_spans(indptr, lo: int, hi: int, entries: int | None = None):
+    """``(start, stop)`` spans covering rows ``lo .. hi - 1`` of a CSR matrix with row
+    pointers ``indptr``, about ``entries`` entries each (:data:`PIECE_ENTRIES` by default;
+    one row at least)."""
+    entries = PIECE_ENTRIES if entries is None else entries
+    start = lo
+    while start < hi:
+        stop = int(np.searchsorted(indptr, indptr[start] + entries, side="right")) - 1
+        stop = min(hi, max(stop, start + 1))
+        yield start, stop
+        start = stop
+
+
 class RowPieces:
     """A CSR matrix of shape ``shape`` as consecutive pieces of rows, appended in order
     (rows not covered by any piece are empty).
@@ -62,6 +75,25 @@ class RowPieces:
         out.nnz = int(out._csr.nnz)
         return out
 
+    @classmethod
+    def written(cls, mat, directory: str | None) -> "RowPieces":
+        """A CSR matrix copied piece by piece to a file in ``directory`` (:meth:`of` without
+        one): once the caller drops its references, the matrix is out of memory while its
+        pieces are read (e.g. to build its transpose beside them)."""
+        if directory is None or isinstance(mat, RowPieces):
+            return cls.of(mat)
+        mat = sps.csr_matrix(mat)
+        out = cls(mat.shape, directory)
+        for start, stop in row_spans(mat.indptr, 0, mat.shape[0]):
+            part = mat[start:stop]
+            out.append(start, part.indptr, part.indices, part.data)
+        return out
+
+    @property
+    def wrapped(self):
+        """The CSR matrix that :meth:`of` wraps, or None."""
+        return self._csr
+
     @property
     def on_disk(self) -> bool:
         return self._spool.on_disk
@@ -84,13 +116,8 @@ class RowPieces:
         """``(start, piece)``: each piece a CSR matrix of its rows (all columns)."""
         if self._csr is not None:
             mat = self._csr
-            n, start = mat.shape[0], 0
-            while start < n:
-                stop = int(np.searchsorted(mat.indptr, mat.indptr[start] + PIECE_ENTRIES,
-                                           side="right")) - 1
-                stop = min(n, max(stop, start + 1))
+            for start, stop in row_spans(mat.indptr, 0, mat.shape[0]):
                 yield start, mat[start:stop]
-                start = stop
             return
         for start, arrays in zip(self._starts, self._spool):
             yield start, self._piece(arrays)

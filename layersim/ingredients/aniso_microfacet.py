@@ -46,8 +46,8 @@ import numpy as np
 from .. import fourier, memory
 from ..aniso import basis, series
 from ..aniso.operator import (AnisoOperator, from_parts, reciprocal_image, rotate_block,
-                              slot_column_scale)
-from ..aniso.park import park
+                              slot_column_scale, with_reciprocal_image)
+from ..aniso.park import Spool, park
 from ..kernels import projection as kproj
 from ..operator import Grid
 from ..scene import Conductor
@@ -363,24 +363,27 @@ def _truncate(F, md, stats, peak_len, relerr):
 
 def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: float, av: float,
                    dist: str, stats: AnisoProjectionStats, triangle: bool = False,
-                   relerr: float = RELERR, convert=None) -> list:
+                   relerr: float = RELERR, convert=None, out=None):
     """Project the pairs of block ``name`` (one triangle of them with ``triangle``).
 
     Returns
     -------
-    list
+    list or Spool
         Chunks ``(o, i, F)``: node indices (P,) and ``F[p, d, ms + s] = f_{d,s}`` (P, md,
         2 ms + 1), or ``convert(o, i, F)`` of each chunk, applied as soon as the chunk is
         projected (the dense chunks of a block took several times the memory of its sparse
-        entries). Batches are projected :data:`layersim.threads.THREADS` at a time, so that
-        only those batches' dense temporaries are alive at once.
+        entries), appended to ``out`` (a new list by default; a
+        :class:`~layersim.aniso.park.Spool` keeps them in a file: on Table 2 row 6 of seed
+        000 a triangle of the coating's ``Rb`` took 300 MiB beside the projection's
+        temporaries). Batches are projected :data:`layersim.threads.THREADS` at a time, so
+        that only those batches' dense temporaries are alive at once.
     """
     from ..threads import THREADS
     mu_i, mu_o, o, i = _block_pairs(grid, name, triangle)
     stats.pairs += mu_i.size
     fw = grid.flux_weight
     qs = _qs_for(ms)
-    chunks = []
+    chunks = [] if out is None else out
     todo = np.arange(mu_i.size)
     first = True
     while todo.size:
@@ -535,7 +538,8 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
         """The block's matrix from its (triangle of) pairs, assembled batch by batch."""
         parts = _project_block(grid, name, md, ms, eta, au, av, dist, stats, triangle=triangle,
                                relerr=relerr, convert=lambda o, i, F: _entries(grid, md, ms,
-                                                                               o, i, F))
+                                                                               o, i, F),
+                               out=None if park_dir is None else Spool(park_dir))
         return from_parts(parts, (N, N))
 
     def done(*names):
@@ -558,9 +562,9 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
                                             1.0 / eta.real ** 2)
             done("Ttb", "Tbt")
         else:                   # one triangle of pairs and its reciprocal image
-            half = project(name, triangle=True)
-            blocks[name] = half + reciprocal_image(half, grid.h, col_scale, skip_diagonal=True)
-            del half
+            blocks[name] = with_reciprocal_image(project(name, triangle=True), grid.h,
+                                                 col_scale, 1.0, 1.0, skip_diagonal=True,
+                                                 directory=park_dir).to_csr(release=True)
             done(name)
         memory.release()
     op = AnisoOperator(grid, md, blocks, eta_top=eta_above,
