@@ -13,9 +13,12 @@ What is parked in a solve (:func:`layersim.solve` of an anisotropic stack): the 
 operator that an adding step will consume, as the projection builds them
 (:func:`~layersim.ingredients.aniso_microfacet.aniso_interface_operator` with ``park_dir``;
 read back by the adding step when it needs them, the top's ``Rt`` and ``Tbt`` after the
-solve); the right-hand side ``Rt2 Ttb1`` while ``K`` is formed; ``K`` itself, written piece by
-piece as it is formed (:class:`~layersim.aniso.rowpieces.RowPieces` on a :class:`Spool`); the
-parts of the solution while the substitutions run (a :class:`Spool`).
+solve), and, before that, the projected parts of each block and a triangle of pairs while its
+reciprocal image is formed; in the adding step the bottom's ``Rt`` (read piece by piece by
+both products), the right-hand side ``Rt2 Ttb1``, ``K`` and ``Tbt1 Z1``, each written piece by
+piece as it is formed (:class:`~layersim.aniso.rowpieces.RowPieces` on a :class:`Spool`), the
+right-hand sides grouped for the substitutions and the parts of the solution (a
+:class:`Spool`), and the result while its reciprocal image is formed.
 
 Parking needs a directory on a disk: a RAM-backed file system (tmpfs, ramfs) would move the
 block to memory that is not even counted as the process's, so :func:`park_directory` answers
