@@ -478,8 +478,9 @@ def test_sums_and_reciprocal_pruning_in_pieces_equal_the_whole(coupled_layers, o
 @pytest.mark.parametrize("on_disk", [False, True])
 def test_transpose_and_sum_of_a_matrix_in_row_pieces(on_disk, tmp_path):
     """A matrix given as row pieces (rows in no piece, pieces of one row) transposes by the
-    counting sort over its pieces to scipy's transpose, exactly and in canonical form, and
-    sums piece by piece (rows between pieces taken from the other term) to the whole sum."""
+    counting sort over its pieces to scipy's transpose, exactly and in canonical form, sums
+    piece by piece (rows between pieces taken from the other term) to the whole sum and
+    prunes piece by piece as the whole matrix does."""
     from layersim.aniso import operator as aop
     from layersim.aniso.rowpieces import RowPieces
     rng = np.random.default_rng(4)
@@ -501,7 +502,12 @@ def test_transpose_and_sum_of_a_matrix_in_row_pieces(on_disk, tmp_path):
     got = aop.sum_pieces(pieces, B, 0.5, -2.0, str(tmp_path) if on_disk else None)
     assert np.allclose(got.to_csr(release=True).toarray(), (0.5 * A - 2.0 * B).toarray(),
                        rtol=0, atol=1e-15)
-    pieces.close()
+    cut = 0.5 * abs(A).max()                    # prune: piece by piece as whole
+    kept = aop.prune(pieces, 0.5)
+    assert pieces.nnz == 0 and kept.on_disk == on_disk
+    kept = kept.to_csr(release=True)
+    assert 0 < kept.nnz < A.nnz and np.abs(kept.data).min() >= cut
+    assert (kept != aop.prune(A.copy(), 0.5)).nnz == 0
     assert list(tmp_path.iterdir()) == []
 
 

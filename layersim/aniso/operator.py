@@ -315,9 +315,10 @@ def reciprocal_prune(blocks: dict, grid: Grid, md: int, eta_top: float,
                      directory: str | None = None) -> None:
     """Make the blocks of an operator exactly reciprocal and drop the coefficients below
     ``relerr`` times the largest of their ordinate pair, in place (``blocks`` is the
-    ``{name: csr}`` dict of :class:`AnisoOperator`; each block is replaced as soon as its
-    successor is formed, so a caller holding no other reference frees it then). This is the
-    truncation that the coupled projection applies to each pair (see
+    ``{name: csr}`` dict of :class:`AnisoOperator`, a block possibly given as
+    :class:`~layersim.aniso.rowpieces.RowPieces`, and CSR on return; each block is replaced
+    as soon as its successor is formed, so a caller holding no other reference frees it
+    then). This is the truncation that the coupled projection applies to each pair (see
     :data:`layersim.aniso.plan.COUPLED_RELERR`).
 
     In ``S = G D / eta^2`` (``G`` the coefficients, ``D`` the slot scale of
@@ -824,9 +825,23 @@ def _summed_rows(a, b):
         yield *span, None
 
 
-def prune(mat, tolerance: float = DROP_TOLERANCE) -> sps.csr_matrix:
-    """Drop entries below ``tolerance`` times the largest magnitude of ``mat`` (CSR copy)."""
-    mat = sps.csr_matrix(mat)
+def prune(mat, tolerance: float = DROP_TOLERANCE):
+    """Drop entries below ``tolerance`` times the largest magnitude of ``mat``.
+
+    A CSR matrix is pruned in place (pass a temporary) and returned; other formats are
+    converted. :class:`~layersim.aniso.rowpieces.RowPieces` are pruned piece by piece (one
+    pass for the largest magnitude, one to filter) into new RowPieces, these emptied."""
+    if isinstance(mat, RowPieces) and mat.wrapped is None:
+        cut = tolerance * max((np.abs(p.data).max() for _, p in mat if p.nnz), default=0.0)
+
+        def drop(start, indptr, indices, data):
+            piece = sps.csr_matrix((data, indices, indptr), shape=(indptr.size - 1,
+                                                                   mat.shape[1]))
+            piece.data[np.abs(piece.data) < cut] = 0.0
+            piece.eliminate_zeros()
+            return start, piece.indptr, piece.indices, piece.data
+        return mat.filtered(drop)
+    mat = sps.csr_matrix(mat.wrapped if isinstance(mat, RowPieces) else mat)
     if mat.nnz:
         cut = tolerance * np.abs(mat.data).max()
         mat.data[np.abs(mat.data) < cut] = 0.0
