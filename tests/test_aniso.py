@@ -215,6 +215,20 @@ def test_projection_without_the_reciprocity_shortcut_is_reciprocal_and_conservin
     assert np.median(E["Rt"][0] + E["Ttb"][0]) > 0.98
 
 
+def test_coarse_bounds_in_chunks_of_pairs_equal_all_pairs_at_once(monkeypatch):
+    """The pre-pass bounds of a block (_coarse, peak parameters and BSDF bound per pair) are
+    the same evaluated a few pairs at a time (the memory bound) as all at once."""
+    from layersim.ingredients import aniso_microfacet as am
+    mu_i, mu_o, _, _ = am._block_pairs(G32, "Rb", False)
+    args = (mu_i, mu_o, 1.5, 0.15, 0.05, "beckmann", 32)
+    whole = am._coarse(*args)
+    monkeypatch.setattr(am, "COARSE_ELEMENTS", 17 * 17 * 7)        # 7 pairs per launch
+    chunked = am._coarse(*args)
+    assert mu_i.size > 7 * 10
+    for x, y in zip(whole, chunked):
+        assert x.shape == y.shape and np.array_equal(x, y)
+
+
 # ---- adding ---------------------------------------------------------------------------------
 
 def test_coupled_adding_of_isotropic_operators_is_isotropic_adding():

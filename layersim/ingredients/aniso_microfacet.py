@@ -81,6 +81,10 @@ N_KINK = 512
 K_KINK = 160
 #: Coarse samples used to bound the BSDF of a pair before projecting it.
 N_COARSE_D = 17
+#: Pairs x coarse samples evaluated at once by _coarse: the kernel's inputs and outputs take
+#: about six arrays of 8 bytes per element (~48 MiB); all pairs of a block at once took
+#: ~360 MiB on the coating of Table 2 row 6 of seed 000.
+COARSE_ELEMENTS = 1 << 20
 #: Bound on (pairs x (phi_s samples + fit terms) x FFT length) per batch: the temporaries take
 #: ~8 bytes per element (~32 MiB per batch, one batch per thread).
 BATCH_ELEMENTS = 4_000_000
@@ -115,7 +119,18 @@ def _qs_for(ms: int) -> int:
 
 
 def _coarse(mu_i, mu_o, eta, au, av, dist, qs):
-    """Peak parameters at every phi_s sample and a bound of the BSDF per pair."""
+    """Peak parameters at every phi_s sample and a bound of the BSDF per pair, evaluated
+    for :data:`COARSE_ELEMENTS` pair samples at a time."""
+    step = max(1, COARSE_ELEMENTS // ((qs // 2 + 1) * N_COARSE_D))
+    if mu_i.size <= step:
+        return _coarse_chunk(mu_i, mu_o, eta, au, av, dist, qs)
+    parts = [_coarse_chunk(mu_i[at:at + step], mu_o[at:at + step], eta, au, av, dist, qs)
+             for at in range(0, mu_i.size, step)]
+    return tuple(np.concatenate(x) for x in zip(*parts))
+
+
+def _coarse_chunk(mu_i, mu_o, eta, au, av, dist, qs):
+    """:func:`_coarse` of one chunk of pairs."""
     P = mu_i.size
     ns = qs // 2 + 1
     phi_s = np.arange(ns) * (2.0 * np.pi / qs)
