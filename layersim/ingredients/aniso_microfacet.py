@@ -83,10 +83,13 @@ K_KINK = 160
 N_COARSE_D = 17
 #: Pairs x coarse samples evaluated at once by _coarse: the kernel's inputs and outputs take
 #: about six arrays of 8 bytes per element (~48 MiB); all pairs of a block at once took
-#: ~360 MiB on the coating of Table 2 row 6 of seed 000.
+#: 355 MiB above the baseline in the plan of Table 2 row 6 of seed 000 at n = 390 (97 MiB
+#: in chunks).
 COARSE_ELEMENTS = 1 << 20
-#: Bound on (pairs x (phi_s samples + fit terms) x FFT length) per batch: the temporaries take
-#: ~8 bytes per element (~32 MiB per batch, one batch per thread).
+#: Bound on (pairs x (phi_s samples + fit terms) x FFT length) per batch, one batch per
+#: thread. The temporaries take several times 8 bytes per element: projecting a triangle of
+#: the coating's Rb on Table 2 row 6 of seed 000 peaked 370 MiB above the baseline (116 MiB
+#: with 1M elements, but the projection took 33 % longer; 2M: 21 % longer).
 BATCH_ELEMENTS = 4_000_000
 
 
