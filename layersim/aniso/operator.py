@@ -724,7 +724,8 @@ def pruned_product(a, b, h: int, relerr: float, pieces: bool = False,
         chunks = list(zip(bounds[:-1], bounds[1:]))
         for at in range(0, len(chunks), THREADS):      # THREADS chunks in flight at a time
             batch = chunks[at:at + THREADS]
-            parts = parallel_map(lambda c: sps.csr_matrix(rows[c[0]:c[1]] @ b), batch)
+            parts = parallel_map(lambda c, rows=rows: sps.csr_matrix(rows[c[0]:c[1]] @ b),
+                                 batch)
             for (start, _), part in zip(batch, parts):
                 formed += part.nnz
                 piece = _filter_piece(keep, offset + start, part.indptr, part.indices,
