@@ -330,7 +330,7 @@ def _solve_groups(lu, groups, starts, ordered, keep=None, out=None):
                for j in range(lo, hi)
                if sub.indptr[starts[j + 1] - starts[lo]] > sub.indptr[starts[j] - starts[lo]]}
         scale = np.abs(sub.data).max()
-        del sub, task, indptr, indices, data
+        del sub
         rows, cs, vals = [], [], []
         Y = lu.solve(rhs, lo, hi)
         del rhs

@@ -557,7 +557,7 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
         parts = _project_block(grid, name, md, ms, eta, au, av, dist, stats, triangle=triangle,
                                relerr=relerr, convert=lambda o, i, F: _entries(grid, md, ms,
                                                                                o, i, F),
-                               out=None if park_dir is None else Spool(park_dir))
+                               out=Spool(park_dir))     # in memory without park_dir
         return from_parts(parts, (N, N))
 
     def done(*names):
