@@ -216,8 +216,10 @@ def _fit_smooth(mu_i, mu_o, theta_c, width, tau_ab, q_pars, phi_s, eta, au, av, 
     s = s / factor[:, None, :]
     # envelope of the (prefactor-weighted) peak over the phi_s samples, relative
     rel = np.zeros((P, Q))
+    trig = (np.cos(t), np.sin(t))
     for j in range(ns):
-        pk = series.peak_samples(q0[:, j], qpi[:, j], theta0[:, j] - theta_c, dist, t) * factor
+        pk = series.peak_samples(q0[:, j], qpi[:, j], theta0[:, j] - theta_c, dist, t,
+                                 trig) * factor
         with np.errstate(invalid="ignore", divide="ignore"):
             rel = np.maximum(rel, np.nan_to_num(pk / pk.max(axis=1, keepdims=True)))
     x = t / width[:, None]
@@ -321,12 +323,12 @@ def _product_series(mu_i, mu_o, geometry, phi_s, eta, au, av, dist, K, coef, tau
         ps = np.broadcast_to(np.repeat(phi_s, n_w)[None, :], (P, ns * n_w))
         smooth, _ = kproj.microfacet_split_ds(mu_i, mu_o, pd, ps, eta, au, av, dist)
         smooth = smooth.reshape(P, ns, n_w) * inside[:, None, :]
-    tt = np.broadcast_to(t, (P, n_w))
+    trig = (np.cos(t)[None, :], np.sin(t)[None, :])       # the same azimuths for all pairs
     buf = np.zeros((P, N))
     prod = np.empty((P, ns, K), complex)
     for j in range(ns):
         buf[:, idx] = series.peak_samples(q0[:, j], qpi[:, j], theta0[:, j] - theta_c, dist,
-                                          tt) * smooth[:, j]
+                                          t, trig) * smooth[:, j]
         # numpy's fft sums x_n exp(-i k t_n): the coefficient of exp(i k t)
         prod[:, j] = np.fft.rfft(buf, axis=1)[:, :K] / N
     prod *= np.exp(-1j * np.outer(theta_c, np.arange(K)))[:, None, :]   # t -> phi_d
