@@ -582,6 +582,37 @@ def test_banded_solve_with_a_singular_diagonal_block_falls_back_to_sparse_lu():
                                atol=1e-13)
 
 
+def test_banded_solve_with_block_lu_growth_falls_back_to_sparse_lu(monkeypatch):
+    """As above, but the diagonal blocks of orders 0 and 2 are 1e-14 (invertible: LAPACK
+    does not warn): the block LU divides by them and its factors grow by ~1e14, which the
+    residual check on random dense right-hand sides catches; the sparse LU (pivoting across
+    orders) then gives the accurate solution. Without the check the block-LU answer is wrong
+    far beyond the tolerance below."""
+    from layersim.aniso import adding as aadd
+    h, md = 4, 5
+    N = basis.n_slots(md) * h
+    mode = basis.slot_mode(md)
+    s0, s2 = int(np.flatnonzero(mode == 0)[0]), int(np.flatnonzero(mode == 2)[0])
+    A = sps.lil_matrix(np.eye(N))
+    for a, b in ((s0, s0), (s2, s2)):
+        A[a * h:(a + 1) * h, b * h:(b + 1) * h] = np.eye(h) * 1e-14
+    for a, b in ((s0, s2), (s2, s0)):
+        A[a * h:(a + 1) * h, b * h:(b + 1) * h] = np.eye(h) * 2.0 + 0.3
+    A = sps.csr_matrix(A)
+    B = sps.random(N, 7, density=0.5, random_state=3, format="csr")
+    ref = np.linalg.solve(A.toarray(), B.toarray())
+    checked = []
+    residual = aadd._residual
+    monkeypatch.setattr(aadd, "_residual", lambda *a: checked.append(residual(*a)) or
+                        checked[-1])
+    Y = banded_solve(A, B, h, md)
+    assert checked and checked[0] > aadd.RESIDUAL_CHECK         # the block LU was refused
+    np.testing.assert_allclose(Y.toarray(), ref, atol=1e-12 * np.abs(ref).max())
+    monkeypatch.setattr(aadd, "RESIDUAL_CHECK", np.inf)          # accept it: wrong
+    bad = banded_solve(A, B, h, md).toarray()
+    assert np.abs(bad - ref).max() > 1e-6 * np.abs(ref).max()
+
+
 @pytest.mark.parametrize("on_disk", [False, True])
 def test_banded_solve_reads_a_matrix_in_row_pieces(on_disk, tmp_path, monkeypatch):
     """``I - K`` with ``K`` given as row pieces (in memory or in a file; rows left out of
@@ -609,6 +640,8 @@ def test_banded_solve_reads_a_matrix_in_row_pieces(on_disk, tmp_path, monkeypatc
     assert np.array_equal(pieces.row_counts(), np.diff(K.indptr))
     assert abs(pieces.to_csr() - K).max() == 0.0
     assert abs(pieces.matmul(B) - K @ B).max() < 1e-15
+    D = np.random.default_rng(1).standard_normal((N, 3))
+    assert np.abs(pieces.matmul(D) - K @ D).max() < 1e-14          # dense: ndarray
     assert abs(pieces.columns([3, 50, 7]) - K[:, [3, 50, 7]]).max() == 0.0
     assert np.array_equal(pieces.diagonal(), K.diagonal())
     assert all(np.array_equal(x, y) for x, y in zip(slot_pairs(pieces, h), slot_pairs(K, h)))

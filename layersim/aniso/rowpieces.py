@@ -131,8 +131,15 @@ class RowPieces:
             counts[start:start + piece.shape[0]] = np.diff(piece.indptr)
         return counts
 
-    def matmul(self, X) -> sps.csr_matrix:
-        """``self @ X`` for a sparse ``X`` (CSR), piece by piece."""
+    def matmul(self, X):
+        """``self @ X``, piece by piece: CSR for a sparse ``X``, an ndarray for a dense one."""
+        if isinstance(X, np.ndarray):
+            if self._csr is not None:
+                return self._csr @ X
+            out = np.zeros((self.shape[0], X.shape[1]), np.result_type(X, _DATA))
+            for start, piece in self:
+                out[start:start + piece.shape[0]] = piece @ X
+            return out
         X = sps.csr_matrix(X)
         if self._csr is not None:
             return sps.csr_matrix(self._csr @ X)
