@@ -409,6 +409,34 @@ def test_spooled_parts_assemble_as_a_list_of_them_does(on_disk, tmp_path):
     assert len(spool) == 0 and list(tmp_path.iterdir()) == []
 
 
+def test_csr_product_equals_scipys_product():
+    """Rows lo..hi of a @ b without the symbolic pass (output sized by the multiply-adds)
+    equal scipy's product entry for entry and in order: 32- and 64-bit indices, empty rows,
+    an empty product, one row, and cancellation to exact zeros (dropped by both)."""
+    from layersim.aniso import operator as aop
+    rng = np.random.default_rng(11)
+    a = sps.random(60, 80, 0.08, random_state=rng, format="csr")
+    b = sps.random(80, 70, 0.1, random_state=rng, format="csr")
+    keep = np.ones(60)
+    keep[5] = 0.0
+    a = sps.csr_matrix(sps.diags(keep) @ a)                  # an empty row
+    a.eliminate_zeros()
+    b2 = b.tolil()
+    b2[4] = b2[3]
+    b2 = sps.csr_matrix(b2)
+    a2 = sps.csr_matrix(([1.0, -1.0], ([0, 0], [3, 4])), shape=(1, 80))  # a2 @ b2 = 0
+    cases = [(a, b, 0, 60), (a, b, 17, 41), (a, b, 5, 6), (a, b, 59, 60), (a2, b2, 0, 1)]
+    wide = sps.csr_matrix(a)
+    wide.indptr, wide.indices = wide.indptr.astype(np.int64), wide.indices.astype(np.int64)
+    cases.append((wide, b, 3, 50))
+    for x, y, lo, hi in cases:
+        ptr, cols, vals = aop.csr_product(x, lo, hi, y)
+        ref = sps.csr_matrix(x[lo:hi] @ y)
+        assert np.array_equal(ptr, ref.indptr)
+        assert np.array_equal(cols, ref.indices) and np.array_equal(vals, ref.data)
+    assert aop.csr_product(a2, 0, 1, b2)[1].size == 0
+
+
 def test_pruned_product_is_the_pair_pruned_product(monkeypatch, tmp_path):
     """The chunked product (CSR pieces, filtered as they come, then stacked, or kept as row
     pieces in memory or in a file; the left factor whole or read in row pieces from a file)
