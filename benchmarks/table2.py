@@ -22,7 +22,8 @@ md = 426 at the planner's accuracy (the coating's refraction lobe sets n = 390; 
 7.0 GiB). At that plan (``benchmarks/memory_phases.py 6 --default``, shared 2-core machine,
 commit 306c7fc) the solve took 384 s (plan and projection 158 s, the products of the adding
 equations 117 s, the solve 60 s, the output product, sum and pruning 49 s), peak RSS 1034 MiB
-above the baseline. It is run at
+above the baseline; 288 s and 1031 MiB at commit 434e2a0 (faster products and projection). It
+is run at
 ``n = 224, md = 300``: the smallest n at which the coating's discrete operator does not create
 energy (n = 196 and 210 are refused by the energy check: 1.00000x and 1.0012), and marked as
 such.
