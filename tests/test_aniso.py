@@ -461,6 +461,10 @@ def test_pruned_product_is_the_pair_pruned_product(monkeypatch, tmp_path):
             for lo, hi in zip(starts[:-1], starts[1:]):     # the bound, or a single row
                 assert hi - lo == 1 or row_flops[lo:hi].sum() <= chunk_flops
                 assert hi == n or row_flops[lo:hi + 1].sum() > chunk_flops   # greedy
+            whole, ref = aop.pruned_product(a, b, 5, None), sps.csr_matrix(a @ b)
+            assert np.array_equal(whole.indptr, ref.indptr)         # relerr None: a @ b
+            assert np.array_equal(whole.indices, ref.indices)
+            assert np.array_equal(whole.data, ref.data)
             for h, relerr in ((5, 1e-6), (7, 0.3)):
                 got, ref = aop.pruned_product(a, b, h, relerr), aop.prune_pairs(a @ b, h, relerr)
                 assert got.shape == ref.shape and got.nnz == ref.nnz

@@ -390,10 +390,9 @@ def _multiply(a, b, h: int, relerr: float | None, floor: float | None = None,
     (:func:`~layersim.aniso.operator.pruned_product`), or whole and without the entries below
     ``floor`` times its largest (``relerr`` None); with ``pieces`` as
     :class:`~layersim.aniso.rowpieces.RowPieces` in a file in ``directory``."""
-    if relerr is not None:
+    if relerr is not None or floor is None:
         return pruned_product(a, b, h, relerr, pieces=pieces, directory=directory)
-    out = a.matmul(b) if isinstance(a, RowPieces) else a @ b
-    out = out if floor is None else prune(out, floor)
+    out = prune(pruned_product(a, b, h, None), floor)
     return RowPieces.written(out, directory) if pieces else out
 
 
@@ -534,10 +533,11 @@ def add(top, bottom, relerr: float | None = None,
         del Z
         Rb1, Ttb1 = unpark(one.pop("Rb")), unpark(one.pop("Ttb"))
         Ttb2 = unpark(two.pop("Ttb"))
-        W = Ttb2 @ Rb1
+        W = _multiply(Ttb2, Rb1, h, None)
         del Rb1
         blocks["Tbt"] = prune(output(Tbt1, Z2), DROP_TOLERANCE)
-        blocks["Ttb"] = _sum([Ttb2 @ Ttb1, output(W, Z1)], directory, whole)
+        blocks["Ttb"] = _sum([_multiply(Ttb2, Ttb1, h, None), output(W, Z1)], directory,
+                             whole)
         del Ttb1, Ttb2, Z1
         blocks["Rb"] = _sum([unpark(two.pop("Rb")), output(W, Z2)], directory, whole)
         del W, Z2, Tbt1

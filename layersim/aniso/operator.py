@@ -702,27 +702,39 @@ def csr_product(a: sps.csr_matrix, lo: int, hi: int, b: sps.csr_matrix) -> tuple
     30.6 s of ``Rt @ Rb`` of the coating of Table 2 row 6 of seed 000 on one thread) before
     the numeric one. Here the output is sized by the multiply-adds of the rows instead, an
     upper bound on its entries, and left uninitialised: the pages past the entries written
-    are never touched, so they take address space, not memory. The rows of ``a`` are read
-    in place (no copy of the slice). Without SciPy's ``_sparsetools.csr_matmat`` (a private
+    are never touched, so they take address space, not memory (the returned arrays are views
+    of those buffers: callers that keep them copy them; where the address space is refused
+    the product is sized exactly as SciPy does). The rows of ``a`` are read in place (no
+    copy of the slice). Without SciPy's ``_sparsetools.csr_matmat`` (a private
     module) this falls back to the public product.
     """
     a0, a1 = int(a.indptr[lo]), int(a.indptr[hi])
     indices, data = a.indices[a0:a1], a.data[a0:a1]
     flops = int(np.diff(b.indptr)[indices].sum(dtype=np.int64))
     bound = min(flops, (hi - lo) * b.shape[1])
+
+    def exact():
+        """SciPy's product (symbolic pass, output sized exactly)."""
+        rows = sps.csr_matrix((data, indices, a.indptr[lo:hi + 1] - a0),
+                              shape=(hi - lo, a.shape[1]))
+        c = sps.csr_matrix(rows @ b)
+        return c.indptr, c.indices, c.data
+
     try:
         from scipy.sparse._sparsetools import csr_matmat
     except ImportError:                                     # pragma: no cover
-        c = sps.csr_matrix(a[lo:hi] @ b)
-        return c.indptr, c.indices, c.data
+        return exact()
     big = max(bound, a1 - a0, b.nnz, b.shape[1], hi - lo)
     idx = np.int32 if big < np.iinfo(np.int32).max else np.int64
     ptr = np.empty(hi - lo + 1, idx)
     if bound == 0:
         ptr[:] = 0
         return ptr, np.zeros(0, idx), np.zeros(0, np.result_type(a.data, b.data))
-    cols = np.empty(bound, idx)
-    vals = np.empty(bound, np.result_type(a.data, b.data))
+    try:
+        cols = np.empty(bound, idx)
+        vals = np.empty(bound, np.result_type(a.data, b.data))
+    except MemoryError:     # address space refused (strict overcommit)
+        return exact()
     csr_matmat(hi - lo, b.shape[1], (a.indptr[lo:hi + 1] - a0).astype(idx),
                indices.astype(idx, copy=False), data, b.indptr.astype(idx, copy=False),
                b.indices.astype(idx, copy=False), b.data, ptr, cols, vals)
@@ -740,9 +752,10 @@ def _int32_indices(mat: sps.csr_matrix) -> sps.csr_matrix:
                            mat.indptr.astype(np.int32)), shape=mat.shape)
 
 
-def pruned_product(a, b, h: int, relerr: float, pieces: bool = False,
+def pruned_product(a, b, h: int, relerr: float | None, pieces: bool = False,
                    directory: str | None = None):
-    """``prune_pairs(a @ b, h, relerr)`` without holding the unpruned product: it is formed
+    """``prune_pairs(a @ b, h, relerr)`` (``a @ b`` itself with ``relerr`` None, entries in
+    SciPy's order) without holding the unpruned product: it is formed
     in chunks of rows of ``a`` of at most :data:`PRODUCT_CHUNK_FLOPS` multiply-adds
     (:func:`product_row_chunks`), each filtered by :class:`PairPruner` as it comes (on
     Table 2 row 7 of seed 000 the product ``Rt2 Rb1`` had several times the entries it
@@ -760,7 +773,7 @@ def pruned_product(a, b, h: int, relerr: float, pieces: bool = False,
     piece by piece: then only ``b`` is resident whole."""
     from ..threads import THREADS, parallel_map
     b = _int32_indices(sps.csr_matrix(b))       # converted once, not per chunk (csr_product)
-    keep = PairPruner(h, relerr)
+    keep = None if relerr is None else PairPruner(h, relerr)
     shape = (a.shape[0], b.shape[1])
     store = RowPieces(shape, directory) if pieces else None
     kept = []
@@ -784,7 +797,8 @@ def pruned_product(a, b, h: int, relerr: float, pieces: bool = False,
             # up (K on Table 2 row 6 of seed 000: +135 MiB over the product written to a file)
             trimmed = _trim(formed, trimmed)
         del rows
-    final = lambda *piece: _filter_piece(keep, *piece, False)
+    final = (lambda *piece: piece) if keep is None else \
+        (lambda *piece: _filter_piece(keep, *piece, False))
     if store is not None:
         out = store.filtered(final)
     else:
@@ -795,9 +809,12 @@ def pruned_product(a, b, h: int, relerr: float, pieces: bool = False,
     return out
 
 
-def _filter_piece(keep: "PairPruner", start: int, indptr, indices, data, update: bool):
+def _filter_piece(keep: "PairPruner | None", start: int, indptr, indices, data, update: bool):
     """One CSR piece of rows ``start ..`` filtered by ``keep`` (``update``: also record its
-    pair maxima), as ``(start, indptr, indices, data)`` with 32-bit indices."""
+    pair maxima; None keeps every entry), as ``(start, indptr, indices, data)`` with 32-bit
+    indices."""
+    if keep is None:        # copies: csr_product's arrays are views of larger buffers
+        return start, np.asarray(indptr, np.int64), indices.astype(np.int32), data.copy()
     rows = np.repeat(np.arange(start, start + indptr.size - 1, dtype=np.int32), np.diff(indptr))
     r, c, v = keep._filter(rows, indices, data, update)
     counts = np.bincount(r - start, minlength=indptr.size - 1)
