@@ -90,6 +90,9 @@ class Parked:
         Keep a copy of the first ``head`` rows resident (:attr:`head`; e.g. the slot-0 rows
         that the energy check of a projected operator reads,
         :meth:`~layersim.aniso.operator.AnisoOperator.albedo_slots`).
+
+    The file is a :class:`Spool` of one item (the CSR arrays), as the pieces of
+    :class:`~layersim.aniso.rowpieces.RowPieces` are.
     """
 
     def __init__(self, mat: sps.csr_matrix, directory: str, head: int = 0):
@@ -97,33 +100,22 @@ class Parked:
         self.nnz = int(mat.nnz)
         self.bytes = sparse_bytes(mat)
         self.head = mat[:head].copy() if head else None
-        self._arrays = [(a.dtype, a.size) for a in (mat.indptr, mat.indices, mat.data)]
-        fd, self.path = tempfile.mkstemp(prefix="layersim-block-", suffix=".bin",
-                                         dir=directory)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                for a in (mat.indptr, mat.indices, mat.data):
-                    np.ascontiguousarray(a).tofile(f)
-        except BaseException:
-            self._remove()
-            raise
+        self._spool = Spool(directory)
+        self._spool.append((mat.indptr, mat.indices, mat.data))
         empty_sparse(mat)
+
+    @property
+    def path(self) -> str | None:
+        """The file, or None once loaded."""
+        return self._spool.path
 
     def load(self) -> sps.csr_matrix:
         """The matrix, read back; the file is removed."""
         if self.path is None:
             raise RuntimeError("this parked block was already loaded")
-        with open(self.path, "rb") as f:
-            indptr, indices, data = (np.fromfile(f, dtype, size) for dtype, size in self._arrays)
-        self._remove()
+        indptr, indices, data = next(self._spool.drain())
+        self._spool.close()
         return sps.csr_matrix((data, indices, indptr), shape=self.shape)
-
-    def _remove(self) -> None:
-        _unlink(self.path)
-        self.path = None
-
-    def __del__(self):
-        self._remove()
 
 
 def _unlink(path: str | None) -> None:
