@@ -594,21 +594,27 @@ def test_block_lu_solver_matches_sparse_lu_on_a_banded_system():
                                atol=1e-12)
 
 
-def test_banded_solve_with_a_singular_diagonal_block_falls_back_to_sparse_lu():
-    """A coupled system that needs pivoting across Fourier orders (the block of order 0 is
-    zero, orders 0 and 2 swap): the block LU (no pivoting across blocks) detects the singular
-    block and the sparse LU solves it exactly."""
-    h, md = 4, 5
+def _swapped_orders_system(h, md, diagonal, coupling, fill=0.0):
+    """``A`` (CSR) equal to the identity except that the blocks of Fourier orders 0 and 2
+    are ``diagonal * I`` and couple to each other by ``coupling * I + fill`` (so that
+    solving needs pivoting across the two orders), and a sparse right-hand side ``B``."""
     N = basis.n_slots(md) * h
     mode = basis.slot_mode(md)
     s0, s2 = int(np.flatnonzero(mode == 0)[0]), int(np.flatnonzero(mode == 2)[0])
     A = sps.lil_matrix(np.eye(N))
     for a, b in ((s0, s0), (s2, s2)):
-        A[a * h:(a + 1) * h, b * h:(b + 1) * h] = 0.0
+        A[a * h:(a + 1) * h, b * h:(b + 1) * h] = np.eye(h) * diagonal
     for a, b in ((s0, s2), (s2, s0)):
-        A[a * h:(a + 1) * h, b * h:(b + 1) * h] = np.eye(h) * 2.0
-    A = sps.csr_matrix(A)
-    B = sps.random(N, 7, density=0.5, random_state=3, format="csr")
+        A[a * h:(a + 1) * h, b * h:(b + 1) * h] = np.eye(h) * coupling + fill
+    return sps.csr_matrix(A), sps.random(N, 7, density=0.5, random_state=3, format="csr")
+
+
+def test_banded_solve_with_a_singular_diagonal_block_falls_back_to_sparse_lu():
+    """A coupled system that needs pivoting across Fourier orders (the block of order 0 is
+    zero, orders 0 and 2 swap): the block LU (no pivoting across blocks) detects the singular
+    block and the sparse LU solves it exactly."""
+    h, md = 4, 5
+    A, B = _swapped_orders_system(h, md, diagonal=0.0, coupling=2.0)
     Y = banded_solve(A, B, h, md)
     np.testing.assert_allclose(Y.toarray(), np.linalg.solve(A.toarray(), B.toarray()),
                                atol=1e-13)
@@ -622,16 +628,7 @@ def test_banded_solve_with_block_lu_growth_falls_back_to_sparse_lu(monkeypatch):
     far beyond the tolerance below."""
     from layersim.aniso import adding as aadd
     h, md = 4, 5
-    N = basis.n_slots(md) * h
-    mode = basis.slot_mode(md)
-    s0, s2 = int(np.flatnonzero(mode == 0)[0]), int(np.flatnonzero(mode == 2)[0])
-    A = sps.lil_matrix(np.eye(N))
-    for a, b in ((s0, s0), (s2, s2)):
-        A[a * h:(a + 1) * h, b * h:(b + 1) * h] = np.eye(h) * 1e-14
-    for a, b in ((s0, s2), (s2, s0)):
-        A[a * h:(a + 1) * h, b * h:(b + 1) * h] = np.eye(h) * 2.0 + 0.3
-    A = sps.csr_matrix(A)
-    B = sps.random(N, 7, density=0.5, random_state=3, format="csr")
+    A, B = _swapped_orders_system(h, md, diagonal=1e-14, coupling=2.0, fill=0.3)
     ref = np.linalg.solve(A.toarray(), B.toarray())
     checked = []
     residual = aadd._residual
