@@ -4,6 +4,8 @@ symmetries (isotropic limit, axis swap = 90 degree rotation, reciprocity, conser
 coupled adding equations against isotropic adding and a dense solve, and the plan/solve/BSDF
 pipeline."""
 
+import os
+
 import numpy as np
 import pytest
 import scipy.sparse as sps
@@ -24,6 +26,22 @@ from conftest import random_directions, unit
 
 G32 = Grid.make("gauss-lobatto", 32)
 GOLD = complex(0.143552, 3.98397)
+
+
+def files_in(directory) -> list:
+    """Our files in ``directory``: the named ones, and the spool files held open by this
+    process (layersim.aniso.park.Spool removes a file from the directory as it creates it, so
+    that it lives only while open; Linux /proc lists it as ``path (deleted)``)."""
+    prefix = os.path.join(str(directory), "")
+    held = []
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            target = os.readlink(f"/proc/self/fd/{fd}")
+        except OSError:
+            continue
+        if target.startswith(prefix):
+            held.append(target)
+    return held + [str(p) for p in directory.iterdir()]
 
 
 def slot_values(op, name, o, i, phi_i, phi_o):
@@ -329,7 +347,7 @@ def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(
     # (two relerr settings each; the right-hand side Rt2 Ttb1, K and Tbt1 Z1 go to files
     # as row pieces as they are formed, not through Parked)
     assert len(written) == (2 * (2 + 6) if parking else 0)
-    assert list(tmp_path.iterdir()) == []
+    assert files_in(tmp_path) == []
 
 
 def test_malloc_arena_cap_follows_the_environment(monkeypatch):
@@ -351,6 +369,25 @@ def test_malloc_arena_cap_follows_the_environment(monkeypatch):
         memory.limit_arenas()
 
 
+def test_a_killed_solve_leaves_no_spool_file(tmp_path):
+    """A process killed (SIGKILL, as the out-of-memory killer does) while it holds spooled
+    data on disk leaves nothing in the parking directory: the file has no name there from
+    the moment it is created."""
+    import subprocess
+    import sys
+    code = ("import os, signal, numpy as np\n"
+            "from layersim.aniso.park import Spool\n"
+            f"s = Spool({str(tmp_path)!r})\n"
+            "s.append((np.arange(100000.0),))\n"
+            "assert s.on_disk and next(iter(s))[0][-1] == 99999.0\n"
+            f"print(len(os.listdir({str(tmp_path)!r})), flush=True)\n"
+            "os.kill(os.getpid(), signal.SIGKILL)\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert run.returncode == -9, run.stderr
+    assert run.stdout.strip() == "0"
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_parked_block_round_trip_and_where_parking_is_refused(tmp_path, monkeypatch):
     from layersim.aniso import park
     mat = sps.random(50, 40, 0.2, random_state=2, format="csr")
@@ -358,9 +395,9 @@ def test_parked_block_round_trip_and_where_parking_is_refused(tmp_path, monkeypa
     monkeypatch.setattr(park, "PARK_MIN_BYTES", 0)
     blk = park.park(mat, str(tmp_path))
     assert isinstance(blk, park.Parked) and mat.nnz == 0        # the caller's copy is freed
-    assert len(list(tmp_path.iterdir())) == 1
+    assert len(files_in(tmp_path)) == 1
     back = park.unpark(blk)
-    assert list(tmp_path.iterdir()) == []
+    assert files_in(tmp_path) == []
     assert back.dtype == ref.dtype and (back != ref).nnz == 0
     with pytest.raises(RuntimeError, match="already loaded"):
         blk.load()
@@ -395,7 +432,7 @@ def test_spooled_parts_assemble_as_a_list_of_them_does(on_disk, tmp_path):
     for part in parts:
         spool.append(part)
     assert spool.on_disk == on_disk and len(spool) == 4
-    assert len(list(tmp_path.iterdir())) == int(on_disk)
+    assert len(files_in(tmp_path)) == int(on_disk)
     for _ in range(2):
         for got, ref in zip(spool, parts):
             assert all(np.array_equal(x, y) and x.dtype == y.dtype for x, y in zip(got, ref))
@@ -406,7 +443,7 @@ def test_spooled_parts_assemble_as_a_list_of_them_does(on_disk, tmp_path):
     got = aop.from_parts(spool, shape, select=keep.final_filter)
     assert sum(keep.final_filter(*p)[0].size for p in parts) < sum(p[0].size for p in parts)
     assert (got != ref).nnz == 0 and np.array_equal(got.indices, ref.indices)
-    assert len(spool) == 0 and list(tmp_path.iterdir()) == []
+    assert len(spool) == 0 and files_in(tmp_path) == []
 
 
 def test_csr_product_equals_scipys_product():
@@ -485,7 +522,7 @@ def test_pruned_product_is_the_pair_pruned_product(monkeypatch, tmp_path):
                         assert np.array_equal(whole.data, ref.data)
                         pieces.close()
                     left.close()
-                    assert list(tmp_path.iterdir()) == []       # the filtered copy's file too
+                    assert files_in(tmp_path) == []       # the filtered copy's file too
 
 
 @pytest.mark.parametrize("on_disk", [False, True])
@@ -505,7 +542,7 @@ def test_sums_and_reciprocal_pruning_in_pieces_equal_the_whole(coupled_layers, o
         assert pieces.on_disk == on_disk and len(list(pieces)) > 3
         got, ref = pieces.to_csr(release=True), alpha * a + beta * b
         assert got.nnz == ref.nnz and abs(got - ref).max() <= 1e-15 * abs(ref).max()
-        assert pieces.nnz == 0 and list(tmp_path.iterdir()) == []
+        assert pieces.nnz == 0 and files_in(tmp_path) == []
     slab = aniso_adding.add(d, aniso_adding.add(hg, glass_out))     # all four blocks
     ref, got = dict(slab.blocks), dict(slab.blocks)
     args = (slab.grid, slab.md, slab.eta_top, slab.eta_bottom, slab.delta, 1e-5)
@@ -518,7 +555,7 @@ def test_sums_and_reciprocal_pruning_in_pieces_equal_the_whole(coupled_layers, o
         assert got[name].nnz < slab.blocks[name].nnz
     assert reciprocity_error(AnisoOperator(slab.grid, slab.md, got, slab.eta_top,
                                            slab.eta_bottom, slab.delta)) < 1e-14
-    assert list(tmp_path.iterdir()) == []
+    assert files_in(tmp_path) == []
 
 
 @pytest.mark.parametrize("on_disk", [False, True])
@@ -554,7 +591,7 @@ def test_transpose_and_sum_of_a_matrix_in_row_pieces(on_disk, tmp_path):
     kept = kept.to_csr(release=True)
     assert 0 < kept.nnz < A.nnz and np.abs(kept.data).min() >= cut
     assert (kept != aop.prune(A.copy(), 0.5)).nnz == 0
-    assert list(tmp_path.iterdir()) == []
+    assert files_in(tmp_path) == []
 
 
 def test_from_parts_sums_duplicates_in_either_format(monkeypatch):
@@ -665,7 +702,7 @@ def test_banded_solve_reads_a_matrix_in_row_pieces(on_disk, tmp_path, monkeypatc
         if lo != 10:
             part = K[lo:hi]
             pieces.append(lo, part.indptr, part.indices, part.data)
-    assert len(list(tmp_path.iterdir())) == int(on_disk)
+    assert len(files_in(tmp_path)) == int(on_disk)
     assert np.array_equal(pieces.row_counts(), np.diff(K.indptr))
     assert abs(pieces.to_csr() - K).max() == 0.0
     assert abs(pieces.matmul(B) - K @ B).max() < 1e-15
@@ -680,7 +717,7 @@ def test_banded_solve_reads_a_matrix_in_row_pieces(on_disk, tmp_path, monkeypatc
     ref = np.linalg.solve(np.eye(N) - K.toarray(), B.toarray())
     Y = banded_solve(pieces, B, h, md, identity_minus=True, release=True)
     np.testing.assert_allclose(Y.toarray(), ref, atol=1e-12)
-    assert pieces.nnz == 0 and list(tmp_path.iterdir()) == []   # released: file removed
+    assert pieces.nnz == 0 and files_in(tmp_path) == []   # released: file removed
 
 
 # ---- plan, solve, BSDF ----------------------------------------------------------------------
@@ -786,7 +823,7 @@ def test_rgb_stack_shares_layers_across_channels_and_matches_per_channel_solves(
     # (4 blocks) and base of each monochrome solve
     projected = sum(1 for head in written if head)
     assert projected == ((1 + 3 * (4 + 1)) if parking else 0)
-    assert list(tmp_path.iterdir()) == []
+    assert files_in(tmp_path) == []
 
 
 def test_projection_parks_the_blocks_of_an_operator_handed_to_the_adding(
@@ -805,7 +842,7 @@ def test_projection_parks_the_blocks_of_an_operator_handed_to_the_adding(
                                                           alpha_v=0.2), 1.5,
                                     park_dir=str(tmp_path))
     assert all(isinstance(m, park.Parked) for m in top.blocks.values())
-    assert len(list(tmp_path.iterdir())) == 5 and base.ms == c.ms and top.memory_bytes() == 0
+    assert len(files_in(tmp_path)) == 5 and base.ms == c.ms and top.memory_bytes() == 0
     for name, alb in d.albedo_slots().items():
         assert np.array_equal(top.albedo_slots()[name], alb)
     with pytest.raises(OperatorError, match="parked"):
@@ -820,7 +857,7 @@ def test_projection_parks_the_blocks_of_an_operator_handed_to_the_adding(
         got = aniso_adding.add(top, base, consume="both", **kw)
         assert abs(ref.blocks["Rt"] - got.blocks["Rt"]).max() == 0.0
         del top, base
-        assert list(tmp_path.iterdir()) == []
+        assert files_in(tmp_path) == []
 
 
 def test_eval_of_a_rotated_anisotropic_interface_matches_the_physics():

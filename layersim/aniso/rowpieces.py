@@ -18,8 +18,6 @@ matrix the same way.
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 import scipy.sparse as sps
 
@@ -184,15 +182,11 @@ class RowPieces:
         pruning); this one is emptied as they are read."""
         if self._csr is not None:
             raise RuntimeError("RowPieces.of() wraps a matrix; filter the matrix instead")
-        out = RowPieces(self.shape, os.path.dirname(self.path) if self.on_disk else None)
+        out = RowPieces(self.shape, self._spool.directory)
         for start, arrays in zip(self._starts, self._spool.drain()):
             out.append(*fn(start, *arrays))
         self.close()
         return out
-
-    @property
-    def path(self) -> str | None:
-        return self._spool.path
 
     def close(self) -> None:
         """Drop the pieces (and remove the file)."""
