@@ -386,9 +386,9 @@ def _sum(terms: list, directory, assemble: bool = True):
 
 def _multiply(a, b, h: int, relerr: float | None, floor: float | None = None,
               pieces: bool = False, directory: str | None = None):
-    """``a @ b`` pruned per ordinate pair at ``relerr`` as it is formed
-    (:func:`~layersim.aniso.operator.pruned_product`), or whole and without the entries below
-    ``floor`` times its largest (``relerr`` None); with ``pieces`` as
+    """``a @ b`` by :func:`~layersim.aniso.operator.pruned_product`: pruned per ordinate
+    pair at ``relerr`` as it is formed, or, with ``relerr`` None, whole (without the entries
+    below ``floor`` times its largest, if given); with ``pieces`` as
     :class:`~layersim.aniso.rowpieces.RowPieces` in a file in ``directory``."""
     if relerr is not None or floor is None:
         return pruned_product(a, b, h, relerr, pieces=pieces, directory=directory)
