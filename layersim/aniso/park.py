@@ -111,7 +111,7 @@ class Parked:
         """The matrix, read back; the file is removed."""
         if not self._spool.on_disk:
             raise RuntimeError("this parked block was already loaded")
-        indptr, indices, data = next(self._spool.drain())
+        indptr, indices, data = next(iter(self._spool))
         self._spool.close()
         return sps.csr_matrix((data, indices, indptr), shape=self.shape)
 
