@@ -16,7 +16,8 @@ With ``A = I - Rb1 Rt2`` and the push-through identities ``(I - Rt2 Rb1)^-1 Rt2 
     Rb  = Rb2 + Ttb2 Y2    Tbt = Tbt1 Tbt2 + Tbt1 Rt2 Y2
 
 Below an opaque bottom layer only ``Rt`` is computed. Each order uses dense LAPACK or sparse
-SuperLU (UMFPACK via scikit-umfpack when installed) depending on the density of its blocks.
+SuperLU (UMFPACK via scikit-umfpack when installed) depending on the density and size of its
+blocks (:data:`SPARSE_DENSITY`, :data:`SPARSE_MIN_H`).
 
 Threads: orders are independent and can be spread over a thread pool (``threads=``), but on the
 block sizes of typical plans (h <= 256) the per-order work is too small for Python threads to pay
@@ -48,8 +49,13 @@ try:  # optional, faster sparse LU
 except ImportError:  # pragma: no cover - depends on the environment
     _HAVE_UMFPACK = False
 
-#: Orders whose blocks hold fewer than this fraction of nonzeros use sparse LU.
+#: Orders whose blocks hold fewer than this fraction of nonzeros use sparse LU ...
 SPARSE_DENSITY = 0.05
+#: ... if their blocks have at least this many ordinates per hemisphere: below it, SciPy's
+#: per-call overhead outweighs what sparsity saves (Table 2 row 1 of seed 000, h = 98, on
+#: the 2-core CI machine: the adding 0.46 s with every order dense against 0.64-0.83 s
+#: mixed; h = 128 and 150 even; h = 195: 1.28-1.39 s mixed against 1.41-1.96 s dense).
+SPARSE_MIN_H = 128
 #: Worker threads for independent Fourier orders (``$LAYERSIM_THREADS``, default 1; see above).
 THREADS = int(os.environ.get("LAYERSIM_THREADS", "1"))
 #: Blocks with fewer ordinates per hemisphere than this run with single-threaded BLAS.
@@ -129,7 +135,7 @@ def _add_order(b1: dict, b2: dict, opaque: bool) -> dict:
         mats = (Rb1, Rt2, Ttb1, Tbt1)
     else:
         mats = (Rb1, Rt2, Ttb1, Tbt1, b2["Rb"], b2["Ttb"], b2["Tbt"])
-    if _density(*mats) < SPARSE_DENSITY:
+    if h >= SPARSE_MIN_H and _density(*mats) < SPARSE_DENSITY:
         return _add_order_sparse(b1, b2, opaque, coupled)
     return _add_order_dense(b1, b2, opaque, coupled, h)
 

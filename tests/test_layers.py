@@ -218,6 +218,25 @@ def test_threaded_adding_equals_serial_adding():
     close_ops(parallel, serial, rtol=0.0)
 
 
+@pytest.mark.parametrize("opaque", [False, True])
+def test_sparse_and_dense_orders_agree(monkeypatch, opaque):
+    """Each order is added with dense LAPACK or sparse LU (by density and size of its
+    blocks): both give the same operator, all orders forced one way, then the other."""
+    top = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.2, alpha_v=0.2), 1.0)
+    if opaque:
+        bottom = interface_operator(GRID, M, Conductor(ior=complex(0.2, 3.0), alpha_u=0.3,
+                                                       alpha_v=0.3), 1.5)
+    else:
+        bottom = medium_operator(GRID, M, 0.9, 0.6, 0.8, 1.5)
+    monkeypatch.setattr(adding, "SPARSE_MIN_H", 0)
+    monkeypatch.setattr(adding, "SPARSE_DENSITY", 2.0)          # every order sparse
+    sparse = adding.add(top, bottom)
+    monkeypatch.setattr(adding, "SPARSE_DENSITY", 0.0)          # every order dense
+    dense = adding.add(top, bottom)
+    close_ops(sparse, dense, rtol=1e-10)
+    assert (sparse.blocks["Ttb"] is None) == opaque
+
+
 def test_adding_refuses_mismatched_operators():
     a = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3), 1.0)
     other = medium_operator(Grid.make("gauss-lobatto", 50), M, 0.5, 0.0, 1.0, 1.5)
