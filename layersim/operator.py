@@ -375,10 +375,13 @@ def _orders_to_csr(chunks, m: int, grid: Grid) -> "OrderStack":
             dense[:, o, i] = (c * grid.flux_weight[i][:, None]).T
         dense *= weight[:, None, None]
         flat = dense.reshape(m, h * h)
-        cut = DROP_TOLERANCE * np.abs(flat).max(axis=1)
-        flat[np.abs(flat) < cut[:, None]] = 0.0
-        l, pos = np.nonzero(flat)
-        v = flat[l, pos]
+        # |x| < cut as two comparisons and max |x| as max(max, -min): no float temporary of
+        # the dense array (np.abs of it took a third of the assembly of Table 2 row 1)
+        cut = DROP_TOLERANCE * np.maximum(flat.max(axis=1), -flat.min(axis=1))[:, None]
+        flat[(flat < cut) & (flat > -cut)] = 0.0
+        at = np.flatnonzero(flat)
+        l, pos = np.divmod(at, h * h)
+        v = flat.reshape(-1)[at]
         o, i = np.divmod(pos, h)
     else:
         rows, cols, orders, vals = [], [], [], []
