@@ -29,6 +29,7 @@ thread (via threadpoolctl) for blocks below :data:`BLAS_SINGLE_BELOW` ordinates.
 
 from __future__ import annotations
 
+import functools
 import os
 from concurrent.futures import ThreadPoolExecutor
 
@@ -41,7 +42,7 @@ import scipy.sparse.linalg as spla
 from threadpoolctl import threadpool_limits
 
 from .errors import OperatorError
-from .operator import IsoOperator, _prune
+from .operator import IsoOperator, OrderStack, _prune
 
 try:  # optional, faster sparse LU
     import scikits.umfpack as _umfpack  # noqa: F401
@@ -56,6 +57,9 @@ SPARSE_DENSITY = 0.05
 #: the 2-core CI machine: the adding 0.46 s with every order dense against 0.64-0.83 s
 #: mixed; h = 128 and 150 even; h = 195: 1.28-1.39 s mixed against 1.41-1.96 s dense).
 SPARSE_MIN_H = 128
+#: Entries of one (orders x h x h) array of a batch of orders (2 MiB): below SPARSE_MIN_H
+#: every order is dense, and orders are added in batches (:func:`_add_orders_dense`).
+ORDER_BATCH_ELEMENTS = 1 << 18
 #: Worker threads for independent Fourier orders (``$LAYERSIM_THREADS``, default 1; see above).
 THREADS = int(os.environ.get("LAYERSIM_THREADS", "1"))
 #: Blocks with fewer ordinates per hemisphere than this run with single-threaded BLAS.
@@ -94,22 +98,32 @@ def add(top: IsoOperator, bottom: IsoOperator, threads: int | None = None) -> Is
     m = max(top.m, bottom.m)
     opaque = bottom.opaque
 
+    names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
+
     def one(l: int):
         blk1 = {k: top.block(k, l) for k in ("Rt", "Rb", "Ttb", "Tbt")}
-        blk2 = {k: bottom.block(k, l) for k in (("Rt",) if opaque else ("Rt", "Rb", "Ttb",
-                                                                        "Tbt"))}
+        blk2 = {k: bottom.block(k, l) for k in names}
         return _add_order(blk1, blk2, opaque)
 
+    batched = top.h < SPARSE_MIN_H      # every order dense: batches of orders
+    if batched:
+        per = max(1, ORDER_BATCH_ELEMENTS // (top.h * top.h))
+        tasks = [range(l, min(m, l + per)) for l in range(0, m, per)]
+        work = functools.partial(_add_orders_dense, top, bottom, opaque=opaque)
+    else:
+        tasks, work = range(m), one
     threads = threads or THREADS
     limit = threadpool_limits(1, user_api="blas") if top.h < BLAS_SINGLE_BELOW else nullcontext()
     with limit:
-        if threads > 1 and m > 4:
+        if threads > 1 and len(tasks) > 4:
             with ThreadPoolExecutor(threads) as pool:
-                results = list(pool.map(one, range(m)))
+                results = list(pool.map(work, tasks))
         else:
-            results = [one(l) for l in range(m)]
-    names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
-    blocks = {name: [r[name] for r in results] for name in names}
+            results = [work(t) for t in tasks]
+    if batched:
+        blocks = {name: OrderStack.concatenate([r[name] for r in results]) for name in names}
+    else:
+        blocks = {name: [r[name] for r in results] for name in names}
     # unscattered light crosses both layers only through both deltas (the multiply reflected
     # terms involve the smooth reflection blocks)
     delta = {}
@@ -138,6 +152,41 @@ def _add_order(b1: dict, b2: dict, opaque: bool) -> dict:
     if h >= SPARSE_MIN_H and _density(*mats) < SPARSE_DENSITY:
         return _add_order_sparse(b1, b2, opaque, coupled)
     return _add_order_dense(b1, b2, opaque, coupled, h)
+
+
+def _dense_orders(op: IsoOperator, name: str, orders: range) -> np.ndarray:
+    """Block ``name`` of ``op`` for ``orders`` as a dense (len(orders), h, h) array."""
+    blk = op.blocks[name]
+    if isinstance(blk, OrderStack):
+        return blk.dense(orders)
+    return np.stack([op.block(name, l).toarray() for l in orders])
+
+
+def _add_orders_dense(top: IsoOperator, bottom: IsoOperator, orders: range,
+                      opaque: bool) -> dict:
+    """:func:`_add_order_dense` for a batch of orders at once: the same LAPACK solves and
+    products, stacked, with the blocks read and the results pruned and stored as stacked
+    CSR (:class:`OrderStack`): at small h the per-order conversions to and from SciPy
+    matrices cost more than the arithmetic. Returns ``{block: OrderStack of the orders}``."""
+    Rt1, Rb1, Ttb1, Tbt1 = (_dense_orders(top, k, orders) for k in ("Rt", "Rb", "Ttb", "Tbt"))
+    Rt2 = _dense_orders(bottom, "Rt", orders)
+    h = Rt1.shape[1]
+    if opaque:
+        rhs = Ttb1
+    else:
+        Rb2, Ttb2, Tbt2 = (_dense_orders(bottom, k, orders) for k in ("Rb", "Ttb", "Tbt"))
+        rhs = np.concatenate([Ttb1, Rb1 @ Tbt2], axis=2)
+    # uncoupled orders (Rb1 or Rt2 zero) have A = I, whose LU solve returns rhs exactly;
+    # numpy.linalg, not scipy.linalg (see _add_order_dense)
+    Y = np.linalg.solve(np.eye(h) - Rb1 @ Rt2, rhs)
+    Y1 = Y[:, :, :h]
+    out = {"Rt": Rt1 + Tbt1 @ (Rt2 @ Y1)}
+    if not opaque:
+        Y2 = Y[:, :, h:]
+        out["Ttb"] = Ttb2 @ Y1
+        out["Rb"] = Rb2 + Ttb2 @ Y2
+        out["Tbt"] = Tbt1 @ Tbt2 + Tbt1 @ (Rt2 @ Y2)
+    return {k: OrderStack.from_dense(np.ascontiguousarray(v)) for k, v in out.items()}
 
 
 def _add_order_dense(b1, b2, opaque, coupled, h):

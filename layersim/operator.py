@@ -299,6 +299,47 @@ class OrderStack(Sequence):
         """From the stacked matrix of shape (m h, h)."""
         return cls(stacked.data, stacked.indices, stacked.indptr, h)
 
+    @classmethod
+    def from_dense(cls, dense: np.ndarray) -> "OrderStack":
+        """From dense orders (m, h, h), each pruned at :data:`DROP_TOLERANCE` relative to its
+        largest entry (exact zeros dropped too, as :func:`_prune` does); ``dense`` is
+        overwritten. ``|x| < cut`` is taken as two comparisons and ``max |x|`` as
+        ``max(max, -min)``: no float temporary of the dense array (``np.abs`` of it took a
+        third of the assembly of Table 2 row 1 of seed 000)."""
+        m, h = dense.shape[0], dense.shape[1]
+        flat = dense.reshape(m, h * h)
+        cut = DROP_TOLERANCE * np.maximum(flat.max(axis=1), -flat.min(axis=1))[:, None]
+        flat[(flat < cut) & (flat > -cut)] = 0.0
+        at = np.flatnonzero(flat)
+        row, col = np.divmod(at, h)             # row l h + o of the stacked matrix
+        indptr = np.zeros(m * h + 1, np.int64)
+        np.cumsum(np.bincount(row, minlength=m * h), out=indptr[1:])
+        return cls(flat.reshape(-1)[at], col.astype(np.int32), indptr, h)
+
+    @classmethod
+    def concatenate(cls, stacks: list) -> "OrderStack":
+        """The orders of ``stacks`` one after another."""
+        h = stacks[0].h
+        offsets = np.cumsum([0] + [s._data.size for s in stacks])
+        indptr = np.concatenate([s._indptr[:-1] + off for s, off in zip(stacks, offsets)]
+                                + [offsets[-1:]])
+        return cls(np.concatenate([s._data for s in stacks]),
+                   np.concatenate([s._indices for s in stacks]), indptr, h)
+
+    def dense(self, orders: range) -> np.ndarray:
+        """Orders ``orders`` (a step-1 range; zero past the last order) as a dense
+        (len(orders), h, h) array, from the stacked rows at once."""
+        h = self.h
+        out = np.zeros((len(orders), h, h))
+        stop = min(orders.stop, len(self))
+        if stop > orders.start:
+            ptr = self._indptr[orders.start * h:stop * h + 1]
+            a, b = ptr[0], ptr[-1]
+            rows = sps.csr_matrix((self._data[a:b], self._indices[a:b], ptr - a),
+                                  shape=((stop - orders.start) * h, h))
+            out[:stop - orders.start] = rows.toarray().reshape(-1, h, h)
+        return out
+
     def __len__(self) -> int:
         return len(self._mats)
 
@@ -374,15 +415,7 @@ def _orders_to_csr(chunks, m: int, grid: Grid) -> "OrderStack":
         for o, i, c in chunks:
             dense[:, o, i] = (c * grid.flux_weight[i][:, None]).T
         dense *= weight[:, None, None]
-        flat = dense.reshape(m, h * h)
-        # |x| < cut as two comparisons and max |x| as max(max, -min): no float temporary of
-        # the dense array (np.abs of it took a third of the assembly of Table 2 row 1)
-        cut = DROP_TOLERANCE * np.maximum(flat.max(axis=1), -flat.min(axis=1))[:, None]
-        flat[(flat < cut) & (flat > -cut)] = 0.0
-        at = np.flatnonzero(flat)
-        l, pos = np.divmod(at, h * h)
-        v = flat.reshape(-1)[at]
-        o, i = np.divmod(pos, h)
+        return OrderStack.from_dense(dense)
     else:
         rows, cols, orders, vals = [], [], [], []
         for o, i, c in chunks:

@@ -221,7 +221,8 @@ def test_threaded_adding_equals_serial_adding():
 @pytest.mark.parametrize("opaque", [False, True])
 def test_sparse_and_dense_orders_agree(monkeypatch, opaque):
     """Each order is added with dense LAPACK or sparse LU (by density and size of its
-    blocks): both give the same operator, all orders forced one way, then the other."""
+    blocks), or, below SPARSE_MIN_H ordinates, all orders dense in stacked batches: all three
+    give the same operator (orders forced each way; batches of 5 orders, the last short)."""
     top = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.2, alpha_v=0.2), 1.0)
     if opaque:
         bottom = interface_operator(GRID, M, Conductor(ior=complex(0.2, 3.0), alpha_u=0.3,
@@ -235,6 +236,14 @@ def test_sparse_and_dense_orders_agree(monkeypatch, opaque):
     dense = adding.add(top, bottom)
     close_ops(sparse, dense, rtol=1e-10)
     assert (sparse.blocks["Ttb"] is None) == opaque
+    monkeypatch.setattr(adding, "SPARSE_MIN_H", GRID.h + 1)      # batches of orders
+    monkeypatch.setattr(adding, "ORDER_BATCH_ELEMENTS", 5 * GRID.h ** 2)
+    batched = adding.add(top, bottom)
+    close_ops(batched, dense, rtol=1e-13)
+    for name, blk in batched.blocks.items():                   # same entries, per order
+        if blk is not None:
+            assert len(blk) == M
+            assert all(blk[l].nnz == dense.blocks[name][l].nnz for l in range(M))
 
 
 def test_adding_refuses_mismatched_operators():
