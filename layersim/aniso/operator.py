@@ -434,14 +434,9 @@ def _row_chunks(mat: sps.csr_matrix, entries: int = CHUNK_ENTRIES):
     operators of coupled stacks (tens of millions of entries) took more memory than the
     matrices themselves when formed at once, and chunks of a fixed number of rows still took
     300 MiB on ``K`` of Table 2 row 6 of seed 000 (320 entries per row)."""
-    n = mat.shape[0]
-    start = 0
-    while start < n:
-        stop = int(np.searchsorted(mat.indptr, mat.indptr[start] + entries, side="right")) - 1
-        stop = min(n, max(stop, start + 1))
+    for start, stop in row_spans(mat.indptr, 0, mat.shape[0], entries):
         ptr = mat.indptr[start:stop + 1]
         yield int(ptr[0]), int(ptr[-1]), np.repeat(np.arange(start, stop), np.diff(ptr))
-        start = stop
 
 
 def from_parts(parts, shape: tuple, fmt: str = "csr", select=None):
@@ -898,17 +893,18 @@ def prune(mat, tolerance: float = DROP_TOLERANCE):
         cut = tolerance * max((np.abs(p.data).max() for _, p in mat if p.nnz), default=0.0)
 
         def drop(start, indptr, indices, data):
-            piece = sps.csr_matrix((data, indices, indptr), shape=(indptr.size - 1,
-                                                                   mat.shape[1]))
-            piece.data[np.abs(piece.data) < cut] = 0.0
-            piece.eliminate_zeros()
+            piece = _drop_below(sps.csr_matrix((data, indices, indptr),
+                                               shape=(indptr.size - 1, mat.shape[1])), cut)
             return start, piece.indptr, piece.indices, piece.data
         return mat.filtered(drop)
     mat = sps.csr_matrix(mat.wrapped if isinstance(mat, RowPieces) else mat)
-    if mat.nnz:
-        cut = tolerance * np.abs(mat.data).max()
-        mat.data[np.abs(mat.data) < cut] = 0.0
-        mat.eliminate_zeros()
+    return _drop_below(mat, tolerance * np.abs(mat.data).max()) if mat.nnz else mat
+
+
+def _drop_below(mat: sps.csr_matrix, cut: float) -> sps.csr_matrix:
+    """``mat`` without its entries of magnitude below ``cut`` (in place)."""
+    mat.data[np.abs(mat.data) < cut] = 0.0
+    mat.eliminate_zeros()
     return mat
 
 
