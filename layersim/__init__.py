@@ -7,8 +7,6 @@ Public entry points (see CONVENTIONS.md)::
     bsdf.eval(wi, wo); bsdf.albedo(wi); bsdf.bin_energies(wi, mu_edges, phi_edges)
     stack = layersim.add(top, bottom); layer = layersim.subtract(stack, known, side="top")
 """
-from . import memory as _memory
-_memory.limit_arenas()          # before any worker thread allocates (layersim.memory)
 from .errors import LayersimError, SceneError, InfeasibleError, OperatorError, FileFormatError
 from .scene import Scene, Dielectric, Conductor, Medium, Diffuse, Discretization
 from .plan import Plan, make_plan
