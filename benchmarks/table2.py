@@ -67,6 +67,9 @@ def _density(op) -> float:
 def run_row(k: int) -> dict:
     import layersim
     from layersim import solver
+    from layersim.config import settings
+    from layersim.outofcore import memory
+    memory.cap_arenas(settings().malloc_arenas)     # the row's process is this script's
     top, bottom = ROWS[k - 1][:2]
     scene = {"layer": [{"kind": "dielectric", "ior": 1.5, "roughness": list(top)},
                        {"kind": "conductor", "ior": GOLD, "roughness": list(bottom)}]}
@@ -112,8 +115,9 @@ def main(argv) -> int:
         print(json.dumps(run_row(int(argv[1]))))
         return 0
     rows = [int(a) for a in argv] or list(range(1, len(ROWS) + 1))
-    print(f"machine: {os.cpu_count()} cores; layersim projection threads: "
-          f"{os.environ.get('LAYERSIM_PROJECTION_THREADS', os.cpu_count())}; load average "
+    from layersim.config import settings
+    print(f"machine: {os.cpu_count()} cores; layersim threads: "
+          f"{settings().threads}; load average "
           f"at start {os.getloadavg()[0]:.1f}")
     head = (f"{'row':>3} {'top':>11} {'bottom':>11} | {'total s':>15} {'adding s':>15} | "
             f"{'top %':>13} {'bottom %':>13} {'combined %':>13} | {'storage MiB':>15} | "

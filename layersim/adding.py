@@ -8,8 +8,8 @@ For a top layer 1 and a bottom layer 2 (Jakob's layerlab tutorial eq. (3); Grant
     Tbt = Tbt1 (I - Rt2 Rb1)^-1 Tbt2
 
 With ``A = I - Rb1 Rt2`` and the push-through identities ``(I - Rt2 Rb1)^-1 Rt2 = Rt2 A^-1`` and
-``(I - Rt2 Rb1)^-1 = I + Rt2 A^-1 Rb1`` (Zeltner & Jakob 2018 eq. (12)), all four outputs need solves with
-``A`` only, which is factorised once per Fourier order::
+``(I - Rt2 Rb1)^-1 = I + Rt2 A^-1 Rb1`` (Zeltner & Jakob 2018 eq. (12)), all four outputs need
+solves with ``A`` only, which is factorised once per Fourier order::
 
     [Y1 | Y2] = A^-1 [Ttb1 | Rb1 Tbt2]
     Ttb = Ttb2 Y1          Rt  = Rt1 + Tbt1 Rt2 Y1
@@ -84,8 +84,9 @@ def add(top: IsoOperator, bottom: IsoOperator, threads: int | None = None) -> Is
     top, bottom : IsoOperator
         ``top`` must be transmissive; ``bottom`` may be opaque (then only ``Rt`` is formed).
     threads : int, optional
-        Worker threads for the Fourier orders (default ``layersim.config.settings().order_threads``,
-        ``LAYERSIM_ORDER_THREADS``; see the module docstring).
+        Worker threads for the Fourier orders (default
+        ``layersim.config.settings().order_threads``, ``LAYERSIM_ORDER_THREADS``; see the
+        module docstring).
 
     Returns
     -------

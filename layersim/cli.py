@@ -28,7 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .config import settings
 from .errors import LayersimError
+from .outofcore import memory
 
 EXIT_INPUT = 2
 
@@ -343,6 +345,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(_attach_negative_values(argv))
     args.argv = argv
     try:
+        memory.cap_arenas(settings().malloc_arenas)     # the command owns its process
         return args.func(args)
     except (LayersimError, ValueError, OSError) as exc:
         msg = str(exc).replace("\n", " ")

@@ -2,9 +2,9 @@
 
 The adding and subtracting equations need ``Y = A^-1 B`` for ``A = I - K`` (or
 ``T^T T + eps^2 I``) where ``K`` couples Fourier mode ``k`` only to modes ``k +- 2s``,
-``|s| <= ms`` (Zeltner & Jakob 2018 eq. (10)): ordered by mode, ``A`` is block banded. The paper factors it
-once with UMFPACK and runs custom sparse-sparse substitutions (sec. 3.3). Here
-(:func:`banded_solve` drives it):
+``|s| <= ms`` (Zeltner & Jakob 2018 eq. (10)): ordered by mode, ``A`` is block banded. The
+paper factors it once with UMFPACK and runs custom sparse-sparse substitutions (sec. 3.3).
+Here (:func:`banded_solve` drives it):
 
 1. **Components.** Mode parity is conserved, and for mirror-symmetric stacks (aligned layers)
    the cosine and sine slots decouple too; unknowns are ordered by (component, Fourier order),

@@ -52,11 +52,13 @@ def with_reciprocal_image(mat, h: int, col_scale: np.ndarray, alpha: float, beta
                           skip_diagonal: bool = False,
                           directory: str | None = None) -> RowPieces:
     """``alpha mat + beta reciprocal_image(mat)`` (:func:`reciprocal_image`) in pieces of rows
-    (:func:`~layersim.outofcore.sums.sum_pieces`), for the mean of a reflection block and its image and for a block
+    (:func:`~layersim.outofcore.sums.sum_pieces`), for the mean of a reflection block and its
+    image and for a block
     projected on one triangle of ordinate pairs.
 
     With ``directory`` the matrix is first written there piece by piece and its image built
-    from the file (:func:`~layersim.outofcore.transpose.transposed`), so that ``mat``, its image and their sum are never
+    from the file (:func:`~layersim.outofcore.transpose.transposed`), so that ``mat``, its
+    image and their sum are never
     resident together: the caller hands ``mat`` over (no reference of its own left) and
     assembles the result once this returns (``to_csr(release=True)``).
     """

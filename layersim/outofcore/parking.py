@@ -80,7 +80,8 @@ class Parked:
         that the energy check of a projected operator reads,
         :meth:`~layersim.aniso.operator.AnisoOperator.albedo_slots`).
 
-    The file is a :class:`~layersim.outofcore.spool.Spool` of one item (the CSR arrays), as the pieces of
+    The file is a :class:`~layersim.outofcore.spool.Spool` of one item (the CSR arrays), as
+    the pieces of
     :class:`~layersim.outofcore.rowpieces.RowPieces` are.
     """
 

@@ -48,8 +48,8 @@ class RowPieces:
 
     @classmethod
     def of(cls, mat) -> "RowPieces":
-        """Read a CSR matrix piece by piece (no copy; pieces of about :data:`~layersim.outofcore.rows.PIECE_ENTRIES`
-        entries)."""
+        """Read a CSR matrix piece by piece (no copy; pieces of about
+        :data:`~layersim.outofcore.rows.PIECE_ENTRIES` entries)."""
         if isinstance(mat, RowPieces):
             return mat
         out = cls(mat.shape)
