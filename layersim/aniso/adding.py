@@ -58,25 +58,21 @@ def add(top, bottom, relerr: float | None = None, relerr_intermediate: float | N
     Parameters
     ----------
     top, bottom : AnisoOperator or IsoOperator
-        Same grid; isotropic operands are converted; the result has
-        ``md = max(top.md, bottom.md)``.
+        Same grid; isotropic operands are converted; the result has the larger ``md``.
     relerr : float, optional
         Drop coefficients of the result below ``relerr`` times the largest of their ordinate
-        pair, making it exactly reciprocal (:func:`~layersim.aniso.operator.reciprocal_prune`);
-        the products with the solution are pruned per pair at ``relerr / 10`` as they are
-        formed. By default only entries below :data:`~layersim.operator.DROP_TOLERANCE` of
-        their block's largest are dropped.
+        pair, keeping it exactly reciprocal (:func:`~.operator.reciprocal_prune`); the
+        products with the solution are pruned per pair at ``relerr / 10`` as they are formed.
+        By default only entries below :data:`~layersim.operator.DROP_TOLERANCE` of their
+        block's largest are dropped.
     relerr_intermediate : float, optional
-        The same for ``K``, ``Rt2 Ttb1`` and the solution ``Z``
-        (:func:`~layersim.aniso.pairs.prune_pairs`). :func:`layersim.solve` passes
-        :data:`layersim.aniso.plan.STACK_RELERR` and ``STACK_RELERR_INTERMEDIATE``.
+        The same for ``K``, ``Rt2 Ttb1`` and the solution ``Z`` (:func:`~.pairs.prune_pairs`).
     consume : {None, "top", "bottom", "both"}
-        Operands that the caller will not use again and holds no other reference to: they
-        are emptied (:meth:`AnisoOperator.consume`) and their blocks released and parked as
-        the step goes (module docstring).
+        Operands that the caller will not use again and holds no other reference to: emptied
+        (:meth:`AnisoOperator.consume`), their blocks released and parked as the step goes.
     workspace : Workspace, optional
-        Where idle blocks and intermediate pieces wait (default: one chosen for this step's
-        operands, :meth:`~layersim.outofcore.workspace.Workspace.for_bytes`).
+        Where idle blocks and intermediate pieces wait (default: one chosen for this step,
+        :meth:`~layersim.outofcore.workspace.Workspace.for_bytes`).
     """
     pair, blocks = _operands(top, bottom, consume, workspace)
     opaque, whole = pair.opaque, relerr is None      # else the sums stay in row pieces
