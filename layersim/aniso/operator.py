@@ -123,7 +123,7 @@ class AnisoOperator:
             raise OperatorError(f"block {name} was left out of this operator (opaque)")
         if isinstance(mat, Parked):
             raise OperatorError(f"block {name} is parked on disk for an adding step that "
-                                "consumes this operator (layersim.aniso.park)")
+                                "consumes this operator (layersim.outofcore.parking)")
         return mat
 
     def nnz(self) -> int:
