@@ -1,8 +1,8 @@
 """Accuracy of the anisotropic projection against a support-adapted brute-force reference.
 
 For sample ordinate pairs of every block of a few interfaces, the 2-D coefficients
-``f_{d,s}`` (seed 000 eq. (17)) are computed by brute force from ``physics.microfacet_eval``
-(through :func:`layersim.kernels.projection.microfacet_values_ds`):
+``f_{d,s}`` (Zeltner & Jakob 2018 eq. (17)) are computed by brute force from
+``physics.microfacet_eval`` (through :func:`layersim.kernels.projection.microfacet_values_ds`):
 
 * in ``phi_s``: trapezoidal rule with 512 samples (periodic, spectrally accurate);
 * in ``phi_d``: composite Gauss-Legendre (24 nodes per panel) on panels graded geometrically

@@ -1,4 +1,5 @@
-"""Subtracting equations (seed 000 eq. (13)-(16)): recovery errors without and with noise.
+"""Subtracting equations (Zeltner & Jakob 2018 eq. (13)-(16)): recovery errors without and with
+noise.
 
 For a few two-layer stacks, the known layer is removed from ``add(a, b)`` and the recovered
 layer compared with the true one (relative Frobenius error of all blocks in the energy basis

@@ -162,6 +162,7 @@ def test_equal_roughness_on_the_coupled_path_reproduces_the_isotropic_operator(l
     np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5 * np.abs(b).max())
 
 
+@pytest.mark.slow
 def test_swapping_alpha_u_and_alpha_v_equals_rotating_by_90_degrees():
     """Convention check: alpha_u acts along (cos rot, sin rot, 0)."""
     a = aniso_interface_operator(G32, 24, 3, Conductor(ior=GOLD, alpha_u=0.2, alpha_v=0.4,
@@ -180,6 +181,7 @@ def test_swapping_alpha_u_and_alpha_v_equals_rotating_by_90_degrees():
                                atol=1e-9)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("layer,names,tol", [
     (Conductor(ior=GOLD, alpha_u=0.2, alpha_v=0.4), ("Rt",), (1e-6, 1e-5)),
     (Conductor(ior=GOLD, alpha_u=0.2, alpha_v=0.4, distribution="ggx"), ("Rt",), (2e-6, 2e-4)),
@@ -214,6 +216,7 @@ def test_projection_matches_direct_evaluation_of_the_physics(layer, names, tol):
             name, np.median(err), np.percentile(err, 99))
 
 
+@pytest.mark.slow
 def test_projection_without_the_reciprocity_shortcut_is_reciprocal_and_conserving():
     """Projecting every block independently checks physics and projection against generalized
     reciprocity; a rough dielectric never creates energy (R + T <= 1 for uniform illumination
@@ -276,6 +279,7 @@ def coupled_layers():
     return d, hg, c, glass_out
 
 
+@pytest.mark.slow
 def test_coupled_adding_matches_a_dense_solve_and_is_associative(coupled_layers):
     d, hg, c, _ = coupled_layers
     bottom = aniso_adding.add(hg, c)
@@ -306,6 +310,7 @@ def test_coupled_stack_never_creates_energy_and_is_reciprocal(coupled_layers):
     assert energy_weighted_error(aniso_adding.add(clear, slab), slab) < 1e-13
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("parking", [False, True])
 def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(
         coupled_layers, parking, tmp_path, monkeypatch):
@@ -369,6 +374,7 @@ def test_malloc_arena_cap_follows_the_environment(monkeypatch):
         memory.limit_arenas()
 
 
+@pytest.mark.slow
 def test_a_killed_solve_leaves_no_spool_file(tmp_path):
     """A process killed (SIGKILL, as the out-of-memory killer does) while it holds spooled
     data on disk leaves nothing in the parking directory: the file has no name there from
@@ -525,6 +531,7 @@ def test_pruned_product_is_the_pair_pruned_product(monkeypatch, tmp_path):
                     assert files_in(tmp_path) == []       # the filtered copy's file too
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("on_disk", [False, True])
 def test_sums_and_reciprocal_pruning_in_pieces_equal_the_whole(coupled_layers, on_disk,
                                                                  tmp_path, monkeypatch):
@@ -790,6 +797,7 @@ def test_solved_anisotropic_stack_eval_albedo_bins_and_persistence(brushed_coati
         assert int(d["version"]) == 2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("parking", [False, True])
 def test_rgb_stack_shares_layers_across_channels_and_matches_per_channel_solves(
         parking, tmp_path, monkeypatch):
@@ -826,6 +834,7 @@ def test_rgb_stack_shares_layers_across_channels_and_matches_per_channel_solves(
     assert files_in(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_projection_parks_the_blocks_of_an_operator_handed_to_the_adding(
         coupled_layers, tmp_path, monkeypatch):
     """aniso_interface_operator(park_dir=...) parks each block as it is built (rotated, its
@@ -860,6 +869,7 @@ def test_projection_parks_the_blocks_of_an_operator_handed_to_the_adding(
         assert files_in(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_eval_of_a_rotated_anisotropic_interface_matches_the_physics():
     """BSDF.eval (cubic interpolation between ordinates) of a single rotated anisotropic
     conductor at the planner's discretisation, against physics.microfacet_eval evaluated in the
@@ -891,6 +901,7 @@ def _rotate_z(v, psi):
                     axis=-1)
 
 
+@pytest.mark.slow
 def test_rotational_average_is_the_mean_over_frame_rotations_and_sampling_is_unbiased():
     """The isotropic proposal of anisotropic sampling equals the BSDF averaged over rotations
     of both directions about the normal, and weights drawn with it average to the albedo."""

@@ -120,6 +120,7 @@ def test_export_version_2(glass_files, capsys):
     assert table.version == 2 and table.alpha == pytest.approx((0.3, 0.3))
 
 
+@pytest.mark.slow
 def test_anisotropic_scene_exports_evaluates_and_plots(tmp_path, capsys):
     """A rotated brushed metal: export writes version 2 with complex coefficients by default
     (version 1 is refused), eval of the file equals eval of the scene (and of the solved BSDF;

@@ -73,7 +73,7 @@ class Case:
 
 
 def cases() -> list:
-    """The named cases of issue 5 (and any added with :func:`register`)."""
+    """The named stability cases (and any added with :func:`register`)."""
     diel = lambda eta, a: {"kind": "dielectric", "ior": eta, "roughness": a}
     cond = lambda ior, a: {"kind": "conductor", "ior": ior, "roughness": a}
     med = lambda albedo, tau, g=0.0: {"kind": "medium", "albedo": albedo, "tau": tau, "g": g}
@@ -98,8 +98,8 @@ def cases() -> list:
         Case("grazing_89", [diel(1.5, 0.1), cond(GOLD, 0.1)], "coated gold lit at 89 deg",
              angles=(89.0,)),
         # 89.9 deg lies beyond the first ordinate of the default plan (n = 196: 89.5 deg), where
-        # incident directions take that ordinate's values (0.75 % low here; README limits):
-        # the case checks a plan that resolves it
+        # incident directions take that ordinate's values (see the README's limits): the case
+        # checks a plan that resolves it
         Case("grazing_89.9", [diel(1.5, 0.1), cond(GOLD, 0.1)],
              "coated gold lit at 89.9 deg, n = 800 (first ordinate at 89.8 deg)",
              angles=(89.9,), discretization={"n": 800}, small={"n": 196}),
@@ -122,10 +122,10 @@ _registered: list = []
 
 @dataclass
 class SubtractCase:
-    """A subtraction case (seed 000 sec. 3.4): build ``add(top, bottom)``, optionally perturb
-    it with multiplicative noise, and recover ``bottom`` with automatic regularisation. Passes
-    if the result is finite, conserves energy, has no negative lobes deeper than the noise, and
-    is within ``tolerance`` of the truth (:func:`layersim.subtract.relative_error`); an
+    """A subtraction case (Zeltner & Jakob 2018 sec. 3.4): build ``add(top, bottom)``, optionally
+    perturb it with multiplicative noise, and recover ``bottom`` with automatic regularisation.
+    Passes if the result is finite, conserves energy, has no negative lobes deeper than the noise,
+    and is within ``tolerance`` of the truth (:func:`layersim.subtract.relative_error`); an
     ill-posed removal must be refused."""
 
     name: str
