@@ -237,7 +237,7 @@ def test_coarse_bounds_in_chunks_of_pairs_equal_all_pairs_at_once(monkeypatch):
     """The pre-pass bounds of a block (_coarse, peak parameters and BSDF bound per pair) are
     the same evaluated a few pairs at a time (the memory bound) as all at once."""
     from layersim.ingredients import aniso_microfacet as am
-    mu_i, mu_o, _, _ = am._block_pairs(G32, "Rb", False)
+    mu_i, mu_o, _, _ = am.block_pairs(G32, "Rb", False)
     args = (mu_i, mu_o, 1.5, 0.15, 0.05, "beckmann", 32)
     whole = am._coarse(*args)
     monkeypatch.setattr(am, "COARSE_ELEMENTS", 17 * 17 * 7)        # 7 pairs per launch

@@ -1,5 +1,6 @@
-"""Planning of anisotropic stacks: the coupling width ``ms`` per layer, the pre-pass of the
-Fourier orders of anisotropic interfaces, and memory estimates.
+"""Planning of anisotropic stacks: the coupling width ``ms`` per layer, the truncation of the
+coupled coefficients, and memory estimates (the pre-pass of their Fourier orders is the
+projection's, :func:`layersim.ingredients.aniso_microfacet.series_lengths`).
 
 ``ms`` (coupling half-width, modes ``s in [-ms, ms]`` of the azimuth sum) grows with the
 roughness ratio ``r = max(alpha_u / alpha_v, alpha_v / alpha_u)``. Seed 000 eq. (25) fits
@@ -26,7 +27,7 @@ MS_ROUGH = 0.5
 MS_TARGET = 0.01
 #: Relative truncation of each ordinate pair's coefficients ``f_{d,s}`` on the coupled path
 #: (projection and the pre-pass that sets ``md``); the isotropic path keeps
-#: ``layersim.plan.SERIES_RELERR`` = 1e-7. The ``ms`` rule already accepts a relative L2
+#: ``layersim.ingredients.microfacet.RELERR`` = 1e-7. The ``ms`` rule already accepts a relative L2
 #: error of up to :data:`MS_TARGET` (1 %); dropping coefficients below 1e-5 of their pair's
 #: largest removes ~30 % of the nonzeros of the layers of Table 2 row 7 (the work of the
 #: adding equations scales with them) and changes its BSDF by 1.4e-6 median, 6e-5 at the 99th
@@ -63,15 +64,6 @@ def ms_for_layer(layer) -> int:
     if ms and max(layer.alpha_u, layer.alpha_v) > MS_ROUGH:
         ms += 1
     return ms
-
-
-def interface_prepass(grid, layer, eta_above: float, ms: int, relerr: float = COUPLED_RELERR):
-    """Series lengths (in ``phi_d``) of the significant ordinate pairs of an anisotropic
-    interface (maximum over ``phi_s``) and whether both elevations are within the plan's
-    ``THETA_FULL``: the same quantities as the isotropic pre-pass, from one cheap kernel pass
-    per block (:func:`layersim.ingredients.aniso_microfacet.coarse_lengths`)."""
-    from ..ingredients.aniso_microfacet import coarse_lengths
-    return coarse_lengths(grid, layer, eta_above, ms, relerr)
 
 
 #: Measured fraction of the (d, s) coefficients of a pair's rectangle that survive pruning

@@ -53,7 +53,7 @@ from ..operator import Grid
 from ..scene import Conductor
 from .microfacet import L_FIT as ISO_L_FIT
 from .microfacet import (ENERGY_DROP, RELERR, SUPPORT_TOLERANCE, TAPER_THRESHOLD,
-                         ProjectionStats, _block_pairs)
+                         ProjectionStats, block_pairs)
 
 #: Smallest number of phi_s samples (a power of two; mirror symmetry samples half + 1 of them).
 QS_MIN = 16
@@ -155,26 +155,47 @@ def _coarse_chunk(mu_i, mu_o, eta, au, av, dist, qs):
     return theta0, q0, qpi, bound
 
 
-def coarse_lengths(grid: Grid, layer, eta_above: float, ms: int, relerr: float):
-    """Plan pre-pass: series length in ``phi_d`` (maximum over ``phi_s``, plus the smooth
-    factor's terms) of the significant pairs of every block, and whether both elevations lie
-    within ``layersim.plan.THETA_FULL`` of the normal."""
-    from ..plan import THETA_FULL
+def series_lengths(grid: Grid, layer, eta_above: float, ms: int, relerr: float):
+    """Pre-pass of the projection for the plan: how many orders in ``phi_d`` each significant
+    pair of an anisotropic interface needs (the maximum over coarse ``phi_s`` samples, plus the
+    smooth factor's terms), from one cheap kernel pass per block (:func:`_coarse`).
+
+    Parameters
+    ----------
+    grid : Grid
+    layer : Dielectric or Conductor
+        Validated rough interface (``alpha_u``, ``alpha_v``; its rotation does not change the
+        lengths).
+    eta_above : float
+        Absolute index of the medium above the interface.
+    ms : int
+        Coupling half-width the layer is projected with (sets the ``phi_s`` sampling).
+    relerr : float
+        Relative truncation of each pair's coefficients
+        (:data:`layersim.aniso.plan.COUPLED_RELERR` on the coupled path).
+
+    Returns
+    -------
+    lengths : int ndarray (P,)
+        Orders each significant pair of the interface's blocks needs.
+    mu_min : ndarray (P,)
+        ``min(|mu_i|, |mu_o|)`` of each of those pairs, as
+        :func:`layersim.ingredients.microfacet.series_lengths` returns it.
+    """
     eta = complex(layer.ior) / eta_above
     names = ("Rt",) if isinstance(layer, Conductor) else ("Rt", "Rb", "Ttb", "Tbt")
     fw = grid.flux_weight
-    mu_full = math.cos(math.radians(THETA_FULL))
-    lengths, full = [], []
+    lengths, mu_min = [], []
     qs = max(8, _qs_for(ms) // 2)
     for name in names:
-        mu_i, mu_o, o, i = _block_pairs(grid, name, triangle=False)
+        mu_i, mu_o, o, i = block_pairs(grid, name, triangle=False)
         _, q0, qpi, bound = _coarse(mu_i, mu_o, eta, layer.alpha_u, layer.alpha_v,
                                     layer.distribution, qs)
         sig = bound * 2.0 * np.pi * np.maximum(fw[i], fw[o]) > ENERGY_DROP
         n = fourier.peak_length(q0[sig].ravel(), qpi[sig].ravel(), layer.distribution, relerr)
         lengths.append(n.reshape(-1, q0.shape[1]).max(axis=1) + L_FIT)
-        full.append(np.minimum(np.abs(mu_i[sig]), np.abs(mu_o[sig])) >= mu_full)
-    return np.concatenate(lengths), np.concatenate(full)
+        mu_min.append(np.minimum(np.abs(mu_i[sig]), np.abs(mu_o[sig])))
+    return np.concatenate(lengths), np.concatenate(mu_min)
 
 
 def _supports(theta0, q0, qpi, dist):
@@ -399,7 +420,7 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
         that only those batches' dense temporaries are alive at once.
     """
     from ..threads import THREADS
-    mu_i, mu_o, o, i = _block_pairs(grid, name, triangle)
+    mu_i, mu_o, o, i = block_pairs(grid, name, triangle)
     stats.pairs += mu_i.size
     fw = grid.flux_weight
     qs = _qs_for(ms)
