@@ -41,6 +41,8 @@ import subprocess
 import sys
 import time
 
+from layersim.config import settings
+
 GOLD = [0.143552, 3.98397]
 ROWS = [  # (top alpha_u, alpha_v), (bottom alpha_u, alpha_v), paper: total s, adding s,
     #       sparsity top %, bottom %, combined %, storage MiB
@@ -112,9 +114,8 @@ def main(argv) -> int:
         print(json.dumps(run_row(int(argv[1]))))
         return 0
     rows = [int(a) for a in argv] or list(range(1, len(ROWS) + 1))
-    print(f"machine: {os.cpu_count()} cores; layersim projection threads: "
-          f"{os.environ.get('LAYERSIM_PROJECTION_THREADS', os.cpu_count())}; load average "
-          f"at start {os.getloadavg()[0]:.1f}")
+    print(f"machine: {os.cpu_count()} cores; layersim threads (LAYERSIM_THREADS): "
+          f"{settings().threads}; load average at start {os.getloadavg()[0]:.1f}")
     head = (f"{'row':>3} {'top':>11} {'bottom':>11} | {'total s':>15} {'adding s':>15} | "
             f"{'top %':>13} {'bottom %':>13} {'combined %':>13} | {'storage MiB':>15} | "
             f"{'peak RSS MiB (above base)':>25} | {'estimate MiB (/above)':>21} | "

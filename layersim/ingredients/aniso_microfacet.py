@@ -48,9 +48,11 @@ from ..aniso import basis, series
 from ..aniso.operator import (AnisoOperator, from_parts, reciprocal_image, rotate_block,
                               slot_column_scale, with_reciprocal_image)
 from ..aniso.park import Spool, park
+from ..config import settings
 from ..kernels import projection as kproj
 from ..operator import Grid
 from ..scene import Conductor
+from ..threads import parallel_map
 from .microfacet import L_FIT as ISO_L_FIT
 from .microfacet import (ENERGY_DROP, RELERR, SUPPORT_TOLERANCE, TAPER_THRESHOLD,
                          ProjectionStats, block_pairs)
@@ -416,10 +418,10 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
         entries), appended to ``out`` (a new list by default; a
         :class:`~layersim.aniso.park.Spool` keeps them in a file: on Table 2 row 6 of seed
         000 a triangle of the coating's ``Rb`` took 300 MiB beside the projection's
-        temporaries). Batches are projected :data:`layersim.threads.THREADS` at a time, so
-        that only those batches' dense temporaries are alive at once.
+        temporaries). Batches are projected ``layersim.config.settings().threads`` at a
+        time, so that only those batches' dense temporaries are alive at once.
     """
-    from ..threads import THREADS
+    threads = settings().threads
     mu_i, mu_o, o, i = block_pairs(grid, name, triangle)
     stats.pairs += mu_i.size
     fw = grid.flux_weight
@@ -460,9 +462,11 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
             return _project_pairs(mu_i[todo[sel]], mu_o[todo[sel]], eta, au, av, dist, ms, md,
                                   qs, geo, relerr)
 
+        # groups of `threads` batches on the pool (numpy and Warp release the GIL)
         for sel, (F, alias, dropped, tot, plen, nrefit) in (
-                (sel, res) for g in range(0, len(batches), THREADS)
-                for sel, res in zip(batches[g:g + THREADS], _map(work, batches[g:g + THREADS]))):
+                (sel, res) for g in range(0, len(batches), threads)
+                for sel, res in zip(batches[g:g + threads],
+                                    parallel_map(work, batches[g:g + threads]))):
             stats.refit += nrefit
             ok = ~alias if qs < QS_MAX else np.ones(sel.size, bool)
             if (~ok).any():
@@ -485,12 +489,6 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
     if stats._den:
         stats.s_dropped_energy = math.sqrt(stats._num / stats._den)
     return chunks
-
-
-def _map(fn, items):
-    """:func:`layersim.threads.parallel_map` (batches release the GIL in numpy and Warp)."""
-    from ..threads import parallel_map
-    return parallel_map(fn, items)
 
 
 def _entries(grid: Grid, md: int, ms: int, o, i, F):

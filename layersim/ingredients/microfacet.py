@@ -22,7 +22,6 @@ wide.
 
 from __future__ import annotations
 
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -30,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import fourier
+from ..config import settings
 from ..kernels import projection as kproj
 from ..kernels.runtime import device_for
 from ..operator import Grid, IsoOperator
@@ -73,9 +73,6 @@ N_COARSE = 17
 #: Pairs per batch (bounds the temporary memory of the fit: ~Q*L*8 bytes per pair; small
 #: enough that a block gives the thread pool several batches).
 BATCH = 1024
-#: Threads projecting the blocks of an interface concurrently (``$LAYERSIM_BLOCK_WORKERS``;
-#: default: the number of CPU cores). Batches within a block run on :mod:`layersim.threads`.
-BLOCK_WORKERS = int(os.environ.get("LAYERSIM_BLOCK_WORKERS", "0")) or (os.cpu_count() or 1)
 #: Azimuths (on [0, pi]) at which the plan's pre-pass (:func:`series_lengths`) samples each pair.
 N_PREPASS = 9
 
@@ -425,7 +422,8 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
     eta, dist, alpha, opaque, names = interface_setup(layer, eta_above)
     series = {}
     # Blocks are independent: project them concurrently (Warp CPU launches, FFTs and LAPACK
-    # release the GIL), one worker per core up to the number of blocks.
+    # release the GIL), one worker per thread of layersim.config (threads) up to the number of
+    # blocks.
     def project(name, triangle):
         own = ProjectionStats()       # one per block: no counters shared between threads
         chunks = _project_block(grid, name, m, eta, alpha, dist, own, triangle=triangle,
@@ -438,7 +436,7 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
         jobs = {name: (name, name != "Ttb") for name in names if name != "Tbt"}
     else:
         jobs = {name: (name, False) for name in names}
-    workers = 1 if on_gpu(device) else min(len(jobs), BLOCK_WORKERS)
+    workers = 1 if on_gpu(device) else min(len(jobs), settings().threads)
     if workers > 1:
         with ThreadPoolExecutor(workers) as pool:
             done = dict(zip(jobs, pool.map(lambda job: project(*job), jobs.values())))

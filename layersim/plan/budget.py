@@ -1,6 +1,6 @@
 """Memory of a plan: estimated from the projection's pre-pass (coefficients actually stored)
-and refused up front when it exceeds the limit (``LAYERSIM_MAX_MEMORY`` bytes; default: half
-the available memory).
+and refused up front when it exceeds the limit (``layersim.config.settings().max_memory``,
+``LAYERSIM_MAX_MEMORY``; default: half the available memory).
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import os
 import numpy as np
 
 from ..aniso import plan as aplan
+from ..config import settings
 from ..errors import InfeasibleError
 from ..operator import Grid
 from ..scene import Discretization, Scene
@@ -33,14 +34,10 @@ def available_memory() -> int:
 
 
 def memory_limit() -> int:
-    """Bytes a solve may use: ``$LAYERSIM_MAX_MEMORY`` or half the available memory."""
-    env = os.environ.get("LAYERSIM_MAX_MEMORY")
-    if env:
-        try:
-            return int(float(env))
-        except ValueError:
-            raise InfeasibleError(f"LAYERSIM_MAX_MEMORY must be a number of bytes, got {env!r}")
-    return available_memory() // 2
+    """Bytes a solve may use: ``settings().max_memory`` (``LAYERSIM_MAX_MEMORY``) or half the
+    available memory."""
+    limit = settings().max_memory
+    return available_memory() // 2 if limit is None else limit
 
 
 def refuse_below_lower_bound(disc: Discretization, mono: Scene, layers: list, grid: Grid,
