@@ -1,4 +1,4 @@
-"""Table 2 of seed 000 (Zeltner & Jakob 2018): a dielectric coating (eta 1.5) over gold
+"""Table 2 of Zeltner & Jakob 2018: a dielectric coating (eta 1.5) over gold
 ([0.143552, 3.98397], red channel), seven roughness combinations, solved by `layersim.solve`
 at the planner's discretisation. Each row runs in a fresh process (so that the peak resident
 memory is the row's own); the paper's numbers (4-core i7-6700K, UMFPACK) are printed beside ours.
@@ -22,14 +22,10 @@ Usage::
 
 Row 6 (both layers 1:3 anisotropic, the narrow axis 0.05 in the coating) needs n = 390 and
 md = 426 at the planner's accuracy (the coating's refraction lobe sets n = 390; estimated
-7.0 GiB). At that plan (``benchmarks/memory_phases.py 6 --default``, shared 2-core machine,
-commit 306c7fc) the solve took 384 s (plan and projection 158 s, the products of the adding
-equations 117 s, the solve 60 s, the output product, sum and pruning 49 s), peak RSS 1034 MiB
-above the baseline; 288 s and 1031 MiB at commit 434e2a0 (faster products and projection). It
-is run at
-``n = 224, md = 300``: the smallest n at which the coating's discrete operator does not create
-energy (n = 196 and 210 are refused by the energy check: 1.00000x and 1.0012), and marked as
-such.
+7.0 GiB), a solve of several minutes (``benchmarks/memory_phases.py 6 --default`` runs it;
+docs/performance.md gives its phases). It is run at ``n = 224, md = 300``: the smallest n at
+which the coating's discrete operator does not create energy (n = 196 and 210 are refused by
+the energy check), and marked as such.
 """
 
 from __future__ import annotations

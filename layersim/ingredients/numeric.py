@@ -7,8 +7,8 @@ the number of azimuth samples: the trapezoidal rule with N samples aliases coeff
 ``l`` onto ``N - l``, so a pair whose series has ``K`` significant orders needs
 ``N >= m + K`` for its first ``m`` orders to be clean. Pairs are grouped by that N (a power of
 two), capped at ``max_samples``; pairs that would need more (counted in ``stats.aliased``) are
-projected by the semi-analytic path instead. On a GPU this path is far cheaper than the semi-analytic one (no fits, one
-launch per group); on a single CPU thread it is usually slower.
+projected by the semi-analytic path instead. On a GPU this path is far cheaper than the
+semi-analytic one (no fits, one launch per group); on a single CPU thread it is usually slower.
 
 Everything else (pairs, energy pruning, reciprocity shortcut, truncation with Lanczos tapering,
 assembly) follows the semi-analytic path. On a CUDA device a whole operator is built without
