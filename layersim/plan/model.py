@@ -61,10 +61,11 @@ class Plan:
     def report(self) -> str:
         """Human-readable summary (printed by ``layersim plan`` and ``layersim solve``)."""
         src = lambda k: " (from the scene)" if k in self.overridden else ""
+        basis = ("(cosine series in the azimuth difference)" if self.representation == "isotropic"
+                 else "(Fourier series in phi_d and phi_s, coupled modes, Zeltner & Jakob 2018, "
+                      "eq. (7)-(10))")
         lines = [
-            f"representation: {self.representation} "
-            + ("(cosine series in the azimuth difference)" if self.representation == "isotropic"
-               else "(Fourier series in phi_d and phi_s, coupled modes, seed 000 eq. (7)-(10))"),
+            f"representation: {self.representation} {basis}",
             f"ordinates: n = {self.n}{src('n')}, {self.rule}{src('quadrature')} "
             f"({self.n // 2} per hemisphere)",
             f"Fourier orders: md = {self.md}{src('md')}" + (f", ms = {self.ms}{src('ms')}"
