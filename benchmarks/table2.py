@@ -37,6 +37,9 @@ import subprocess
 import sys
 import time
 
+import layersim
+from layersim import solver
+from layersim.aniso import AnisoOperator
 from layersim.config import settings
 
 GOLD = [0.143552, 3.98397]
@@ -56,15 +59,12 @@ OVERRIDES = {6: {"n": 224, "md": 300}}
 
 def _density(op) -> float:
     """Nonzeros over all entries of the coupled representation (percent)."""
-    from layersim.aniso import AnisoOperator
     if not isinstance(op, AnisoOperator):
         op = AnisoOperator.from_iso(op)
     return 100.0 * op.density()
 
 
 def run_row(k: int) -> dict:
-    import layersim
-    from layersim import solver
     top, bottom = ROWS[k - 1][:2]
     scene = {"layer": [{"kind": "dielectric", "ior": 1.5, "roughness": list(top)},
                        {"kind": "conductor", "ior": GOLD, "roughness": list(bottom)}]}
