@@ -30,7 +30,7 @@ import numpy as np
 
 from layersim.aniso import series
 from layersim.ingredients import aniso_microfacet as am
-from layersim.ingredients.microfacet import _block_pairs
+from layersim.ingredients.microfacet import block_pairs
 from layersim.kernels import projection as kproj
 from layersim.operator import Grid
 from layersim.scene import Conductor, Dielectric
@@ -95,7 +95,7 @@ def main() -> int:
     for label, layer, names in cases:
         for name in names:
             t0 = time.perf_counter()
-            mu_i, mu_o, o, i = _block_pairs(grid, name, False)
+            mu_i, mu_o, o, i = block_pairs(grid, name, False)
             stats = am.AnisoProjectionStats()
             chunks = am._project_block(grid, name, md, ms, complex(layer.ior), layer.alpha_u,
                                        layer.alpha_v, layer.distribution, stats)

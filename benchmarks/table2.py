@@ -38,6 +38,11 @@ import subprocess
 import sys
 import time
 
+import layersim
+from layersim import solver
+from layersim.aniso import AnisoOperator
+from layersim.config import settings
+
 GOLD = [0.143552, 3.98397]
 ROWS = [  # (top alpha_u, alpha_v), (bottom alpha_u, alpha_v), paper: total s, adding s,
     #       sparsity top %, bottom %, combined %, storage MiB
@@ -55,15 +60,12 @@ OVERRIDES = {6: {"n": 224, "md": 300}}
 
 def _density(op) -> float:
     """Nonzeros over all entries of the coupled representation (percent)."""
-    from layersim.aniso import AnisoOperator
     if not isinstance(op, AnisoOperator):
         op = AnisoOperator.from_iso(op)
     return 100.0 * op.density()
 
 
 def run_row(k: int) -> dict:
-    import layersim
-    from layersim import solver
     top, bottom = ROWS[k - 1][:2]
     scene = {"layer": [{"kind": "dielectric", "ior": 1.5, "roughness": list(top)},
                        {"kind": "conductor", "ior": GOLD, "roughness": list(bottom)}]}
@@ -109,9 +111,8 @@ def main(argv) -> int:
         print(json.dumps(run_row(int(argv[1]))))
         return 0
     rows = [int(a) for a in argv] or list(range(1, len(ROWS) + 1))
-    print(f"machine: {os.cpu_count()} cores; layersim projection threads: "
-          f"{os.environ.get('LAYERSIM_PROJECTION_THREADS', os.cpu_count())}; load average "
-          f"at start {os.getloadavg()[0]:.1f}")
+    print(f"machine: {os.cpu_count()} cores; layersim threads (LAYERSIM_THREADS): "
+          f"{settings().threads}; load average at start {os.getloadavg()[0]:.1f}")
     head = (f"{'row':>3} {'top':>11} {'bottom':>11} | {'total s':>15} {'adding s':>15} | "
             f"{'top %':>13} {'bottom %':>13} {'combined %':>13} | {'storage MiB':>15} | "
             f"{'peak RSS MiB (above base)':>25} | {'estimate MiB (/above)':>21} | "

@@ -14,6 +14,7 @@ import layersim
 from layersim import adding
 from layersim.aniso import AnisoOperator, adding as aniso_adding, basis, reciprocity_error
 from layersim.aniso.adding import banded_solve
+from layersim.config import configure
 from layersim.errors import InfeasibleError
 from layersim.ingredients.numeric import numeric_interface_operator
 from layersim.ingredients import interface_operator, medium_operator
@@ -240,7 +241,7 @@ def test_coarse_bounds_in_chunks_of_pairs_equal_all_pairs_at_once(monkeypatch):
     """The pre-pass bounds of a block (_coarse, peak parameters and BSDF bound per pair) are
     the same evaluated a few pairs at a time (the memory bound) as all at once."""
     from layersim.ingredients import aniso_microfacet as am
-    mu_i, mu_o, _, _ = am._block_pairs(G32, "Rb", False)
+    mu_i, mu_o, _, _ = am.block_pairs(G32, "Rb", False)
     args = (mu_i, mu_o, 1.5, 0.15, 0.05, "beckmann", 32)
     whole = am._coarse(*args)
     monkeypatch.setattr(am, "COARSE_ELEMENTS", 17 * 17 * 7)        # 7 pairs per launch
@@ -749,12 +750,12 @@ def test_plan_chooses_the_representation_and_the_coupling_width():
     assert forced.ms == 2 and any("below the" in n for n in forced.notes)
 
 
-def test_memory_limit_refuses_a_coupled_plan_and_says_what_to_reduce(monkeypatch):
-    monkeypatch.setenv("LAYERSIM_MAX_MEMORY", "2000000")
+def test_memory_limit_refuses_a_coupled_plan_and_says_what_to_reduce():
     scene = layersim.Scene.from_dict({"layer": [
         {"kind": "dielectric", "ior": 1.5, "roughness": 0.1},
         {"kind": "conductor", "ior": [0.2, 3.0], "roughness": [0.05, 0.15]}]})
-    with pytest.raises(InfeasibleError, match="ms = 6.*GiB.*ms in \\[discretization\\]"):
+    with configure(max_memory=2_000_000), \
+            pytest.raises(InfeasibleError, match="ms = 6.*GiB.*ms in \\[discretization\\]"):
         layersim.make_plan(scene)
 
 
