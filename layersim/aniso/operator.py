@@ -15,20 +15,24 @@ isotropic operators.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import scipy.sparse as sps
 
 from .. import memory
 from ..errors import FileFormatError, OperatorError
-from ..operator import (BLOCKS, DROP_TOLERANCE, Grid, IsoOperator, header_arrays,
-                        read_blocks, read_delta, write_blocks)
+from ..operator import (BLOCKS, DROP_TOLERANCE, Grid, IsoOperator, Operator, header_arrays,
+                        read_blocks, read_delta, register, write_blocks)
 from . import basis
 from .park import Parked, Spool
 from .rowpieces import RowPieces, row_spans
 
 
-class AnisoOperator:
-    """Operator of an anisotropic layer or stack in the real slot basis (module docstring).
+@register
+class AnisoOperator(Operator):
+    """Operator of an anisotropic layer or stack in the real slot basis (module docstring);
+    implements :class:`layersim.operator.Operator`.
 
     Parameters
     ----------
@@ -74,14 +78,6 @@ class AnisoOperator:
         self.consumed = False           # see consume()
 
     # ---- structure ---------------------------------------------------------------------
-
-    @property
-    def opaque(self) -> bool:
-        return self.blocks["Ttb"] is None
-
-    @property
-    def h(self) -> int:
-        return self.grid.h
 
     @property
     def m(self) -> int:
@@ -191,6 +187,17 @@ class AnisoOperator:
     @classmethod
     def identity(cls, grid: Grid, md: int, eta: float) -> "AnisoOperator":
         return cls.from_iso(IsoOperator.identity(grid, md, eta), md)
+
+    def as_coupled(self, md: int | None = None) -> "AnisoOperator":
+        return self if md is None else self.with_md(md)
+
+    def map_blocks(self, fn: Callable) -> "AnisoOperator":
+        blocks = {k: None if v is None else fn(v) for k, v in self.blocks.items()}
+        return AnisoOperator(self.grid, self.md, blocks, self.eta_top, self.eta_bottom,
+                             self.delta)
+
+    def reciprocity_error(self) -> float:
+        return reciprocity_error(self)
 
     def with_md(self, md: int) -> "AnisoOperator":
         """The same operator with ``md`` orders (slots beyond are dropped / zero)."""
