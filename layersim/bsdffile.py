@@ -133,9 +133,13 @@ from types import SimpleNamespace
 import numpy as np
 import scipy.sparse as sps
 
-from .bsdf import BSDF, _azimuth, _directions, spline_weights
+from .aniso import basis
+from .aniso.operator import AnisoOperator
+from .bsdf import BSDF
 from .channels import LUMINANCE, aligned_series, green_from_ybr
+from .directions import azimuth, unit_directions
 from .errors import FileFormatError, InfeasibleError
+from .interpolation import spline_weights
 from .kernels import fourier_eval, fourier_eval2d
 from .operator import BLOCKS, Grid, IsoOperator, order_weight
 
@@ -580,8 +584,8 @@ class FourierTable:
         -------
         ndarray, shape (...) or (..., 3)
         """
-        wi = _directions("wi", wi)
-        wo = _directions("wo", wo)
+        wi = unit_directions("wi", wi)
+        wo = unit_directions("wo", wo)
         wi, wo = np.broadcast_arrays(wi, wo)
         shape = wi.shape[:-1]
         wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
@@ -597,7 +601,7 @@ class FourierTable:
         weight = (wii[:, :, None] * wio[:, None, :]).reshape(-1, 16)
         weight[~inside] = 0.0
         # azimuths of the camera direction and of the reversed light direction
-        phi_i, phi_o = _azimuth(wo), _azimuth(-wi)
+        phi_i, phi_o = azimuth(wo), azimuth(-wi)
         if self.version == 1:
             sums = [fourier_eval.eval_series(*self._channel_series(c), pair, weight,
                                              phi_o - phi_i) for c in range(self.channels)]
@@ -729,8 +733,6 @@ def _operator(grid, ours_of, pair, order, a, present, eta_top, eta_bottom, delta
 def _aniso_operator(grid, ours_of, pair, s, d, c, md, present, eta_top, eta_bottom, delta):
     """An AnisoOperator from the file's complex ``c_sd = f_{d,s} |mu_o|`` of one channel (file
     ``pair``, ``s``, ``d >= 0`` of every coefficient), with at least ``md`` orders."""
-    from .aniso import basis
-    from .aniso.operator import AnisoOperator
     h = grid.h
     ours = ours_of[pair]
     sel = (ours >= 0) & (c != 0)                 # the boxes are dense: skip their zeros
@@ -812,7 +814,7 @@ def _bsdf_spectrum(bsdf, c: int):
     """Every nonzero ``f_{d,s}`` (1/sr, complex) with ``d >= 0`` of channel ``c`` of a solved
     BSDF, the unscattered delta excluded: ``(pair, s, d, f)`` with our pair numbering
     (``b h^2 + o h + i``). The ``d = 0`` row holds ``f_{0,s}`` and ``f_{0,-s}``."""
-    table = bsdf._table(c)
+    table = bsdf.series_table(c)
     if not bsdf.anisotropic:       # f = sum_l f_l cos(l phi_d): f_{0,0} = f_0, f_{+-l,0} = f_l / 2
         size = np.diff(table.offsets)
         pair = np.repeat(np.arange(size.size), size)
