@@ -1,7 +1,7 @@
 """The solved BSDF of a stack: evaluation, energy fractions and bin energies.
 
-Directions follow ``docs/conventions.md``: unit vectors ``(..., 3)`` in the local frame, both pointing
-away from the surface. This module is the one place where they are converted to the solver's
+Directions follow ``docs/conventions.md``: unit vectors ``(..., 3)`` in the local frame, both
+pointing away from the surface. This module is the one place where they are converted to the solver's
 discrete-ordinates convention::
 
     mu_in = wi.z,   mu_out = -wo.z,   dphi = phi(wo) - phi(wi) - pi

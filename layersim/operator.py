@@ -1,6 +1,6 @@
 """Discrete scattering operators of isotropic layers in the cosine basis.
 
-Representation (seed 004 eq. (10), (14); seed 000 eq. (5))
+Representation (Jakob's layerlab tutorial eq. (10), (14); Zeltner & Jakob 2018 eq. (5))
 -----------------------------------------------------------
 The solver uses the discrete-ordinates convention: ``mu > 0`` propagates deeper into the stack
 (downwards), ``mu < 0`` towards the top. Radiance is expanded in azimuth as
@@ -58,7 +58,7 @@ DROP_TOLERANCE = 1e-12
 
 
 def order_weight(l: int | np.ndarray):
-    """c_l of eq. (14) in seed 004: 2 pi for l = 0, pi otherwise."""
+    """c_l of eq. (14) of Jakob's layerlab tutorial: 2 pi for l = 0, pi otherwise."""
     return np.where(np.asarray(l) == 0, 2.0 * np.pi, np.pi)
 
 
@@ -348,7 +348,7 @@ class IsoOperator(Operator):
         out = {}
         for name in BLOCKS:
             arr = blocks.get(name)
-            out[name] = None if arr is None else [_prune(sps.csr_matrix(a)) for a in arr]
+            out[name] = None if arr is None else [prune_order(sps.csr_matrix(a)) for a in arr]
         return cls(grid, out, eta_top, eta_bottom, delta)
 
     @classmethod
@@ -444,8 +444,8 @@ class OrderStack(Sequence):
     in one pass, and what operator files store.
 
     Indexing gives ``scipy.sparse.csr_matrix`` views of order ``l`` (sharing the arrays; built on
-    first access and cached, since scipy's constructor costs ~20-50 us, a large part of the
-    projection of a whole operator on a GPU). A slice gives a list of them.
+    first access and cached, since scipy's constructor is slow next to the projection of a
+    whole operator on a GPU). A slice gives a list of them.
 
     Parameters
     ----------
@@ -478,10 +478,10 @@ class OrderStack(Sequence):
     @classmethod
     def from_dense(cls, dense: np.ndarray) -> "OrderStack":
         """From dense orders (m, h, h), each pruned at :data:`DROP_TOLERANCE` relative to its
-        largest entry (exact zeros dropped too, as :func:`_prune` does); ``dense`` is
+        largest entry (exact zeros dropped too, as :func:`prune_order` does); ``dense`` is
         overwritten. ``|x| < cut`` is taken as two comparisons and ``max |x|`` as
-        ``max(max, -min)``: no float temporary of the dense array (``np.abs`` of it took a
-        third of the assembly of Table 2 row 1 of seed 000)."""
+        ``max(max, -min)``: no float temporary of the dense array (``np.abs`` of it would cost
+        as much as the rest of the assembly of a small operator)."""
         m, h = dense.shape[0], dense.shape[1]
         flat = dense.reshape(m, h * h)
         cut = DROP_TOLERANCE * np.maximum(flat.max(axis=1), -flat.min(axis=1))[:, None]
@@ -613,7 +613,9 @@ def _orders_to_csr(chunks, m: int, grid: Grid) -> "OrderStack":
     return OrderStack(v, i.astype(np.int32), indptr, h)
 
 
-def _prune(mat: sps.csr_matrix) -> sps.csr_matrix:
+def prune_order(mat: sps.csr_matrix) -> sps.csr_matrix:
+    """Drop the entries of one order's block below :data:`DROP_TOLERANCE` times its largest
+    magnitude, and exact zeros (in place; returns ``mat``)."""
     if mat.nnz:
         cut = DROP_TOLERANCE * np.abs(mat.data).max()
         mat.data[np.abs(mat.data) < cut] = 0.0

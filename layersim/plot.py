@@ -2,8 +2,8 @@
 and hemispherical slices for one incident direction.
 
 :func:`plot_blocks`
-    Like layerlab's ``plot_layer`` (seed 004 sec. 4.2): the BSDF of each block as an image over
-    ``(mu_i, mu_o)`` in the discrete-ordinates convention (``mu > 0`` propagates down), arranged
+    Like layerlab's ``plot_layer`` (Jakob's layerlab tutorial sec. 4.2): the BSDF of each block
+    as an image over ``(mu_i, mu_o)`` in the discrete-ordinates convention (``mu > 0`` propagates down), arranged
     ``Tbt | Rt`` over ``Rb | Ttb``, for one Fourier order ``l`` (the coefficient ``f_l``) or at
     one azimuth difference ``phi_d`` (the series summed), multiplied by ``|mu_i mu_o|`` to keep
     grazing values in range; each panel has its own colour scale (0 to its 99th percentile).

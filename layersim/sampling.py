@@ -33,7 +33,7 @@ non-negative, and ``pdf`` reports exactly the density that is sampled:
   uniformly there;
 * azimuth elsewhere: the density is ``max(g, 0) / (2 pi g_0)``. Where ``g`` is negative somewhere,
   inverting its integral follows ``g`` only up to the negative mass, so ``pdf`` integrates to
-  ``1 + `` that mass (measured: 2e-6 for coated gold at 85 degrees, 5e-6 for rough glass at 30
+  ``1 + `` that mass (2e-6 for coated gold at 85 degrees, 5e-6 for rough glass at 30
   degrees, exactly 1 where nothing rings: see ``tests/test_sampling.py``);
 * weights are ``max(f, 0) |wo.z| / pdf`` per channel (never negative).
 

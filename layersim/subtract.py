@@ -1,5 +1,5 @@
-"""The subtracting equations (seed 000 sec. 3.4, eq. (13)-(16)): recover the unknown layer of a
-two-layer stack from the stack and the known layer.
+"""The subtracting equations (Zeltner & Jakob 2018 sec. 3.4, eq. (13)-(16)): recover the unknown
+layer of a two-layer stack from the stack and the known layer.
 
 Removing a known **top** layer 1 (eq. (13)-(15); tildes denote the stack)::
 
@@ -18,8 +18,8 @@ stack yields the unknown bottom layer's ``Rt`` only).
 
 Regularisation
 --------------
-The inverses of the known transmissions ``T^+`` are Tikhonov-regularised (seed 000 sec. 5.5):
-``T^+ = (T^T T + eps^2 I)^-1 T^T``, computed in the energy basis ``W B W^-1`` with
+The inverses of the known transmissions ``T^+`` are Tikhonov-regularised (Zeltner & Jakob 2018
+sec. 5.5): ``T^+ = (T^T T + eps^2 I)^-1 T^T``, computed in the energy basis ``W B W^-1`` with
 ``W = diag(sqrt(w_j mu_j))`` per ordinate (and ``sqrt 2`` for the order-0 slot of coupled
 operators), where a clear layer is the identity, singular values of a transmission are at most
 ~1, and reciprocal reflection blocks are symmetric. ``eps`` is thus the transmitted amplitude
@@ -104,7 +104,7 @@ VISIBLE_EPS = 1e-3
 
 def subtract(stack, known, side: str = "top", eps: float | None = None,
              noise: float | None = None):
-    """Recover the unknown layer of a two-layer stack (seed 000 eq. (13)-(16)).
+    """Recover the unknown layer of a two-layer stack (Zeltner & Jakob 2018 eq. (13)-(16)).
 
     Parameters
     ----------

@@ -9,7 +9,8 @@
 ``phi_s = phi_o + phi_i``.
 
 * ``eval``: cubic spline interpolation of the coefficients between ordinates (as for isotropic
-  stacks) and the 2-D series of Zeltner & Jakob 2018 eq. (7) (:mod:`layersim.kernels.fourier_eval2d`).
+  stacks) and the 2-D series of Zeltner & Jakob 2018 eq. (7)
+  (:mod:`layersim.kernels.fourier_eval2d`).
 * ``albedo``: the discretisation's own quadrature. A collimated beam from node ``i`` at
   azimuth ``phi_i`` delivers ``sum_b E[b, i] v_b(phi_i)`` (``v = (1, 2 cos k phi,
   2 sin k phi)``, :meth:`AnisoOperator.albedo_slots`): the directional albedo of an anisotropic

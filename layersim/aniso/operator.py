@@ -1,12 +1,12 @@
 """Scattering operators with coupled Fourier modes (anisotropic layers and stacks).
 
-An :class:`AnisoOperator` holds the four blocks ``Rt, Rb, Ttb, Tbt`` of seed 000 sec. 3.2 (same
-meaning and solver convention as :class:`~layersim.operator.IsoOperator`: ``mu > 0`` propagates
-down, blocks indexed ``[outgoing, incident]``) as real sparse matrices of shape ``(S h, S h)`` in
+An :class:`AnisoOperator` holds the four blocks ``Rt, Rb, Ttb, Tbt`` of Zeltner & Jakob 2018
+sec. 3.2 (same meaning and solver convention as :class:`~layersim.operator.IsoOperator`:
+``mu > 0`` propagates down, blocks indexed ``[outgoing, incident]``) as real sparse matrices of shape ``(S h, S h)`` in
 the slot basis of :mod:`layersim.aniso.basis` (``S = 2 md - 1`` real slots of ``h`` ordinates).
 Row/column ``slot * h + node``. The block coupling Fourier mode ``k`` to ``l`` holds
-``B_{l,k} = 2 pi f_{(l+k)/2, (l-k)/2} w |mu|`` (seed 000 eq. (10)); ``ms`` records the largest
-coupling ``|l - k| / 2`` present (0: block diagonal, i.e. isotropic).
+``B_{l,k} = 2 pi f_{(l+k)/2, (l-k)/2} w |mu|`` (Zeltner & Jakob 2018 eq. (10)); ``ms`` records
+the largest coupling ``|l - k| / 2`` present (0: block diagonal, i.e. isotropic).
 
 Unscattered transmission through media (a delta in direction) sits on the diagonal of the
 transmission blocks in every slot, and is recorded per node in ``delta`` exactly as for
@@ -127,7 +127,8 @@ class AnisoOperator(Operator):
 
     def density(self) -> float:
         """Fraction of nonzero entries over the present blocks, counted on the complex
-        operator of seed 000 (modes ``-(md-1)..md-1``, the same count as the real one)."""
+        operator of Zeltner & Jakob 2018 (modes ``-(md-1)..md-1``, the same count as the real
+        one)."""
         present = sum(1 for m in self.blocks.values() if m is not None)
         return self.nnz() / max(1, present * self.size * self.size)
 

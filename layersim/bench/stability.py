@@ -128,8 +128,8 @@ _registered: list = []
 
 @dataclass
 class SubtractCase:
-    """A subtraction case (seed 000 sec. 3.4): build ``add(top, bottom)``, optionally perturb
-    it with multiplicative noise, and recover ``bottom`` with automatic regularisation. Passes
+    """A subtraction case (Zeltner & Jakob 2018 sec. 3.4): build ``add(top, bottom)``, optionally
+    perturb it with multiplicative noise, and recover ``bottom`` with automatic regularisation. Passes
     if the result is finite, conserves energy, has no negative lobes deeper than the noise, and
     is within ``tolerance`` of the truth (:func:`layersim.subtract.relative_error`); an
     ill-posed removal must be refused."""

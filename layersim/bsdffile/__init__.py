@@ -51,8 +51,8 @@ stack). The series of pair ``(o, i)`` is ``a_l = f_l(mu_o, mu_i) |mu_o|``, the B
 (radiance convention, light arriving along ``mu_i``) times the outgoing cosine, so that a
 renderer's ``eval`` (which includes the cosine factor) is ``sum_l a_l cos(l phi)``; ``phi`` is
 the azimuth difference of the propagation directions (0: specular / straight through).
-In layersim's terms (``CONVENTIONS.md``): ``mu_i = wi.z``, ``mu_o = -wo.z``, and pair ``(o, i)`` of
-block ``Rt`` (our ordinate indices ``o``, ``i``) is file pair ``(h - 1 - o, h + 2 + i)``, ``Ttb``
+In layersim's terms (``docs/conventions.md``): ``mu_i = wi.z``, ``mu_o = -wo.z``, and pair
+``(o, i)`` of block ``Rt`` (our ordinate indices ``o``, ``i``) is file pair ``(h - 1 - o, h + 2 + i)``, ``Ttb``
 is ``(h + 2 + o, h + 2 + i)``, ``Rb`` is ``(h + 2 + o, h - 1 - i)`` and ``Tbt`` is
 ``(h - 1 - o, h - 1 - i)``.
 
@@ -63,8 +63,8 @@ Version 2 stores per pair and channel a series in ``phi_s = phi_o + phi_i`` and
     c_sd = f_{d,s}(mu_o, mu_i) |mu_o|,
 
 where ``f = sum_{d,s} f_{d,s} exp(i d phi_d) exp(i s phi_s)`` over all ``d, s`` is the complex
-expansion of seed 000 eq. (7) (:mod:`layersim.aniso.basis`; ``f_{-d,-s} = conj(f_{d,s})``, so
-``d >= 0`` suffices; the ``d = 0`` row holds both ``f_{0,s}`` and ``f_{0,-s}``). The Layer
+expansion of Zeltner & Jakob 2018 eq. (7) (:mod:`layersim.aniso.basis`;
+``f_{-d,-s} = conj(f_{d,s})``, so ``d >= 0`` suffices; the ``d = 0`` row holds both ``f_{0,s}`` and ``f_{0,-s}``). The Layer
 Laboratory stores real ``c_sd`` (its layers are mirror symmetric about their tangent axes), and
 then this is its ``eval_fourier_series_2d``: ``2 sum c_sd cos(s phi_s + d phi_d) - sum_s c_s0
 cos(s phi_s)``. A layer rotated by ``rot`` has ``f_{d,s} exp(-2 i s rot)``: rotated layers, and
@@ -118,7 +118,8 @@ metadata, so that :meth:`FourierTable.to_bsdf` restores it; renderers ignore it)
 
 References: layerlab ``include/layer/storage.h``, ``src/storage.cpp`` (``BSDFStorage``); pbrt-v3
 ``FourierBSDFTable::Read`` and ``FourierBSDF::f``; Mitsuba 0.6 ``src/bsdfs/fourier.cpp``; the Layer
-Laboratory's Mitsuba 2 ``BSDFStorage`` (files above); seed 000 eq. (7), (10); seed 004 sec. 6.5.
+Laboratory's Mitsuba 2 ``BSDFStorage`` (files above); Zeltner & Jakob 2018 eq. (7), (10); Jakob's
+layerlab tutorial sec. 6.5.
 """
 
 from .layout import (FLAG_BSDF, FLAG_COMPLEX, FLAG_EXTRAPOLATED, HEADER_SIZE, MAGIC,

@@ -483,7 +483,8 @@ class FourierTable:
                 ops.append(coupled_operator(grid, ours_of, *ser, int(meta.get("md", 1)),
                                            present, eta_top, eta_bottom, delta))
             else:
-                ops.append(isotropic_operator(grid, ours_of, *ser, present, eta_top, eta_bottom, delta))
+                ops.append(isotropic_operator(grid, ours_of, *ser, present, eta_top, eta_bottom,
+                                              delta))
         info = {"scene": self.info.get("scene"), "source": "bsdf file",
                 "channels": len(ops), "n": grid.n, "md": ops[0].m, "rule": grid.rule,
                 "representation": "anisotropic" if self.anisotropic else "isotropic"}
