@@ -117,6 +117,8 @@ class Operator(ABC):
         The discrete ordinates (``h = grid.h`` per hemisphere).
     m : int
         Number of Fourier orders (``md`` of the coupled representation).
+    ms : int
+        Largest coupling ``|l - k| / 2`` between Fourier modes (0 for isotropic operators).
     blocks : dict
         ``{"Rt", "Rb", "Ttb", "Tbt"}`` to the representation's matrices, ``None`` for a block
         left out (opaque operators keep ``Rt`` only).
@@ -127,6 +129,9 @@ class Operator(ABC):
     """
 
     representation: str = ""
+    #: True once an adding step that consumes its operands took this operator's blocks
+    #: (:meth:`layersim.aniso.operator.AnisoOperator.consume`).
+    consumed: bool = False
 
     # ---- structure (shared) -------------------------------------------------------------
 
@@ -280,6 +285,8 @@ class IsoOperator(Operator):
             k: np.asarray(v, float) for k, v in delta.items() if v is not None}
 
     representation = "isotropic"
+    #: Isotropic operators couple no Fourier modes.
+    ms = 0
 
     # ---- structure ---------------------------------------------------------------------
 

@@ -206,12 +206,27 @@ def _subtract_op(stack, known, side, eps, noise):
         noise_level, source = alg.reciprocity_noise(), "reciprocity"
     else:
         noise_level, source = float(noise), "given"
+    noise_level = max(noise_level, NOISE_FLOOR)
+    rec, resid, e, method, neg = _choose_eps(alg, side, eps, noise_level)
+    vis, _ = alg.visibility(t_names, max(e, VISIBLE_EPS))
+    info = {"eps": e, "method": method, "noise": noise_level, "noise_source": source,
+            "residual": resid, "visible": vis, "negative_lobes": neg, "side": side}
+    if vis < VISIBLE_MIN:
+        _raise_diffusing(side, vis, max(e, VISIBLE_EPS), noise_level, source, alg.h)
+    op = alg.to_operator(rec, side)
+    info["energy_max"] = alg.energy_max(op)
+    return op, info
+
+
+def _choose_eps(alg, side: str, eps: float | None, noise_level: float):
+    """Recover with the given ``eps`` (at least the algebra's floor), or choose it (module
+    docstring: discrepancy principle, then no oscillation). Returns ``(recovered blocks,
+    re-adding residual, eps, method, negativity or None)``."""
 
     def run(e):
         rec = alg.recover(side, e)
         return rec, alg.residual(rec, side)
 
-    noise_level = max(noise_level, NOISE_FLOOR)
     if eps is not None:
         e = max(float(eps), alg.eps_floor)
         rec, resid = run(e)
@@ -257,14 +272,7 @@ def _subtract_op(stack, known, side, eps, noise):
                                                                                     side)))
             rec, resid, e, neg = best
             method = "discrepancy+no-oscillation"
-    vis, _ = alg.visibility(t_names, max(e, VISIBLE_EPS))
-    info = {"eps": e, "method": method, "noise": noise_level, "noise_source": source,
-            "residual": resid, "visible": vis, "negative_lobes": neg, "side": side}
-    if vis < VISIBLE_MIN:
-        _raise_diffusing(side, vis, max(e, VISIBLE_EPS), noise_level, source, alg.h)
-    op = alg.to_operator(rec, side)
-    info["energy_max"] = alg.energy_max(op)
-    return op, info
+    return rec, resid, e, method, neg
 
 
 def relative_error(a, b) -> float:
