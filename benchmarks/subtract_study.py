@@ -25,7 +25,7 @@ from layersim.ingredients import interface_operator, medium_operator
 from layersim.ingredients.aniso_microfacet import aniso_interface_operator
 from layersim.operator import Grid
 from layersim.scene import Conductor, Dielectric
-from layersim.subtract import _negativity, relative_error as error, with_noise
+from layersim.subtract import negativity as _negativity, relative_error as error, with_noise
 
 
 def main() -> int:

@@ -42,7 +42,7 @@ import scipy.sparse.linalg as spla
 from threadpoolctl import threadpool_limits
 
 from .errors import OperatorError
-from .operator import IsoOperator, OrderStack, _prune
+from .operator import IsoOperator, OrderStack, prune_order as _prune
 
 try:  # optional, faster sparse LU
     import scikits.umfpack as _umfpack  # noqa: F401

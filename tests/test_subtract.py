@@ -14,7 +14,7 @@ from layersim.ingredients import interface_operator, medium_operator
 from layersim.ingredients.aniso_microfacet import aniso_interface_operator
 from layersim.operator import Grid
 from layersim.scene import Conductor, Dielectric
-from layersim.subtract import _negativity
+from layersim.subtract import negativity as _negativity
 
 G48 = Grid.make("gauss-lobatto", 48)
 G32 = Grid.make("gauss-lobatto", 32)

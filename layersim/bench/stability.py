@@ -29,8 +29,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import LayersimError
-from ..scene import Scene
+from ..adding import add
+from ..errors import InfeasibleError, LayersimError
+from ..ingredients import medium_operator
+from ..ingredients.numeric import numeric_interface_operator
+from ..operator import Grid
+from ..scene import Conductor, Dielectric, Scene
+from ..solver import solve as solve_scene
+from ..subtract import negativity, relative_error, subtract, with_noise
 
 GOLD = [0.143552, 3.98397]
 
@@ -135,14 +141,6 @@ class SubtractCase:
     tolerance: float = 0.15
 
     def run(self) -> dict:
-        from ..adding import add
-        from ..errors import InfeasibleError
-        from ..ingredients import medium_operator
-        from ..ingredients.numeric import numeric_interface_operator
-        from ..operator import Grid
-        from ..scene import Conductor, Dielectric
-        from ..subtract import _negativity, relative_error, subtract, with_noise
-
         grid, m = Grid.make("gauss-lobatto", 48), 24
         if self.blurring:
             top = medium_operator(grid, m, 0.9, 0.3, 10.0, 1.0)
@@ -167,7 +165,7 @@ class SubtractCase:
         alb = got.albedo_nodes()
         err = relative_error(got, bottom)
         total = max(float(np.max(alb["Rt"] + alb["Ttb"])), float(np.max(alb["Rb"] + alb["Tbt"])))
-        neg = _negativity(got)
+        neg = negativity(got)
         info = got.info.get("subtract", {}) if hasattr(got, "info") else {}
         problems = []
         if not all(np.all(np.isfinite(v)) for v in alb.values()):
@@ -236,7 +234,7 @@ def run_case(case: Case, mc=None, solve=None, small: bool = False) -> dict:
         result["seconds"] = time.perf_counter() - t0
         return result
     if solve is None:
-        from ..solver import solve
+        solve = solve_scene
     t0 = time.perf_counter()
     try:
         scene = case.scene(small)
