@@ -1,8 +1,8 @@
 """Accuracy of the anisotropic projection against a support-adapted brute-force reference.
 
 For sample ordinate pairs of every block of a few interfaces, the 2-D coefficients
-``f_{d,s}`` (seed 000 eq. (17)) are computed by brute force from ``physics.microfacet_eval``
-(through :func:`layersim.kernels.projection.microfacet_values_ds`):
+``f_{d,s}`` (Zeltner & Jakob 2018 eq. (17)) are computed by brute force from
+``physics.microfacet_eval`` (through :func:`layersim.kernels.projection.microfacet_values_ds`):
 
 * in ``phi_s``: trapezoidal rule with 512 samples (periodic, spectrally accurate);
 * in ``phi_d``: composite Gauss-Legendre (24 nodes per panel) on panels graded geometrically
@@ -30,7 +30,7 @@ import numpy as np
 
 from layersim.aniso import series
 from layersim.ingredients import aniso_microfacet as am
-from layersim.ingredients.microfacet import _block_pairs
+from layersim.ingredients.microfacet import block_pairs
 from layersim.kernels import projection as kproj
 from layersim.operator import Grid
 from layersim.scene import Conductor, Dielectric
@@ -95,7 +95,7 @@ def main() -> int:
     for label, layer, names in cases:
         for name in names:
             t0 = time.perf_counter()
-            mu_i, mu_o, o, i = _block_pairs(grid, name, False)
+            mu_i, mu_o, o, i = block_pairs(grid, name, False)
             stats = am.AnisoProjectionStats()
             chunks = am._project_block(grid, name, md, ms, complex(layer.ior), layer.alpha_u,
                                        layer.alpha_v, layer.distribution, stats)

@@ -97,7 +97,7 @@ def main(argv) -> int:
     from layersim.aniso import adding, banded, operator, reciprocity
     from layersim.config import settings
     from layersim.ingredients import aniso_microfacet as am
-    from layersim.outofcore import memory, sums
+    from layersim.outofcore import memory
     memory.cap_arenas(settings().malloc_arenas)     # this script owns its process
     sys.path.insert(0, os.path.dirname(__file__))
     import table2

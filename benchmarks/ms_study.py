@@ -1,7 +1,7 @@
 """How many coupling modes ``ms`` does an anisotropic microfacet interface need?
 
-Seed 000 (sec. 4.2, eq. (25)) searched, over many layers, for the smallest ``ms`` giving a
-relative L2 error below 1 % and fitted ``ms = ceil(2.58 r - 1.82)`` to the roughness ratio
+Zeltner & Jakob 2018 (sec. 4.2, eq. (25)) searched, over many layers, for the smallest ``ms``
+giving a relative L2 error below 1 % and fitted ``ms = ceil(2.58 r - 1.82)`` to the roughness ratio
 ``r = max(alpha_u / alpha_v, alpha_v / alpha_u)``. We repeat the study with our projection:
 every interface is projected once with a generous ``ms`` (``4 r + 8``, whose own truncation is
 reported and negligible), and the relative L2 error of keeping ``|s| <= ms`` is computed from

@@ -11,7 +11,7 @@ sampled far past the length of its series: only rounding, the 1e-12 aliasing bou
 convergence at Fresnel kinks remain, the last ~1e-6 relative). Error: relative L2 over all
 blocks and orders of the operator entries B_l[o, i] (energy-weighted coefficients).
 
-Target (issue 4): on a GPU, the numeric path at equal error >= 10x faster than the host
+Target: on a GPU, the numeric path at equal error >= 10x faster than the host
 semi-analytic path. Usage::
 
     python benchmarks/projection_paths.py [--n 196] [--md 247] [--devices cpu cuda] [--json F]

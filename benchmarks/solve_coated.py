@@ -2,8 +2,8 @@
 
 Rows: a dielectric coating (eta 1.5, Beckmann alpha_top) over gold (eta + ik = 0.143552 + 3.98397i,
 the red channel of the layerlab tutorial, Beckmann alpha_bottom): the isotropic rows of Table 2 of
-the layer-laboratory paper (seed 000), plus 0.05/0.05 and 0.3/0.3 for which the issue quotes
-layerlab timings. For each row the planner's own discretisation (n, md) is timed (best of
+the Layer Laboratory paper (Zeltner & Jakob 2018), plus 0.05/0.05 and 0.3/0.3, for which layerlab
+timings are known. For each row the planner's own discretisation (n, md) is timed (best of
 ``--repeat`` runs, after one warm-up that compiles the Warp kernels), split into plan,
 projection (per layer) and adding; sparsity and storage of the stack are reported.
 
@@ -13,7 +13,7 @@ the error of the default solve against it is reported as
 * ``bsdf_err``: relative L2 error of the energy in 18 x 36 bins (|cos theta_o| x phi_o) for
   incidence at 0, 30, 60 degrees.
 
-Reference figures (from the issue): the paper's 4-core desktop took 2.6 / 2.6 / 2.2 s in total
+Reference figures: the paper's 4-core desktop took 2.6 / 2.6 / 2.2 s in total
 for the three Table 2 rows; layerlab (C++/TBB, Release, 2 cores), at its own heuristic (n = 196,
 m = 267 for those rows), 1.3-1.4 s; 0.05/0.05 (n = 394, m = 671) 2.6 s; 0.3/0.3 (n = 92, m = 61)
 2.6 s.

@@ -1,4 +1,5 @@
-"""Subtracting equations (seed 000 eq. (13)-(16)): recovery errors without and with noise.
+"""Subtracting equations (Zeltner & Jakob 2018 eq. (13)-(16)): recovery errors without and with
+noise.
 
 For a few two-layer stacks, the known layer is removed from ``add(a, b)`` and the recovered
 layer compared with the true one (relative Frobenius error of all blocks in the energy basis
@@ -24,7 +25,7 @@ from layersim.ingredients import interface_operator, medium_operator
 from layersim.ingredients.aniso_microfacet import aniso_interface_operator
 from layersim.operator import Grid
 from layersim.scene import Conductor, Dielectric
-from layersim.subtract import _negativity, relative_error as error, with_noise
+from layersim.subtract import negativity as _negativity, relative_error as error, with_noise
 
 
 def main() -> int:

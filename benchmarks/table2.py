@@ -1,12 +1,12 @@
-"""Table 2 of seed 000 (Zeltner & Jakob 2018): a dielectric coating (eta 1.5) over gold
+"""Table 2 of Zeltner & Jakob 2018: a dielectric coating (eta 1.5) over gold
 ([0.143552, 3.98397], red channel), seven roughness combinations, solved by `layersim.solve`
 at the planner's discretisation. Each row runs in a fresh process (so that the peak resident
 memory is the row's own); the paper's numbers (4-core i7-6700K, UMFPACK) are printed beside ours.
 
 Columns: total solve time (plan + projection + adding; the time this script spends measuring
-the layers' densities inside the solve, before the adding releases them, is left out: ~0.4 s
-on the isotropic rows, whose operators it converts to the coupled representation to count
-them as the paper does), adding only, density of the top, bottom
+the layers' densities inside the solve, before the adding releases them, is left out: on the
+isotropic rows it converts the operators to the coupled representation to count them as the
+paper does), adding only, density of the top, bottom
 and combined operators (nonzeros over all entries of the coupled representation, modes
 -(md-1)..md-1, as in the paper), storage of the combined operator, peak resident memory of the
 process and, in parentheses, above its baseline (resident memory after importing numpy,
@@ -22,11 +22,8 @@ Usage::
 
 Row 6 (both layers 1:3 anisotropic, the narrow axis 0.05 in the coating) needs n = 390 and
 md = 426 at the planner's accuracy (the coating's refraction lobe sets n = 390; estimated
-7.0 GiB). At that plan (``benchmarks/memory_phases.py 6 --default``, shared 2-core machine,
-commit 306c7fc) the solve took 384 s (plan and projection 158 s, the products of the adding
-equations 117 s, the solve 60 s, the output product, sum and pruning 49 s), peak RSS 1034 MiB
-above the baseline; 288 s and 1031 MiB at commit 434e2a0 (faster products and projection). It
-is run at
+7.0 GiB); that plan takes several minutes on a 2-core machine (``python
+benchmarks/memory_phases.py 6 --default``; figures in docs/performance.md). It is run at
 ``n = 224, md = 300``: the smallest n at which the coating's discrete operator does not create
 energy (n = 196 and 210 are refused by the energy check: 1.00000x and 1.0012), and marked as
 such.
@@ -40,6 +37,12 @@ import resource
 import subprocess
 import sys
 import time
+
+import layersim
+from layersim import solver
+from layersim.aniso import AnisoOperator
+from layersim.config import settings
+from layersim.outofcore import memory
 
 GOLD = [0.143552, 3.98397]
 ROWS = [  # (top alpha_u, alpha_v), (bottom alpha_u, alpha_v), paper: total s, adding s,
@@ -58,17 +61,12 @@ OVERRIDES = {6: {"n": 224, "md": 300}}
 
 def _density(op) -> float:
     """Nonzeros over all entries of the coupled representation (percent)."""
-    from layersim.aniso import AnisoOperator
     if not isinstance(op, AnisoOperator):
         op = AnisoOperator.from_iso(op)
     return 100.0 * op.density()
 
 
 def run_row(k: int) -> dict:
-    import layersim
-    from layersim import solver
-    from layersim.config import settings
-    from layersim.outofcore import memory
     memory.cap_arenas(settings().malloc_arenas)     # the row's process is this script's
     top, bottom = ROWS[k - 1][:2]
     scene = {"layer": [{"kind": "dielectric", "ior": 1.5, "roughness": list(top)},
@@ -115,10 +113,8 @@ def main(argv) -> int:
         print(json.dumps(run_row(int(argv[1]))))
         return 0
     rows = [int(a) for a in argv] or list(range(1, len(ROWS) + 1))
-    from layersim.config import settings
-    print(f"machine: {os.cpu_count()} cores; layersim threads: "
-          f"{settings().threads}; load average "
-          f"at start {os.getloadavg()[0]:.1f}")
+    print(f"machine: {os.cpu_count()} cores; layersim threads (LAYERSIM_THREADS): "
+          f"{settings().threads}; load average at start {os.getloadavg()[0]:.1f}")
     head = (f"{'row':>3} {'top':>11} {'bottom':>11} | {'total s':>15} {'adding s':>15} | "
             f"{'top %':>13} {'bottom %':>13} {'combined %':>13} | {'storage MiB':>15} | "
             f"{'peak RSS MiB (above base)':>25} | {'estimate MiB (/above)':>21} | "

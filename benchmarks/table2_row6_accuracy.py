@@ -1,11 +1,10 @@
-"""Table 2 row 6 of seed 000 (benchmarks/table2.py): what the reduced discretisation that
-table2.py uses (n = 224, md = 300) changes against the planner's (n = 390, md = 426).
+"""Table 2 row 6 of Zeltner & Jakob 2018 (benchmarks/table2.py): what the reduced discretisation
+that table2.py uses (n = 224, md = 300) changes against the planner's (n = 390, md = 426).
 
-Solves both (about 100 s and 400 s on the 2-core CI machine, ~1 GiB above the baseline at
-the peak of the second at commit 306c7fc, 4.4 GiB at d9dbce4 where the output was recorded),
-then compares ``BSDF.eval`` at 20000 random pairs of directions within 80 degrees of the
-normal, relative to the planner's value where it exceeds 1 % of the peak, and the directional
-albedo at 12 incident directions.
+Solves both (the second is the long one, several minutes and about 1 GiB above the baseline on a
+2-core machine), then compares ``BSDF.eval`` at 20000 random pairs of directions within 80 degrees
+of the normal, relative to the planner's value where it exceeds 1 % of the peak, and the
+directional albedo at 12 incident directions.
 
 Usage::
 

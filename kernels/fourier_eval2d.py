@@ -1,5 +1,5 @@
-"""Kernel that evaluates tabulated 2-D Fourier BSDFs of anisotropic layers (seed 000 eq. (7)):
-each query sums, over up to 16 neighbouring ordinate pairs (spline weights prepared by the
+"""Kernel that evaluates tabulated 2-D Fourier BSDFs of anisotropic layers (Zeltner & Jakob 2018
+eq. (7)): each query sums, over up to 16 neighbouring ordinate pairs (spline weights prepared by the
 host), ``f = 2 Re sum f_{d,s} exp(i (d phi_d + s phi_s))`` over the stored half of the
 coefficients (the others are their conjugates; ``f_{0,0}`` is stored halved).
 

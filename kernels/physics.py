@@ -5,8 +5,8 @@ These functions are the single source of the BSDF formulas: the Fourier projecti
 solver only ever sees their values. All functions are generic over the scalar type (``float32``
 for the random walk, ``float64`` for projection); literals are cast with ``type(x)(...)``.
 
-Conventions (``CONVENTIONS.md``)
---------------------------------
+Conventions (``docs/conventions.md``)
+-------------------------------------
 * Local frame: ``z`` is the macro-surface normal pointing out of the top of the interface; the
   roughness ``alpha_u`` acts along ``x`` and ``alpha_v`` along ``y`` (callers rotate directions into
   the interface's tangent frame first).
@@ -23,16 +23,17 @@ Both distributions are written as ``D(m) = P(h) * peak(q)`` with an unnormalised
 ``h``, the slope-space quadratic form ``q = (hx^2/au^2 + hy^2/av^2) / hz^2`` and the prefactor
 ``P = |h|^4 / (pi au av hz^4)``; ``peak(q) = exp(-q)`` (Beckmann) or ``1 / (1 + q)^2`` (GGX).
 For a fixed pair of elevations, ``q`` is an affine function of ``cos(phi_o - phi_i)`` (isotropic
-case) or of the phasors of seed 000 eq. (22), so the peak factor has a closed-form Fourier series
-(Bessel functions for Beckmann, a geometric series for GGX); everything else, returned as the
-*smooth factor* by :func:`microfacet_smooth_q`, is low-frequency. The projection relies on this
-split; the random walk uses :func:`microfacet_eval`, which multiplies the two back together.
+case) or of the phasors of Zeltner & Jakob 2018 eq. (22), so the peak factor has a closed-form
+Fourier series (Bessel functions for Beckmann, a geometric series for GGX); everything else,
+returned as the *smooth factor* by :func:`microfacet_smooth_q`, is low-frequency. The projection
+relies on this split; the random walk uses :func:`microfacet_eval`, which multiplies the two back
+together.
 
 References
 ----------
 Walter, Marschner, Li, Torrance (2007), "Microfacet models for refraction through rough surfaces",
 eq. 19-21 (BSDF), 25-27 (Beckmann, Smith); Heitz (2014), "Understanding the masking-shadowing
-function", sec. 5 (anisotropic Smith Lambda). Seed 000 eq. (18)-(22).
+function", sec. 5 (anisotropic Smith Lambda). Zeltner & Jakob 2018 eq. (18)-(22).
 """
 
 from __future__ import annotations

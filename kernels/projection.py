@@ -6,7 +6,7 @@ these kernels only evaluate the physics of :mod:`layersim.kernels.physics` there
 Geometry of a sample: an ordinate pair is given in the solver's convention (``mu > 0`` travels
 deeper into the stack): incident ``mu_i``, outgoing ``mu_o`` and the azimuth difference ``phi``
 between the *propagation* directions. With the incident light propagating along azimuth 0, the
-outward-pointing directions of ``CONVENTIONS.md`` are::
+outward-pointing directions of ``docs/conventions.md`` are::
 
     wi = (-sqrt(1 - mu_i^2), 0, mu_i)                       (points back toward the source)
     wo = (sqrt(1 - mu_o^2) cos phi, sqrt(1 - mu_o^2) sin phi, -mu_o)
@@ -362,9 +362,9 @@ def ragged_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, half: 
 # Anisotropic layers: samples in (phi_d, phi_s)
 # ---------------------------------------------------------------------------------------------
 #
-# For anisotropic layers the BSDF depends on both propagation azimuths, expressed (seed 000
-# eq. (6)) by the difference ``phi_d = phi_o - phi_i`` and the sum ``phi_s = phi_o + phi_i``, in
-# the interface's own tangent frame. With ``phi_i = (phi_s - phi_d) / 2`` and
+# For anisotropic layers the BSDF depends on both propagation azimuths, expressed (Zeltner & Jakob
+# 2018 eq. (6)) by the difference ``phi_d = phi_o - phi_i`` and the sum ``phi_s = phi_o + phi_i``,
+# in the interface's own tangent frame. With ``phi_i = (phi_s - phi_d) / 2`` and
 # ``phi_o = (phi_s + phi_d) / 2``::
 #
 #     wi = (-sqrt(1 - mu_i^2) cos phi_i, -sqrt(1 - mu_i^2) sin phi_i, mu_i)

@@ -8,26 +8,25 @@ import sys
 import numpy as np
 import warp as wp
 
+from ..config import settings
+
 _initialised = False
 
 
-def _verbose() -> bool:
-    return os.environ.get("LAYERSIM_WARP_VERBOSE", "") not in ("", "0")
-
-
 def ensure_init() -> None:
-    """Initialise Warp once. Unless ``$LAYERSIM_WARP_VERBOSE`` is set, the banner and the native
-    library's "no CUDA driver" notice (printed to the C-level stderr on CPU-only machines) are
-    silenced, so that command-line output stays readable."""
+    """Initialise Warp once. Unless ``settings().warp_verbose`` (``LAYERSIM_WARP_VERBOSE``) is
+    on, the banner and the native library's "no CUDA driver" notice (printed to the C-level
+    stderr on CPU-only machines) are silenced, so that command-line output stays readable."""
     global _initialised
     if _initialised:
         return
-    if not _verbose():
+    verbose = settings().warp_verbose
+    if not verbose:
         # Warp >= 1.18 uses log_level; older versions the quiet flag.
         if hasattr(wp.config, "log_level") and hasattr(wp, "LOG_WARNING"):
             wp.config.log_level = wp.LOG_WARNING
         wp.config.quiet = True
-    if _verbose():
+    if verbose:
         wp.init()
     else:
         sys.stderr.flush()
@@ -43,13 +42,14 @@ def ensure_init() -> None:
 
 
 def device_for(device=None):
-    """The Warp device to run on: the given one, else ``$LAYERSIM_DEVICE``, else the CPU.
+    """The Warp device to run on: the given one, else ``settings().device``
+    (``LAYERSIM_DEVICE``, default the CPU).
 
     Projection and evaluation kernels are light and run on the CPU by default; pass ``"cuda"``
     (or set ``LAYERSIM_DEVICE=cuda``) to run them on a GPU.
     """
     ensure_init()
-    name = device or os.environ.get("LAYERSIM_DEVICE") or "cpu"
+    name = device or settings().device
     return wp.get_device(name)
 
 

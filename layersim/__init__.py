@@ -1,18 +1,21 @@
 """layersim: reflectance of layered materials.
 
-Public entry points (see CONVENTIONS.md)::
+Public entry points (see docs/conventions.md)::
 
     scene = layersim.Scene.from_toml(path)
     bsdf = layersim.solve(scene)
     bsdf.eval(wi, wo); bsdf.albedo(wi); bsdf.bin_energies(wi, mu_edges, phi_edges)
+    layersim.export(bsdf, path)                   # .bsdf file for renderers
     stack = layersim.add(top, bottom); layer = layersim.subtract(stack, known, side="top")
 """
 from .errors import LayersimError, SceneError, InfeasibleError, OperatorError, FileFormatError
 from .scene import Scene, Dielectric, Conductor, Medium, Diffuse, Discretization
 from .plan import Plan, make_plan
+from .operator import IsoOperator, Operator
+from .aniso import AnisoOperator
 from .bsdf import BSDF
 from . import bsdffile
-from .bsdffile import FourierTable
+from .bsdffile import FourierTable, export
 from .solver import solve, add
 from .subtract import subtract
 

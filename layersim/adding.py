@@ -41,8 +41,7 @@ from threadpoolctl import threadpool_limits
 
 from .config import settings
 from .errors import OperatorError
-from .operator import DROP_TOLERANCE, IsoOperator, OrderStack
-from .outofcore.sums import prune
+from .operator import IsoOperator, OrderStack, prune_order
 
 try:  # optional, faster sparse LU
     import scikits.umfpack as _umfpack  # noqa: F401
@@ -211,7 +210,7 @@ def _add_order_dense(b1, b2, opaque, coupled, h):
         out["Ttb"] = Ttb2 @ Y1
         out["Rb"] = Rb2 + Ttb2 @ Y2
         out["Tbt"] = Tbt1 @ Tbt2 + Tbt1 @ (Rt2 @ Y2)
-    return {k: prune(sps.csr_matrix(v), DROP_TOLERANCE) for k, v in out.items()}
+    return {k: prune_order(sps.csr_matrix(v)) for k, v in out.items()}
 
 
 def sparse_lu(A: sps.csc_matrix):
@@ -245,7 +244,7 @@ def _add_order_sparse(b1, b2, opaque, coupled):
         out["Ttb"] = Ttb2 @ Y1
         out["Rb"] = Rb2 + Ttb2 @ Y2
         out["Tbt"] = Tbt1 @ Tbt2 + Tbt1 @ (Rt2 @ Y2)
-    return {k: prune(sps.csr_matrix(v), DROP_TOLERANCE) for k, v in out.items()}
+    return {k: prune_order(sps.csr_matrix(v)) for k, v in out.items()}
 
 
 def solve_columns(solve, rhs: sps.csc_matrix) -> np.ndarray:

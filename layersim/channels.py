@@ -45,13 +45,13 @@ def aligned_series(bsdf) -> tuple[np.ndarray, np.ndarray]:
     -------
     offsets : int64 ndarray, shape (4 h^2 + 1,)
         Pair ``p`` (block-major, then outgoing node, then incident node, as in
-        :class:`layersim.bsdf._SeriesTable`) owns ``coef[offsets[p]:offsets[p + 1]]``; its length is
+        :class:`layersim.isobsdf.SeriesTable`) owns ``coef[offsets[p]:offsets[p + 1]]``; its length is
         the longest series of that pair over all channels.
     coef : float64 ndarray, shape (C, channels)
         ``f_l(mu_o, mu_i)`` in 1/sr for ``l = 0, 1, ...`` of every pair, per channel (zero-padded
         where a channel's series is shorter). The unscattered delta of media is not included.
     """
-    tables = [bsdf._table(c) for c in range(bsdf.channels)]
+    tables = [bsdf.series_table(c) for c in range(bsdf.channels)]
     counts = np.max([np.diff(t.offsets) for t in tables], axis=0)
     offsets = np.zeros(counts.size + 1, np.int64)
     np.cumsum(counts, out=offsets[1:])

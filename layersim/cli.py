@@ -28,20 +28,24 @@ from pathlib import Path
 
 import numpy as np
 
+from .bsdf import BSDF
+from .bsdffile import FourierTable, export, read
 from .config import settings
-from .errors import LayersimError
+from .errors import FileFormatError, InfeasibleError, LayersimError
 from .outofcore import memory
+from .plan import make_plan
+from .scene import Scene
+from .solver import solve
+from .subtract import subtract
 
 EXIT_INPUT = 2
 
 
 def _scene(path):
-    from .scene import Scene
     return Scene.from_toml(path)
 
 
 def cmd_plan(args) -> int:
-    from .plan import make_plan
     scene = _scene(args.scene)
     print(scene.describe())
     print(make_plan(scene).report())
@@ -64,12 +68,18 @@ def _albedo_table(bsdf, angles) -> str:
     return "\n".join(rows)
 
 
+def _print_notes(info: dict) -> None:
+    """The diagnostics of the solve (``info["notes"]``), in the plan report's format."""
+    for note in info.get("notes", ()):
+        print(f"  note: {note}")
+
+
 def cmd_solve(args) -> int:
-    from .solver import solve
     scene = _scene(args.scene)
     print(scene.describe())
     bsdf = solve(scene, verbose=True)
     info = bsdf.info
+    _print_notes(info)
     print(f"stack: {info['nnz']} nonzero coefficients, {info['memory_bytes'] / 2**20:.1f} MiB")
     print("albedo (energy fractions):")
     print(_albedo_table(bsdf, [0.0, 30.0, 60.0, 80.0, 89.0]))
@@ -80,7 +90,6 @@ def cmd_solve(args) -> int:
 
 
 def cmd_info(args) -> int:
-    from .bsdf import BSDF
     bsdf = BSDF.load(args.file)
     info = bsdf.info
     op = bsdf.operators[0]
@@ -91,13 +100,14 @@ def cmd_info(args) -> int:
           f"{sum(o.memory_bytes() for o in bsdf.operators) / 2**20:.1f} MiB")
     if "seconds" in info:
         print(f"solved in {info['seconds']['total']:.2f} s")
+    _print_notes(info)
     print("albedo (energy fractions):")
     print(_albedo_table(bsdf, [0.0, 30.0, 60.0, 80.0, 89.0]))
     return 0
 
 
 def cmd_bench(args) -> int:
-    from . import bench
+    from . import bench      # imported when used: the benchmark report needs matplotlib
     results = bench.run(args.out, quick=args.quick, stability=args.stability,
                         backends=args.backend or ("auto",), scene_dir=args.scenes,
                         scenes=args.scene, command="layersim " + " ".join(args.argv))
@@ -115,10 +125,6 @@ def _load(path):
     """A BSDF from a scene, a saved ``.lsim`` BSDF or a ``.bsdf`` file (a ``.bsdf`` file that
     layersim cannot convert, e.g. one on foreign nodes, stays a FourierTable, which evaluates
     as pbrt-v3 and the Layer Laboratory's plugin do)."""
-    from .bsdf import BSDF
-    from .bsdffile import read
-    from .errors import FileFormatError, InfeasibleError
-    from .solver import solve
     path = Path(path)
     with open(path, "rb") as fh:
         head = fh.read(8)
@@ -163,7 +169,6 @@ def _format(f) -> str:
 
 
 def cmd_export(args) -> int:
-    from .bsdffile import FourierTable
     if not 0.0 <= args.relerr < 1.0:          # before solving the scene
         raise ValueError(f"--relerr {args.relerr:g}: the relative truncation must be in [0, 1)")
     bsdf = _load(args.source)
@@ -176,7 +181,7 @@ def cmd_export(args) -> int:
         table = bsdf
         table.write(out)
     else:
-        table = bsdf.export(out, version=args.version, alpha=alpha, relerr=args.relerr)
+        table = export(bsdf, out, version=args.version, alpha=alpha, relerr=args.relerr)
     size = out.stat().st_size
     print(f"wrote {out}: SCATFUN v{table.version}, {table.n_nodes} nodes, max order "
           f"{table.max_order}{' (complex)' if table.is_complex else ''}, {table.channels} "
@@ -198,7 +203,7 @@ def cmd_eval(args) -> int:
 
 
 def cmd_plot(args) -> int:
-    from . import plot
+    from . import plot       # imported when used: matplotlib is slow to import
     if (args.wi is None) == (not args.blocks):
         raise ValueError("plot needs exactly one of --wi THETA,PHI (hemispherical slices) and "
                          "--blocks (the operator's four blocks)")
@@ -225,8 +230,6 @@ def cmd_plot(args) -> int:
 # --- subtracting equations (layersim.subtract) ---------------------------------------------
 
 def cmd_subtract(args) -> int:
-    from .bsdf import BSDF
-    from .subtract import subtract
     stack = BSDF.load(args.stack)
     known = BSDF.load(args.known)
     result = subtract(stack, known, side=args.side, eps=args.eps, noise=args.noise)

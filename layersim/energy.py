@@ -20,12 +20,11 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sps
 
-from .operator import IsoOperator
 
-
-def node_energy(op: IsoOperator, w_top: np.ndarray, w_bot: np.ndarray):
+def node_energy(op, w_top: np.ndarray, w_bot: np.ndarray):
     """R + T per incident ordinate from the top and from the bottom after scaling by the
-    factors ``w_top``/``w_bot`` (ordinates above/below the interface)."""
+    factors ``w_top``/``w_bot`` (ordinates above/below the interface) of the
+    :class:`~layersim.operator.IsoOperator` ``op``."""
     fw = op.grid.flux_weight
     rt = op.blocks["Rt"][0]
     top = w_top * ((rt.T @ (w_top * fw)) / fw)
@@ -37,8 +36,9 @@ def node_energy(op: IsoOperator, w_top: np.ndarray, w_bot: np.ndarray):
     return top, bot
 
 
-def limit_energy(op: IsoOperator, tolerance: float = 1e-13, iterations: int = 200):
-    """Scale ``op`` (in place) so that no incident ordinate gains energy.
+def limit_energy(op, tolerance: float = 1e-13, iterations: int = 200):
+    """Scale the :class:`~layersim.operator.IsoOperator` ``op`` (in place) so that no incident
+    ordinate gains energy (:meth:`~layersim.operator.IsoOperator.limit_energy`).
 
     Returns
     -------

@@ -8,7 +8,8 @@ peak factors are functions of the slope-space form ``q(phi) = c - d cos(phi)`` w
 Peak factors (see :mod:`layersim.kernels.physics`)
 --------------------------------------------------
 * Beckmann: ``exp(-q) = exp(-q0) exp(d (cos phi - 1))``. By Jacobi-Anger (A&S 9.6.34) its
-  coefficients are ``(2 - delta_k0) exp(-q0) I_k(d) e^-d`` (seed 000 eq. (23), seed 004 sec. 5.2).
+  coefficients are ``(2 - delta_k0) exp(-q0) I_k(d) e^-d`` (Zeltner & Jakob 2018 eq. (23);
+  Jakob's layerlab tutorial sec. 5.2).
   We evaluate them with a real FFT of ``N >= 2 K`` samples of the entire function
   ``exp(d (cos phi - 1))``: the trapezoidal rule is spectrally exact for it (the aliasing error is
   the coefficient at index ``N - k``, below rounding once ``N/2`` exceeds the series length), and
@@ -21,10 +22,10 @@ Peak factors (see :mod:`layersim.kernels.physics`)
 Smooth factor
 -------------
 Fitted by :func:`fit_restricted`: a weighted least-squares cosine fit on the support of the peak,
-with soft zero constraints outside it (seed 000 sec. 4.1.2), solved by batched QR. Unlike the
-paper, the in-support rows are weighted by the peak factor itself, so the fit is accurate where
-the product matters (this lowers the worst coefficient error by orders of magnitude in our
-convergence study, ``benchmarks/projection_accuracy.py``).
+with soft zero constraints outside it (Zeltner & Jakob 2018 sec. 4.1.2), solved by batched QR.
+Unlike the paper, the in-support rows are weighted by the peak factor itself, so the fit is
+accurate where the product matters (the worst coefficient errors are orders of magnitude lower
+than with uniform weights).
 """
 
 from __future__ import annotations
@@ -178,7 +179,8 @@ def fit_restricted(phi: np.ndarray, weights: np.ndarray, values: np.ndarray, pea
     L : int
         Number of cosine terms.
     eps : float
-        Weight of the soft constraint ``fit = 0`` outside the support (seed 000 sec. 4.1.2).
+        Weight of the soft constraint ``fit = 0`` outside the support (Zeltner & Jakob 2018
+        sec. 4.1.2).
 
     Returns
     -------

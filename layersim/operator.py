@@ -1,6 +1,6 @@
 """Discrete scattering operators of isotropic layers in the cosine basis.
 
-Representation (seed 004 eq. (10), (14); seed 000 eq. (5))
+Representation (Jakob's layerlab tutorial eq. (10), (14); Zeltner & Jakob 2018 eq. (5))
 -----------------------------------------------------------
 The solver uses the discrete-ordinates convention: ``mu > 0`` propagates deeper into the stack
 (downwards), ``mu < 0`` towards the top. Radiance is expanded in azimuth as
@@ -41,14 +41,15 @@ an operator is assembled.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sps
 
-from . import quadrature
+from . import energy, quadrature
 from .errors import FileFormatError, OperatorError
 from .outofcore import memory
 
@@ -58,7 +59,7 @@ DROP_TOLERANCE = 1e-12
 
 
 def order_weight(l: int | np.ndarray):
-    """c_l of eq. (14) in seed 004: 2 pi for l = 0, pi otherwise."""
+    """c_l of eq. (14) of Jakob's layerlab tutorial: 2 pi for l = 0, pi otherwise."""
     return np.where(np.asarray(l) == 0, 2.0 * np.pi, np.pi)
 
 
@@ -96,7 +97,167 @@ class Grid:
         return hash((self.rule, self.n))
 
 
-class IsoOperator:
+class Operator(ABC):
+    """The interface of a layer's or stack's scattering operator, whatever its representation.
+
+    Two representations implement it: :class:`IsoOperator` (``representation = "isotropic"``:
+    one ``h x h`` matrix per block and Fourier order, eq. (14) of Jakob's layerlab tutorial)
+    and :class:`layersim.aniso.operator.AnisoOperator` (``"anisotropic"``: one ``(S h, S h)``
+    matrix per block coupling the Fourier modes, Zeltner & Jakob 2018 eq. (10)). Code outside
+    the operator modules (the solver's energy check, the BSDF, file export, subtraction) calls
+    these methods, or picks a per-representation implementation from a registry keyed by
+    :attr:`representation`, instead of testing the type.
+
+    Attributes
+    ----------
+    representation : str
+        ``"isotropic"`` or ``"anisotropic"``; the key of :func:`representation_class` and of the
+        per-representation registries of :mod:`layersim.bsdf` and :mod:`layersim.subtract`;
+        stored in operator files (absent means isotropic).
+    grid : Grid
+        The discrete ordinates (``h = grid.h`` per hemisphere).
+    m : int
+        Number of Fourier orders (``md`` of the coupled representation).
+    ms : int
+        Largest coupling ``|l - k| / 2`` between Fourier modes (0 for isotropic operators).
+    blocks : dict
+        ``{"Rt", "Rb", "Ttb", "Tbt"}`` to the representation's matrices, ``None`` for a block
+        left out (opaque operators keep ``Rt`` only).
+    eta_top, eta_bottom : float
+        Absolute indices of the media above and below (``eta_bottom`` None when opaque).
+    delta : dict
+        Unscattered transmission per node, ``{"Ttb": (h,), "Tbt": (h,)}`` (media only).
+    """
+
+    representation: str = ""
+    #: True once an adding step that consumes its operands took this operator's blocks
+    #: (:meth:`layersim.aniso.operator.AnisoOperator.consume`).
+    consumed: bool = False
+
+    # ---- structure (shared) -------------------------------------------------------------
+
+    @property
+    def opaque(self) -> bool:
+        """True when only ``Rt`` is present (a conductor or diffuse base)."""
+        return self.blocks["Ttb"] is None
+
+    @property
+    def h(self) -> int:
+        """Ordinates per hemisphere."""
+        return self.grid.h
+
+    @abstractmethod
+    def nnz(self) -> int:
+        """Stored nonzero entries over all present blocks."""
+
+    @abstractmethod
+    def memory_bytes(self) -> int:
+        """Resident bytes of the stored blocks (values, indices and row pointers)."""
+
+    @abstractmethod
+    def density(self) -> float:
+        """Fraction of nonzero entries over the present blocks (0..1)."""
+
+    # ---- energy ---------------------------------------------------------------------------
+
+    @abstractmethod
+    def albedo_slots(self) -> dict:
+        """Energy fractions per incident slot and node, ``{block: (S, h)}``.
+
+        Row 0 is the energy for azimuthally uniform illumination (:meth:`albedo`); rows
+        ``b >= 1`` (coupled operators only, ``S = 2 md - 1``; ``S = 1`` for isotropic ones)
+        weight the azimuth-dependent part, see
+        :meth:`layersim.aniso.operator.AnisoOperator.albedo_slots`."""
+
+    def albedo(self) -> dict:
+        """Energy fractions per incident node for azimuthally uniform illumination,
+        ``{block: (h,)}``: ``E[i] = sum_o B_0[o, i] w_o mu_o / (w_i mu_i)``, the fraction of the
+        power of a beam arriving along node ``i`` that leaves through the block's side
+        (quadrature-consistent)."""
+        return {name: e[0] for name, e in self.albedo_slots().items()}
+
+    def limit_energy(self) -> tuple[float, int] | None:
+        """Remove a small energy excess of the quadrature in place, keeping reciprocity
+        (:func:`layersim.energy.limit_energy`); returns ``(excess, scaled ordinates)``, or None
+        when the representation does not correct it (the caller then reports the excess)."""
+        return None
+
+    @abstractmethod
+    def reciprocity_error(self) -> float:
+        """Largest violation of (generalized) reciprocity relative to the largest coefficient."""
+
+    # ---- conversions ------------------------------------------------------------------------
+
+    @abstractmethod
+    def map_blocks(self, fn: Callable) -> "Operator":
+        """The same operator with ``fn`` applied to every stored sparse matrix (block by block
+        in :data:`BLOCKS` order, orders in increasing order), e.g. to perturb the entries."""
+
+    @abstractmethod
+    def rotational_average(self) -> "IsoOperator":
+        """The isotropic operator averaged over rotations about the normal (itself when
+        isotropic)."""
+
+    @abstractmethod
+    def as_coupled(self, md: int | None = None) -> "Operator":
+        """This operator in the coupled (anisotropic) representation with ``md`` orders
+        (default: its own)."""
+
+    @classmethod
+    @abstractmethod
+    def identity(cls, grid: Grid, m: int, eta: float) -> "Operator":
+        """A layer that transmits everything unchanged in a medium of index ``eta``."""
+
+    # ---- persistence ------------------------------------------------------------------------
+
+    @abstractmethod
+    def to_arrays(self, prefix: str = "") -> dict:
+        """Flat named arrays for ``np.savez`` (read back with :func:`from_arrays`)."""
+
+    @classmethod
+    @abstractmethod
+    def from_arrays(cls, d, prefix: str = "") -> "Operator":
+        """Inverse of :meth:`to_arrays` for this representation."""
+
+
+#: Operator classes by :attr:`Operator.representation` (see :func:`register`).
+_REPRESENTATIONS: dict = {}
+
+
+def register(cls):
+    """Class decorator: make ``cls`` the operator class of ``cls.representation``."""
+    _REPRESENTATIONS[cls.representation] = cls
+    return cls
+
+
+def representation_class(representation: str) -> type:
+    """The operator class registered for ``representation`` ("isotropic", "anisotropic")."""
+    try:
+        return _REPRESENTATIONS[representation]
+    except KeyError:
+        raise OperatorError(f"unknown operator representation {representation!r}; known: "
+                            + ", ".join(sorted(_REPRESENTATIONS))) from None
+
+
+#: The representation that holds every other (see :func:`common_representation`).
+COUPLED = "anisotropic"
+
+
+def common_representation(*ops: Operator) -> str:
+    """The representation in which the operators ``ops`` can be combined: the coupled one if
+    any of them is coupled, else isotropic."""
+    return COUPLED if any(op.representation == COUPLED for op in ops) else "isotropic"
+
+
+def from_arrays(d, prefix: str = "") -> Operator:
+    """An operator of the representation recorded in the saved arrays ``d`` (no
+    ``representation`` entry: isotropic)."""
+    representation = str(d.get(f"{prefix}representation", "isotropic"))
+    return representation_class(representation).from_arrays(d, prefix=prefix)
+
+
+@register
+class IsoOperator(Operator):
     """Scattering operator of an isotropic layer or stack (see module docstring).
 
     Parameters
@@ -124,15 +285,11 @@ class IsoOperator:
         self.delta = {} if self.opaque or not delta else {
             k: np.asarray(v, float) for k, v in delta.items() if v is not None}
 
+    representation = "isotropic"
+    #: Isotropic operators couple no Fourier modes.
+    ms = 0
+
     # ---- structure ---------------------------------------------------------------------
-
-    @property
-    def opaque(self) -> bool:
-        return self.blocks["Ttb"] is None
-
-    @property
-    def h(self) -> int:
-        return self.grid.h
 
     def block(self, name: str, l: int) -> sps.csr_matrix:
         """Block ``name`` of order ``l`` (an all-zero matrix beyond ``m``)."""
@@ -199,7 +356,7 @@ class IsoOperator:
         out = {}
         for name in BLOCKS:
             arr = blocks.get(name)
-            out[name] = None if arr is None else [_prune(sps.csr_matrix(a)) for a in arr]
+            out[name] = None if arr is None else [prune_order(sps.csr_matrix(a)) for a in arr]
         return cls(grid, out, eta_top, eta_bottom, delta)
 
     @classmethod
@@ -235,6 +392,32 @@ class IsoOperator:
             out[name] = (blk[0].T @ fw) / fw
         return out
 
+    def albedo(self) -> dict:
+        return self.albedo_nodes()
+
+    def albedo_slots(self) -> dict:
+        return {name: e[None, :] for name, e in self.albedo_nodes().items()}
+
+    def limit_energy(self) -> tuple[float, int]:
+        return energy.limit_energy(self)
+
+    def reciprocity_error(self) -> float:
+        return self.as_coupled().reciprocity_error()
+
+    # ---- conversions ---------------------------------------------------------------------
+
+    def map_blocks(self, fn: Callable) -> "IsoOperator":
+        blocks = {k: None if v is None else [fn(b) for b in v] for k, v in self.blocks.items()}
+        return IsoOperator(self.grid, blocks, self.eta_top, self.eta_bottom, self.delta)
+
+    def rotational_average(self) -> "IsoOperator":
+        return self
+
+    def as_coupled(self, md: int | None = None) -> Operator:
+        """Block diagonal in the coupled representation (see
+        :meth:`layersim.aniso.operator.AnisoOperator.from_iso`)."""
+        return representation_class(COUPLED).from_iso(self, md)
+
     # ---- persistence -------------------------------------------------------------------
 
     def to_arrays(self, prefix: str = "") -> dict:
@@ -269,8 +452,8 @@ class OrderStack(Sequence):
     in one pass, and what operator files store.
 
     Indexing gives ``scipy.sparse.csr_matrix`` views of order ``l`` (sharing the arrays; built on
-    first access and cached, since scipy's constructor costs ~20-50 us, a large part of the
-    projection of a whole operator on a GPU). A slice gives a list of them.
+    first access and cached, since scipy's constructor is slow next to the projection of a
+    whole operator on a GPU). A slice gives a list of them.
 
     Parameters
     ----------
@@ -303,10 +486,10 @@ class OrderStack(Sequence):
     @classmethod
     def from_dense(cls, dense: np.ndarray) -> "OrderStack":
         """From dense orders (m, h, h), each pruned at :data:`DROP_TOLERANCE` relative to its
-        largest entry (exact zeros dropped too, as :func:`_prune` does); ``dense`` is
+        largest entry (exact zeros dropped too, as :func:`prune_order` does); ``dense`` is
         overwritten. ``|x| < cut`` is taken as two comparisons and ``max |x|`` as
-        ``max(max, -min)``: no float temporary of the dense array (``np.abs`` of it took a
-        third of the assembly of Table 2 row 1 of seed 000)."""
+        ``max(max, -min)``: no float temporary of the dense array (``np.abs`` of it would cost
+        as much as the rest of the assembly of a small operator)."""
         m, h = dense.shape[0], dense.shape[1]
         flat = dense.reshape(m, h * h)
         cut = DROP_TOLERANCE * np.maximum(flat.max(axis=1), -flat.min(axis=1))[:, None]
@@ -438,7 +621,9 @@ def _orders_to_csr(chunks, m: int, grid: Grid) -> "OrderStack":
     return OrderStack(v, i.astype(np.int32), indptr, h)
 
 
-def _prune(mat: sps.csr_matrix) -> sps.csr_matrix:
+def prune_order(mat: sps.csr_matrix) -> sps.csr_matrix:
+    """Drop the entries of one order's block below :data:`DROP_TOLERANCE` times its largest
+    magnitude, and exact zeros (in place; returns ``mat``)."""
     if mat.nnz:
         cut = DROP_TOLERANCE * np.abs(mat.data).max()
         mat.data[np.abs(mat.data) < cut] = 0.0

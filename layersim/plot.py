@@ -2,8 +2,8 @@
 and hemispherical slices for one incident direction.
 
 :func:`plot_blocks`
-    Like layerlab's ``plot_layer`` (seed 004 sec. 4.2): the BSDF of each block as an image over
-    ``(mu_i, mu_o)`` in the discrete-ordinates convention (``mu > 0`` propagates down), arranged
+    Like layerlab's ``plot_layer`` (Jakob's layerlab tutorial sec. 4.2): the BSDF of each block
+    as an image over ``(mu_i, mu_o)`` in the discrete-ordinates convention (``mu > 0`` propagates down), arranged
     ``Tbt | Rt`` over ``Rb | Ttb``, for one Fourier order ``l`` (the coefficient ``f_l``) or at
     one azimuth difference ``phi_d`` (the series summed), multiplied by ``|mu_i mu_o|`` to keep
     grazing values in range; each panel has its own colour scale (0 to its 99th percentile).
@@ -31,8 +31,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
-from .bsdf import BSDF, spline_weights
+from .bsdf import BSDF
 from .channels import LUMINANCE
+from .interpolation import spline_weights
 
 #: Panel order of layerlab's plot_layer: (block, mu_i range, mu_o range).
 PANELS = (("Tbt", (-1, 0), (-1, 0)), ("Rt", (0, 1), (-1, 0)),
@@ -64,7 +65,7 @@ def _order_coefficient(bsdf: BSDF, c: int, name: str, l: int, mu_out, mu_in) -> 
     op = bsdf.operators[c]
     if op.blocks[name] is None:
         return np.zeros(mu_out.shape)
-    table = bsdf._table(c)
+    table = bsdf.series_table(c)
     h = op.h
     io, wo_ = spline_weights(op.grid.mu, np.abs(mu_out).ravel())
     ii, wi_ = spline_weights(op.grid.mu, np.abs(mu_in).ravel())
@@ -96,8 +97,7 @@ def block_images(bsdf, order: int | None = None, phi_d: float = 0.0, samples: in
                                 "FourierTable.to_bsdf())")
             if order < 0:
                 raise ValueError(f"order must be >= 0, got {order}")
-            if bsdf.anisotropic:        # order l of the rotational average (the s = 0 terms)
-                bsdf = BSDF([op.rotational_average() for op in bsdf.operators])
+            bsdf = bsdf.rotational_average()    # order l of it: the s = 0 terms if coupled
             per = np.stack([_order_coefficient(bsdf, c, name, order, MO, MI)
                             for c in range(bsdf.channels)], axis=-1)
             vals = _scalar(per if bsdf.channels > 1 else per[..., 0], bsdf.channels, channel)

@@ -1,8 +1,8 @@
 """Scene description: a stack of layers, parsed and validated once.
 
-A scene lists layers from top to bottom (see ``CONVENTIONS.md``). Both the Fourier solver and the
-Monte Carlo reference consume the validated :class:`Scene`; neither re-parses or re-checks physics
-parameters.
+A scene lists layers from top to bottom (see ``docs/conventions.md``). Both the Fourier solver and
+the Monte Carlo reference consume the validated :class:`Scene`; neither re-parses or re-checks
+physics parameters.
 
 Per-channel (RGB) values: any physical value may be given as a list of three (R, G, B) values
 (a conductor's ``ior`` as three ``[eta, k]`` pairs). Such a scene has ``channels == 3``;
@@ -179,7 +179,7 @@ class Scene:
 
     @classmethod
     def from_toml(cls, path: str | Path) -> "Scene":
-        """Read and validate a TOML scene file (see ``CONVENTIONS.md`` for the format)."""
+        """Read and validate a TOML scene file (see ``docs/conventions.md`` for the format)."""
         path = Path(path)
         try:
             text = path.read_text(encoding="utf-8")

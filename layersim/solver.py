@@ -5,16 +5,16 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 
-import numpy as np
 from threadpoolctl import threadpool_limits
 
-from . import adding, energy
+from . import adding
+from .aniso import adding as aniso_adding
 from .bsdf import BSDF, channel_pairs
 from .errors import InfeasibleError
 from .ingredients import diffuse_operator, interface_operator, medium_operator
 from .ingredients.microfacet import ProjectionStats
 from .ingredients.numeric import numeric_interface_operator
-from .operator import IsoOperator
+from .operator import IsoOperator, Operator, common_representation
 from .outofcore import memory
 from .outofcore.workspace import Workspace
 from .plan import Plan, make_plan
@@ -23,7 +23,8 @@ from .scene import Conductor, Dielectric, Diffuse, Medium, Scene
 
 #: Discrete energy excess (R + T - 1) beyond which an interface operator is refused as
 #: under-resolved; smaller excesses (quadrature error at the horizon) are removed by
-#: :func:`layersim.energy.limit_energy`, which keeps reciprocity, and reported in the plan notes.
+#: :func:`layersim.energy.limit_energy`, which keeps reciprocity, and reported in the BSDF's
+#: ``info["notes"]``.
 ENERGY_REFUSE = 1e-2
 
 
@@ -36,7 +37,9 @@ PROJECTIONS = ("numeric", "semi-analytic")
 
 def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionStats,
                     projection: str = "numeric", device=None,
-                    workspace: Workspace | None = None):
+                    workspace: Workspace | None = None, notes: list | None = None):
+    """The operator of layer ``i``; diagnostics of interfaces are appended to ``notes``."""
+    notes = [] if notes is None else notes
     layer = scene.layers[i]
     eta_above = scene.ior_above(i)
     if isinstance(layer, (Dielectric, Conductor)) and layer.anisotropic:
@@ -46,7 +49,7 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
         from .aniso.plan import COUPLED_RELERR
         op = aniso_interface_operator(grid, plan.md, lp.ms, layer, eta_above, stats,
                                       relerr=COUPLED_RELERR, workspace=workspace)
-        _check_energy(op, i, layer, plan)
+        notes += _check_energy(op, i, layer, plan)
         return op
     if isinstance(layer, (Dielectric, Conductor)):
         if projection == "numeric":
@@ -54,7 +57,7 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
                                             device=device)
         else:
             op = interface_operator(grid, plan.md, layer, eta_above, stats)
-        _check_energy(op, i, layer, plan)
+        notes += _check_energy(op, i, layer, plan)
         return op
     if isinstance(layer, Medium):
         return medium_operator(grid, plan.md, layer.albedo, layer.g, layer.tau, eta_above)
@@ -63,16 +66,14 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     raise TypeError(f"layer {i}: no operator for kind {layer.kind!r}")  # pragma: no cover
 
 
-def _check_energy(op: IsoOperator, i: int, layer, plan: Plan) -> None:
+def _check_energy(op, i: int, layer, plan: Plan) -> list[str]:
     """Refuse an interface operator that grossly over-counts energy (its lobes are narrower
-    than the ordinate spacing); remove small excesses symmetrically and say so."""
-    if hasattr(op, "albedo_slots"):  # anisotropic: azimuthally uniform illumination
-        alb = {k: v[0] for k, v in op.albedo_slots().items()}
-        worst = max(float((alb[r] + (alb[t] if t in alb else 0.0)).max())
-                    for r, t in (("Rt", "Ttb"), ("Rb", "Tbt")) if r in alb)
-    else:
-        top, bot = energy.node_energy(op, np.ones(op.h), np.ones(op.h))
-        worst = max(top.max(), bot.max() if bot is not None else 0.0)
+    than the ordinate spacing); remove small excesses where the representation can
+    (:meth:`~layersim.operator.Operator.limit_energy`), and return notes saying what was done
+    or left (they go into the BSDF's ``info["notes"]``)."""
+    alb = op.albedo()       # azimuthally uniform illumination
+    worst = max(float((alb[r] + (alb[t] if t in alb else 0.0)).max())
+                for r, t in (("Rt", "Ttb"), ("Rb", "Tbt")) if r in alb)
     if worst > 1.0 + ENERGY_REFUSE:
         raise InfeasibleError(
             f"layer {i} ({layer.kind}): with n = {plan.n} ordinates the discrete operator "
@@ -81,16 +82,18 @@ def _check_energy(op: IsoOperator, i: int, layer, plan: Plan) -> None:
                                                else "")
             + ") are narrower than the ordinate spacing; raise n in "
             "[discretization] (or remove the override and let the planner choose)")
-    if hasattr(op, "albedo_slots"):
+    limited = op.limit_energy()
+    if limited is None:
         if worst > 1.0 + 1e-6:
-            plan.notes.append(f"layer {i}: the quadrature over-counts energy by {worst - 1:.2g} "
-                              "(coupled-mode operator: not corrected; raise n to reduce it)")
-        return
-    excess, scaled = energy.limit_energy(op)
+            return [f"layer {i}: the quadrature over-counts energy by {worst - 1:.2g} "
+                    "(coupled-mode operator: not corrected; raise n to reduce it)"]
+        return []
+    excess, scaled = limited
     if scaled:
-        plan.notes.append(f"layer {i}: the quadrature over-counted energy by up to "
-                          f"{excess:.2g} at {scaled} ordinate(s) (lobes at the horizon); "
-                          "scaled down symmetrically (reciprocity kept)")
+        return [f"layer {i}: the quadrature over-counted energy by up to {excess:.2g} at "
+                f"{scaled} ordinate(s) (lobes at the horizon); scaled down symmetrically "
+                "(reciprocity kept)"]
+    return []
 
 
 def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
@@ -148,6 +151,7 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
     t_layers = t_adding = 0.0
     cache: dict = {}
     stacks = []
+    notes: list[str] = []           # diagnostics of the solve, for info["notes"]
     # every channel's layer keys, to know when an operator is used for the last time: the
     # coupled adding then releases its blocks as it goes (aniso_adding.add(consume=...))
     used = [lp for lp in plan.layers if lp.action != "left out"]
@@ -169,7 +173,7 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
             if key not in cache:
                 t0 = time.perf_counter()
                 cache[key] = _layer_operator(plan, grid, mono, lp.index, stats, projection,
-                                             device, workspace if own else None)
+                                             device, workspace if own else None, notes)
                 memory.release()
                 t_layers += time.perf_counter() - t0
         ops = [cache[key] for key in keys[c]]
@@ -199,6 +203,7 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
         "representation": plan.representation,
         "nnz": sum(op.nnz() for op in stacks),
         "memory_bytes": sum(op.memory_bytes() for op in stacks),
+        "notes": notes,
     }
     if verbose:
         s = info["seconds"]
@@ -214,7 +219,6 @@ def _add_mixed(ops, owned, threads, workspace=None):
     operators flagged in ``owned`` (referenced nowhere else) and the intermediate stacks are
     consumed by the adding steps, which release their blocks as soon as they are used and
     keep idle blocks and intermediate pieces in ``workspace``."""
-    from .aniso import adding as aniso_adding
     from .aniso.plan import STACK_RELERR, STACK_RELERR_INTERMEDIATE
     reduced = _reduce_isotropic_runs(ops, owned, threads)
     stack, own_stack = reduced.pop()
@@ -238,7 +242,7 @@ def _reduce_isotropic_runs(ops, owned, threads) -> list:
     references (the locals of this function go with it)."""
     groups = []          # runs of isotropic operators (lists) and (anisotropic op, owned)
     for op, own in zip(ops, owned):
-        if not isinstance(op, IsoOperator):
+        if op.representation != "isotropic":
             groups.append((op, own))
         elif groups and isinstance(groups[-1], list):
             groups[-1].append(op)
@@ -257,21 +261,22 @@ def _reduce_isotropic_runs(ops, owned, threads) -> list:
     return reduced
 
 
+#: The adding equations of each representation (:func:`common_representation` of the operands).
+_ADDERS = {"isotropic": adding.add,
+           "anisotropic": lambda top, bottom, threads: aniso_adding.add(top, bottom)}
+
+
 def add(top, bottom, threads: int | None = None):
     """Stack ``top`` on ``bottom`` with the adding equations.
 
     Both must be solved on the same discretisation (see ``solve(..., like=...)``) and
     ``top`` must be transmissive, ending in the medium that ``bottom`` starts in. Accepts
     :class:`BSDF` objects (per channel; a 1-channel operand is shared by all channels of the
-    other) or :class:`IsoOperator` objects, and returns the same type.
+    other) or two :class:`~layersim.operator.Operator` objects (an isotropic one is converted
+    when the other is coupled), and returns the same type.
     """
-    from .aniso import AnisoOperator
-    from .aniso import adding as aniso_adding
-    ops = (IsoOperator, AnisoOperator)
-    if isinstance(top, ops) and isinstance(bottom, ops):
-        if isinstance(top, IsoOperator) and isinstance(bottom, IsoOperator):
-            return adding.add(top, bottom, threads)
-        return aniso_adding.add(top, bottom)
+    if isinstance(top, Operator) and isinstance(bottom, Operator):
+        return _ADDERS[common_representation(top, bottom)](top, bottom, threads)
     if not (isinstance(top, BSDF) and isinstance(bottom, BSDF)):
         raise TypeError("add() takes two BSDF objects (from layersim.solve) or two operators")
     pairs = channel_pairs(top, bottom, "cannot add a {a}-channel BSDF to a {b}-channel one")

@@ -1,5 +1,5 @@
-"""The subtracting equations (seed 000 sec. 3.4, eq. (13)-(16)): recover the unknown layer of a
-two-layer stack from the stack and the known layer.
+"""The subtracting equations (Zeltner & Jakob 2018 sec. 3.4, eq. (13)-(16)): recover the unknown
+layer of a two-layer stack from the stack and the known layer.
 
 Removing a known **top** layer 1 (eq. (13)-(15); tildes denote the stack)::
 
@@ -18,8 +18,8 @@ stack yields the unknown bottom layer's ``Rt`` only).
 
 Regularisation
 --------------
-The inverses of the known transmissions ``T^+`` are Tikhonov-regularised (seed 000 sec. 5.5):
-``T^+ = (T^T T + eps^2 I)^-1 T^T``, computed in the energy basis ``W B W^-1`` with
+The inverses of the known transmissions ``T^+`` are Tikhonov-regularised (Zeltner & Jakob 2018
+sec. 5.5): ``T^+ = (T^T T + eps^2 I)^-1 T^T``, computed in the energy basis ``W B W^-1`` with
 ``W = diag(sqrt(w_j mu_j))`` per ordinate (and ``sqrt 2`` for the order-0 slot of coupled
 operators), where a clear layer is the identity, singular values of a transmission are at most
 ~1, and reciprocal reflection blocks are symmetric. ``eps`` is thus the transmitted amplitude
@@ -38,7 +38,7 @@ With ``eps=None`` it is chosen automatically, in two steps:
 2. **No oscillation** (the paper's own rule, sec. 5.5: "the smallest eps that still leads to a
    solution without oscillatory behavior"): if the recovered BSDF has negative lobes deeper
    than ``max(TAU * noise, NEG_FLOOR)`` of its peak (Fejer means of the low orders at every
-   ordinate pair, :func:`_negativity`), eps is increased (bisection) to the smallest value
+   ordinate pair, :func:`negativity`), eps is increased (bisection) to the smallest value
    without them. This matters where the data
    do not determine the unknown layer: below a dielectric coating, directions beyond the
    critical angle are reached only by multiple scattering, and their tiny singular values
@@ -64,8 +64,14 @@ import math
 import numpy as np
 import scipy.sparse as sps
 
+from .adding import add as iso_add
+from .aniso import basis
+from .aniso.adding import add as coupled_add
+from .aniso.banded import banded_solve
+from .aniso.operator import AnisoOperator, prune
+from .bsdf import BSDF, channel_pairs
 from .errors import InfeasibleError, OperatorError
-from .operator import BLOCKS, DROP_TOLERANCE, IsoOperator, order_weight
+from .operator import BLOCKS, DROP_TOLERANCE, IsoOperator, common_representation, order_weight
 
 #: Discrepancy factor of the automatic choice of eps.
 TAU = 1.5
@@ -79,7 +85,7 @@ EPS_MIN_ANISO = 1e-5
 EPS_DECADES = 0.2
 #: Smallest noise level assumed by the automatic choice.
 NOISE_FLOOR = 1e-9
-#: Negative lobes allowed (fraction of the peak) regardless of noise (see _negativity).
+#: Negative lobes allowed (fraction of the peak) regardless of noise (see negativity).
 NEG_FLOOR = 1e-4
 #: Orders of the Fejer means used to detect oscillation.
 FEJER_ORDERS = 8
@@ -98,7 +104,7 @@ VISIBLE_EPS = 1e-3
 
 def subtract(stack, known, side: str = "top", eps: float | None = None,
              noise: float | None = None):
-    """Recover the unknown layer of a two-layer stack (seed 000 eq. (13)-(16)).
+    """Recover the unknown layer of a two-layer stack (Zeltner & Jakob 2018 eq. (13)-(16)).
 
     Parameters
     ----------
@@ -128,7 +134,6 @@ def subtract(stack, known, side: str = "top", eps: float | None = None,
         If the operands are not compatible (grids, indices, opaque known layer on the wrong
         side).
     """
-    from .bsdf import BSDF, channel_pairs
     if side not in ("top", "bottom"):
         raise ValueError(f"side must be 'top' or 'bottom' (where the known layer is), got "
                          f"{side!r}")
@@ -160,7 +165,6 @@ def subtract(stack, known, side: str = "top", eps: float | None = None,
 # ---------------------------------------------------------------------------------------------
 
 def _subtract_op(stack, known, side, eps, noise):
-    from .aniso.operator import AnisoOperator
     if stack.grid != known.grid:
         raise OperatorError(f"stack and known layer are on different grids ({stack.grid.rule} "
                             f"n={stack.grid.n} vs {known.grid.rule} n={known.grid.n}); solve "
@@ -185,8 +189,7 @@ def _subtract_op(stack, known, side, eps, noise):
             raise OperatorError(f"index mismatch: the stack ends in a medium of index "
                                 f"{stack.eta_bottom:g}, the known bottom layer in "
                                 f"{known.eta_bottom:g}")
-    aniso = isinstance(stack, AnisoOperator) or isinstance(known, AnisoOperator)
-    alg = _AnisoAlgebra(stack, known) if aniso else _IsoAlgebra(stack, known)
+    alg = _ALGEBRAS[common_representation(stack, known)](stack, known)
 
     t_names = ("Ttb", "Tbt")
     visible, energy = alg.visibility(t_names)
@@ -203,21 +206,35 @@ def _subtract_op(stack, known, side, eps, noise):
         noise_level, source = alg.reciprocity_noise(), "reciprocity"
     else:
         noise_level, source = float(noise), "given"
-    eps_min = EPS_MIN_ANISO if aniso else EPS_RANGE[0]
+    noise_level = max(noise_level, NOISE_FLOOR)
+    rec, resid, e, method, neg = _choose_eps(alg, side, eps, noise_level)
+    vis, _ = alg.visibility(t_names, max(e, VISIBLE_EPS))
+    info = {"eps": e, "method": method, "noise": noise_level, "noise_source": source,
+            "residual": resid, "visible": vis, "negative_lobes": neg, "side": side}
+    if vis < VISIBLE_MIN:
+        _raise_diffusing(side, vis, max(e, VISIBLE_EPS), noise_level, source, alg.h)
+    op = alg.to_operator(rec, side)
+    info["energy_max"] = alg.energy_max(op)
+    return op, info
+
+
+def _choose_eps(alg, side: str, eps: float | None, noise_level: float):
+    """Recover with the given ``eps`` (at least the algebra's floor), or choose it (module
+    docstring: discrepancy principle, then no oscillation). Returns ``(recovered blocks,
+    re-adding residual, eps, method, negativity or None)``."""
 
     def run(e):
         rec = alg.recover(side, e)
         return rec, alg.residual(rec, side)
 
-    noise_level = max(noise_level, NOISE_FLOOR)
     if eps is not None:
-        e = max(float(eps), eps_min if aniso else 0.0)
+        e = max(float(eps), alg.eps_floor)
         rec, resid = run(e)
         method = "given"
         neg = None
     else:
         target = TAU * noise_level
-        lo, hi = math.log10(max(eps_min, EPS_RANGE[0])), math.log10(EPS_RANGE[1])
+        lo, hi = math.log10(max(alg.eps_min, EPS_RANGE[0])), math.log10(EPS_RANGE[1])
         rec, resid = run(10 ** lo)
         e = 10 ** lo
         if resid <= target:
@@ -255,22 +272,14 @@ def _subtract_op(stack, known, side, eps, noise):
                                                                                     side)))
             rec, resid, e, neg = best
             method = "discrepancy+no-oscillation"
-    vis, _ = alg.visibility(t_names, max(e, VISIBLE_EPS))
-    info = {"eps": e, "method": method, "noise": noise_level, "noise_source": source,
-            "residual": resid, "visible": vis, "negative_lobes": neg, "side": side}
-    if vis < VISIBLE_MIN:
-        _raise_diffusing(side, vis, max(e, VISIBLE_EPS), noise_level, source, alg.h)
-    op = alg.to_operator(rec, side)
-    info["energy_max"] = alg.energy_max(op)
-    return op, info
+    return rec, resid, e, method, neg
 
 
 def relative_error(a, b) -> float:
     """Relative Frobenius error of operator ``a`` against ``b`` over all blocks, in the energy
     basis (entries scaled by ``sqrt(w mu)`` of the outgoing over the incident ordinate, where a
     clear layer is the identity): the distance used to judge a recovered layer."""
-    from .aniso.operator import as_aniso
-    a, b = as_aniso(a), as_aniso(b)
+    a, b = a.as_coupled(), b.as_coupled()
     w = np.tile(np.sqrt(a.grid.flux_weight), a.slots)
     W, Wi = sps.diags(w), sps.diags(1.0 / w)
     num = den = 0.0
@@ -287,15 +296,9 @@ def relative_error(a, b) -> float:
 def with_noise(op, level: float, seed: int):
     """``op`` with independent multiplicative Gaussian noise of relative standard deviation
     ``level`` on every stored entry (synthetic "measured" stacks for subtraction studies)."""
-    from .aniso.operator import AnisoOperator
-    from .operator import IsoOperator
     rng = np.random.default_rng(seed)
-    perturb = lambda mat: mat.multiply(1 + level * rng.standard_normal(mat.shape)).tocsr()
-    if isinstance(op, AnisoOperator):
-        blocks = {k: None if v is None else perturb(v) for k, v in op.blocks.items()}
-        return AnisoOperator(op.grid, op.md, blocks, op.eta_top, op.eta_bottom, op.delta)
-    blocks = {k: None if v is None else [perturb(b) for b in v] for k, v in op.blocks.items()}
-    return IsoOperator(op.grid, blocks, op.eta_top, op.eta_bottom, op.delta)
+    return op.map_blocks(lambda mat: mat.multiply(1 + level * rng.standard_normal(mat.shape))
+                         .tocsr())
 
 
 def _raise_diffusing(side, vis, e, noise_level, source, h):
@@ -311,47 +314,21 @@ def _raise_diffusing(side, vis, e, noise_level, source, h):
 # Energy basis helpers
 # ---------------------------------------------------------------------------------------------
 
-def _negativity(op, L: int = FEJER_ORDERS) -> float:
+def negativity(op, L: int = FEJER_ORDERS) -> float:
     """Depth of negative lobes of an operator's BSDF relative to its peak, measured on Fejer
     means: ``sum_{|l| < L} (1 - |l| / L) f_l exp(i l phi)`` (per azimuth, or the product kernel
     over both azimuths of coupled operators) is non-negative for every non-negative BSDF, at
     every ordinate pair, however the series was truncated at ``md`` (truncation rings by ~1 %
     at coarse ``md``; the Fejer mean does not). Oscillations of a deconvolution, which run
     across ordinates, make it negative. Unscattered deltas are left out."""
+    return _NEGATIVITY[op.representation](op, L)
+
+
+def _negativity_iso(op, L: int) -> float:
+    """:func:`negativity` of an isotropic operator (Fejer means over one azimuth)."""
     h = op.h
     fw = op.grid.flux_weight
     worst = 0.0
-    if getattr(op, "representation", "isotropic") == "anisotropic":
-        from .aniso import basis
-        L = min(L, op.md)
-        S = basis.n_slots(L)
-        mode = basis.slot_mode(L)
-        fejer = 1.0 - mode / L
-        grid = np.linspace(0.0, 2.0 * np.pi, 4 * L, endpoint=False)
-        sin = basis.slot_is_sin(L)
-        U = np.where(sin[None, :], np.sin(np.outer(grid, mode)), np.cos(np.outer(grid, mode)))
-        V = 2.0 * U
-        V[:, 0] = 1.0
-        rng = np.random.default_rng(0)
-        pairs = np.arange(h * h) if h * h <= 4096 else rng.choice(h * h, 4096, replace=False)
-        o, i = pairs // h, pairs % h
-        for name in BLOCKS:
-            if op.blocks[name] is None:
-                continue
-            G = op.coefficients(name)[:S * h, :S * h].tocsr()
-            if name in op.delta:
-                G = G - sps.diags(np.tile(op.delta[name] / (2.0 * np.pi * fw), S))
-            rows = (np.arange(S)[None, :] * h + o[:, None])            # (P, S)
-            cols = (np.arange(S)[None, :] * h + i[:, None])
-            g = np.asarray(G[rows.ravel()][:, np.arange(S * h)].toarray()).reshape(
-                pairs.size, S, S * h)
-            g = np.take_along_axis(g, cols[:, None, :], axis=2)         # (P, S, S)
-            g = g * fejer[None, :, None] * fejer[None, None, :]
-            f = np.einsum("xa,pab,yb->pxy", U, g, V, optimize=True)
-            peak = float(np.abs(f).max())
-            if peak > 0:
-                worst = max(worst, float(max(0.0, -f.min())) / peak)
-        return worst
     L = min(L, op.m)
     phi = np.linspace(0.0, np.pi, 4 * L)
     for name in BLOCKS:
@@ -369,6 +346,46 @@ def _negativity(op, L: int = FEJER_ORDERS) -> float:
     return worst
 
 
+def _negativity_coupled(op, L: int) -> float:
+    """:func:`negativity` of a coupled operator (product Fejer kernel over both azimuths, on at
+    most 4096 ordinate pairs)."""
+    h = op.h
+    fw = op.grid.flux_weight
+    worst = 0.0
+    L = min(L, op.md)
+    S = basis.n_slots(L)
+    mode = basis.slot_mode(L)
+    fejer = 1.0 - mode / L
+    grid = np.linspace(0.0, 2.0 * np.pi, 4 * L, endpoint=False)
+    sin = basis.slot_is_sin(L)
+    U = np.where(sin[None, :], np.sin(np.outer(grid, mode)), np.cos(np.outer(grid, mode)))
+    V = 2.0 * U
+    V[:, 0] = 1.0
+    rng = np.random.default_rng(0)
+    pairs = np.arange(h * h) if h * h <= 4096 else rng.choice(h * h, 4096, replace=False)
+    o, i = pairs // h, pairs % h
+    for name in BLOCKS:
+        if op.blocks[name] is None:
+            continue
+        G = op.coefficients(name)[:S * h, :S * h].tocsr()
+        if name in op.delta:
+            G = G - sps.diags(np.tile(op.delta[name] / (2.0 * np.pi * fw), S))
+        rows = (np.arange(S)[None, :] * h + o[:, None])            # (P, S)
+        cols = (np.arange(S)[None, :] * h + i[:, None])
+        g = np.asarray(G[rows.ravel()][:, np.arange(S * h)].toarray()).reshape(
+            pairs.size, S, S * h)
+        g = np.take_along_axis(g, cols[:, None, :], axis=2)         # (P, S, S)
+        g = g * fejer[None, :, None] * fejer[None, None, :]
+        f = np.einsum("xa,pab,yb->pxy", U, g, V, optimize=True)
+        peak = float(np.abs(f).max())
+        if peak > 0:
+            worst = max(worst, float(max(0.0, -f.min())) / peak)
+    return worst
+
+
+_NEGATIVITY = {"isotropic": _negativity_iso, "anisotropic": _negativity_coupled}
+
+
 def _frob2(mats) -> float:
     total = 0.0
     for m in mats:
@@ -379,8 +396,21 @@ def _frob2(mats) -> float:
     return total
 
 
+def _energy_max(op) -> float:
+    """Largest R + T over incident ordinates (azimuthally uniform illumination)."""
+    alb = op.albedo()
+    worst = 0.0
+    for r, t in (("Rt", "Ttb"), ("Rb", "Tbt")):
+        if r in alb:
+            worst = max(worst, float((alb[r] + alb.get(t, 0.0)).max()))
+    return worst
+
+
 class _IsoAlgebra:
     """Per-order dense algebra in the energy basis ``W B_l W^-1``, ``W = diag(sqrt(w mu))``."""
+
+    #: Smallest eps of the automatic search, and the floor applied to a given eps.
+    eps_min, eps_floor = EPS_RANGE[0], 0.0
 
     def __init__(self, stack: IsoOperator, known: IsoOperator):
         self.stack, self.known = stack, known
@@ -490,9 +520,8 @@ class _IsoAlgebra:
         return IsoOperator.from_dense(self.grid, blocks, eta_top, eta_bottom, delta)
 
     def residual(self, rec, side) -> float:
-        from .adding import add
         op = self.to_operator(rec, side)
-        again = add(self.known, op) if side == "top" else add(op, self.known)
+        again = iso_add(self.known, op) if side == "top" else iso_add(op, self.known)
         sw = self.sw
         num = den = 0.0
         for name in BLOCKS:
@@ -506,15 +535,9 @@ class _IsoAlgebra:
                 den += float(np.sum((sw[:, None] * b / sw[None, :]) ** 2))
         return math.sqrt(num / den) if den > 0 else 0.0
 
-    negativity = staticmethod(_negativity)
+    negativity = staticmethod(negativity)
 
-    def energy_max(self, op) -> float:
-        alb = op.albedo_nodes()
-        worst = 0.0
-        for r, t in (("Rt", "Ttb"), ("Rb", "Tbt")):
-            if r in alb:
-                worst = max(worst, float((alb[r] + alb.get(t, 0.0)).max()))
-        return worst
+    energy_max = staticmethod(_energy_max)
 
 
 def _delta_quotient(stack, known) -> dict:
@@ -531,14 +554,15 @@ def _delta_quotient(stack, known) -> dict:
 class _AnisoAlgebra:
     """Sparse algebra on coupled-mode operators (slot basis), banded solves."""
 
+    #: Smallest eps of the automatic search, and the floor applied to a given eps.
+    eps_min = eps_floor = EPS_MIN_ANISO
+
     def __init__(self, stack, known):
-        from .aniso.operator import as_aniso
         md = max(stack.m, known.m)
-        self.stack, self.known = as_aniso(stack, md), as_aniso(known, md)
+        self.stack, self.known = stack.as_coupled(md), known.as_coupled(md)
         self.md = md
         self.grid = stack.grid
         self.h = stack.grid.h
-        from .aniso import basis
         scale = np.sqrt(np.where(np.arange(basis.n_slots(md)) == 0, 2.0, 1.0))
         w = np.kron(scale, np.sqrt(self.grid.flux_weight))
         self.W = sps.diags(w)
@@ -554,7 +578,6 @@ class _AnisoAlgebra:
         return sps.csr_matrix(self.W @ op.blocks[name] @ self.Winv)
 
     def _solve(self, A, B):
-        from .aniso.adding import banded_solve
         return banded_solve(A, B, self.h, self.md, what="the subtracting equations")
 
     def left_pinv(self, name, M, eps):
@@ -601,7 +624,6 @@ class _AnisoAlgebra:
         return math.sqrt(num / (2.0 * den)) if den > 0 else 0.0
 
     def recover(self, side, eps):
-        from .aniso.operator import prune
         I = sps.identity(self.N, format="csr")
         S, K = self.S, self.K
         out = dict.fromkeys(BLOCKS)
@@ -629,7 +651,6 @@ class _AnisoAlgebra:
         return out
 
     def to_operator(self, rec, side):
-        from .aniso.operator import AnisoOperator, prune
         blocks = {k: None if v is None else prune(self.Winv @ v @ self.W, DROP_TOLERANCE)
                   for k, v in rec.items()}
         if side == "top":
@@ -640,9 +661,8 @@ class _AnisoAlgebra:
                              _delta_quotient(self.stack, self.known))
 
     def residual(self, rec, side) -> float:
-        from .aniso.adding import add
         op = self.to_operator(rec, side)
-        again = add(self.known, op) if side == "top" else add(op, self.known)
+        again = coupled_add(self.known, op) if side == "top" else coupled_add(op, self.known)
         num = den = 0.0
         for name in BLOCKS:
             if self.stack.blocks[name] is None:
@@ -652,12 +672,11 @@ class _AnisoAlgebra:
             den += _frob2([self.S[name]])
         return math.sqrt(num / den) if den > 0 else 0.0
 
-    negativity = staticmethod(_negativity)
+    negativity = staticmethod(negativity)
 
-    def energy_max(self, op) -> float:
-        alb = {k: v[0] for k, v in op.albedo_slots().items()}
-        worst = 0.0
-        for r, t in (("Rt", "Ttb"), ("Rb", "Tbt")):
-            if r in alb:
-                worst = max(worst, float((alb[r] + alb.get(t, 0.0)).max()))
-        return worst
+    energy_max = staticmethod(_energy_max)
+
+
+#: The algebra of each representation (:func:`layersim.operator.common_representation` of the
+#: stack and the known layer).
+_ALGEBRAS = {"isotropic": _IsoAlgebra, "anisotropic": _AnisoAlgebra}

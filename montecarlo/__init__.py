@@ -3,7 +3,7 @@
 Particles walk through the stack with exactly the per-interface and per-medium physics of
 :mod:`layersim.kernels.physics` (sampled by :mod:`layersim.kernels.sampling`, driven by the
 Philox generator of :mod:`layersim.kernels.rng`, walk in :mod:`layersim.kernels.walk`), on Warp
-(CPU, CUDA) or OpenCL (source generated from the same Warp functions). See ``CONVENTIONS.md``::
+(CPU, CUDA) or OpenCL (source generated from the same Warp functions). See ``docs/conventions.md``::
 
     import layersim.montecarlo as mc
     res = mc.simulate(scene, wi, particles, mu_edges=..., phi_edges=..., backend="auto", seed=0)

@@ -14,9 +14,9 @@ Backends
 ``"auto"``       the fastest one present: warp-cuda; else opencl on a GPU, or on a CPU device
                  with at least :data:`OPENCL_CPU_MIN_UNITS` compute units; else warp-cpu.
 
-Why the CPU threshold: on the 2-core development machine PoCL reached 0.41-0.45x warp-cpu's
-paths/s per core (its float32 math library is 4-6x slower than Warp's; measured with
-``benchmarks/mc_throughput.py``), so it only beats single-threaded warp-cpu with three or more
+Why the CPU threshold: PoCL's float32 math library is several times slower than Warp's, so per
+core PoCL reaches well under half of warp-cpu's paths/s (``benchmarks/mc_throughput.py``;
+figures in docs/performance.md) and only beats single-threaded warp-cpu with three or more
 cores; four keeps a margin.
 """
 
@@ -297,11 +297,10 @@ _CONTEXTS: dict = {}
 
 def _build_options(device) -> list:
     """OpenCL build options: correctly rounded single-precision divide and sqrt where the device
-    offers them. OpenCL's default allows 2.5-3 ulp there (Warp's CUDA code is correctly rounded);
-    on an NVIDIA H200 that default biased the exit azimuths of walks at normal incidence
-    (71 of 648 bins beyond 4 sigma from warp-cuda at 1e7 paths, coated gold; none with the
-    option). Measured cost there: coated gold 7.3e8 -> 5.6e8 paths/s, the slab unchanged
-    (``benchmarks/mc_throughput.py``)."""
+    offers them. OpenCL's default allows 2.5-3 ulp there (Warp's CUDA code is correctly rounded),
+    which biases the exit azimuths of walks at normal incidence on NVIDIA GPUs (bins beyond 4
+    sigma from warp-cuda at 1e7 paths); the option costs some throughput on the coated scenes
+    (``benchmarks/mc_throughput.py``; figures in docs/performance.md)."""
     import pyopencl as cl
     if device.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT:
         return ["-cl-fp32-correctly-rounded-divide-sqrt"]

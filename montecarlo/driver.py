@@ -1,4 +1,4 @@
-"""``simulate``: the Monte Carlo reference entry point (``CONVENTIONS.md``)."""
+"""``simulate``: the Monte Carlo reference entry point (``docs/conventions.md``)."""
 
 from __future__ import annotations
 

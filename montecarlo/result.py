@@ -11,7 +11,7 @@ import numpy as np
 class MCResult:
     """Monte Carlo estimates for one incident direction.
 
-    Energy fractions follow ``CONVENTIONS.md``: ``reflectance`` is the fraction of the incident
+    Energy fractions follow ``docs/conventions.md``: ``reflectance`` is the fraction of the incident
     power leaving on the side the light came from (the top for ``wi.z > 0``, the bottom for
     ``wi.z < 0``), ``transmittance`` the fraction leaving on the other side, ``absorbed`` the rest
     (including energy lost by the single-scattering microfacet model and by truncated walks).

@@ -172,6 +172,7 @@ def test_equal_roughness_on_the_coupled_path_reproduces_the_isotropic_operator(l
     np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-5 * np.abs(b).max())
 
 
+@pytest.mark.slow
 def test_swapping_alpha_u_and_alpha_v_equals_rotating_by_90_degrees():
     """Convention check: alpha_u acts along (cos rot, sin rot, 0)."""
     a = aniso_interface_operator(G32, 24, 3, Conductor(ior=GOLD, alpha_u=0.2, alpha_v=0.4,
@@ -190,6 +191,7 @@ def test_swapping_alpha_u_and_alpha_v_equals_rotating_by_90_degrees():
                                atol=1e-9)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("layer,names,tol", [
     (Conductor(ior=GOLD, alpha_u=0.2, alpha_v=0.4), ("Rt",), (1e-6, 1e-5)),
     (Conductor(ior=GOLD, alpha_u=0.2, alpha_v=0.4, distribution="ggx"), ("Rt",), (2e-6, 2e-4)),
@@ -224,6 +226,7 @@ def test_projection_matches_direct_evaluation_of_the_physics(layer, names, tol):
             name, np.median(err), np.percentile(err, 99))
 
 
+@pytest.mark.slow
 def test_projection_without_the_reciprocity_shortcut_is_reciprocal_and_conserving():
     """Projecting every block independently checks physics and projection against generalized
     reciprocity; a rough dielectric never creates energy (R + T <= 1 for uniform illumination
@@ -247,7 +250,7 @@ def test_coarse_bounds_in_chunks_of_pairs_equal_all_pairs_at_once(monkeypatch):
     """The pre-pass bounds of a block (_coarse, peak parameters and BSDF bound per pair) are
     the same evaluated a few pairs at a time (the memory bound) as all at once."""
     from layersim.ingredients import aniso_microfacet as am
-    mu_i, mu_o, _, _ = am._block_pairs(G32, "Rb", False)
+    mu_i, mu_o, _, _ = am.block_pairs(G32, "Rb", False)
     args = (mu_i, mu_o, 1.5, 0.15, 0.05, "beckmann", 32)
     whole = am._coarse(*args)
     monkeypatch.setattr(am, "COARSE_ELEMENTS", 17 * 17 * 7)        # 7 pairs per launch
@@ -286,6 +289,7 @@ def coupled_layers():
     return d, hg, c, glass_out
 
 
+@pytest.mark.slow
 def test_coupled_adding_matches_a_dense_solve_and_is_associative(coupled_layers):
     d, hg, c, _ = coupled_layers
     bottom = aniso_adding.add(hg, c)
@@ -316,6 +320,7 @@ def test_coupled_stack_never_creates_energy_and_is_reciprocal(coupled_layers):
     assert energy_weighted_error(aniso_adding.add(clear, slab), slab) < 1e-13
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("parking", [False, True])
 def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(
         coupled_layers, parking, tmp_path, monkeypatch, park_dir):
@@ -384,6 +389,7 @@ def test_malloc_arena_cap_is_explicit_and_not_applied_on_import():
     assert run.stdout.split() == ["0", "False", "True", "1"]
 
 
+@pytest.mark.slow
 def test_a_killed_solve_leaves_no_spool_file(tmp_path):
     """A process killed (SIGKILL, as the out-of-memory killer does) while it holds spooled
     data on disk leaves nothing in the parking directory: the file has no name there from
@@ -544,6 +550,7 @@ def test_pruned_product_is_the_pair_pruned_product(monkeypatch, tmp_path):
                     assert files_in(tmp_path) == []       # the filtered copy's file too
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("on_disk", [False, True])
 def test_sums_and_reciprocal_pruning_in_pieces_equal_the_whole(coupled_layers, on_disk,
                                                                  tmp_path, monkeypatch):
@@ -764,12 +771,12 @@ def test_plan_chooses_the_representation_and_the_coupling_width():
     assert forced.ms == 2 and any("below the" in n for n in forced.notes)
 
 
-def test_memory_limit_refuses_a_coupled_plan_and_says_what_to_reduce(monkeypatch):
-    monkeypatch.setenv("LAYERSIM_MAX_MEMORY", "2000000")
+def test_memory_limit_refuses_a_coupled_plan_and_says_what_to_reduce():
     scene = layersim.Scene.from_dict({"layer": [
         {"kind": "dielectric", "ior": 1.5, "roughness": 0.1},
         {"kind": "conductor", "ior": [0.2, 3.0], "roughness": [0.05, 0.15]}]})
-    with pytest.raises(InfeasibleError, match="ms = 6.*GiB.*ms in \\[discretization\\]"):
+    with configure(max_memory=2_000_000), \
+            pytest.raises(InfeasibleError, match="ms = 6.*GiB.*ms in \\[discretization\\]"):
         layersim.make_plan(scene)
 
 
@@ -812,6 +819,7 @@ def test_solved_anisotropic_stack_eval_albedo_bins_and_persistence(brushed_coati
         assert int(d["version"]) == 2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("parking", [False, True])
 def test_rgb_stack_shares_layers_across_channels_and_matches_per_channel_solves(
         parking, tmp_path, monkeypatch, park_dir):
@@ -848,6 +856,7 @@ def test_rgb_stack_shares_layers_across_channels_and_matches_per_channel_solves(
     assert files_in(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_projection_parks_the_blocks_of_an_operator_handed_to_the_adding(
         coupled_layers, tmp_path, monkeypatch):
     """aniso_interface_operator(workspace=...) on disk parks each block as it is built (rotated, its
@@ -884,6 +893,7 @@ def test_projection_parks_the_blocks_of_an_operator_handed_to_the_adding(
         assert files_in(tmp_path) == []
 
 
+@pytest.mark.slow
 def test_eval_of_a_rotated_anisotropic_interface_matches_the_physics():
     """BSDF.eval (cubic interpolation between ordinates) of a single rotated anisotropic
     conductor at the planner's discretisation, against physics.microfacet_eval evaluated in the
@@ -915,6 +925,7 @@ def _rotate_z(v, psi):
                     axis=-1)
 
 
+@pytest.mark.slow
 def test_rotational_average_is_the_mean_over_frame_rotations_and_sampling_is_unbiased():
     """The isotropic proposal of anisotropic sampling equals the BSDF averaged over rotations
     of both directions about the normal, and weights drawn with it average to the albedo."""

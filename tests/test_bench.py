@@ -8,6 +8,7 @@ from layersim import bench
 from layersim.bench import stability
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", stability.cases(), ids=lambda c: c.name)
 def test_stability_case_passes_or_is_refused_clearly(case):
     result = stability.run_case(case, small=True)
@@ -58,6 +59,7 @@ def test_stability_monte_carlo_check_allows_stopped_walks_only_upwards():
     assert result["outcome"] == "fail" and "Monte Carlo" in result["detail"]
 
 
+@pytest.mark.slow
 def test_quick_bench_writes_results_report_and_plots(tmp_path):
     results = bench.run(tmp_path, quick=True, scenes=["vandehulst_slab"], log=lambda *a: None)
     data = json.loads((tmp_path / "results.json").read_text())

@@ -7,7 +7,7 @@ import pytest
 import scipy.stats
 
 import layersim
-from layersim.bsdf import _bin_quadrature  # piecewise-cubic-exact bin quadrature
+from layersim.interpolation import bin_quadrature as _bin_quadrature  # piecewise-cubic-exact
 from layersim.channels import LUMINANCE
 from layersim.operator import Grid, IsoOperator
 

@@ -57,7 +57,7 @@ def lambertian():
 
 def test_lambertian_file_matches_the_hand_computed_layout(tmp_path, lambertian):
     path = tmp_path / "lambert.bsdf"
-    lambertian.export(path)
+    layersim.export(lambertian, path)
     data = path.read_bytes()
     t = pbrt_read(data)
     grid = lambertian.grid
@@ -98,7 +98,7 @@ def test_round_trip_reproduces_eval_to_float32(tmp_path, coated_gold, rough_glas
     for bsdf in (coated_gold, rough_glass):
         for version in (1, 2):
             path = tmp_path / f"v{version}.bsdf"
-            table = bsdf.export(path, version=version)
+            table = layersim.export(bsdf, path, version=version)
             assert path.stat().st_size == table.nbytes()
             again = bsdffile.read(path).to_bsdf()
             f, g = bsdf.eval(wi, wo), again.eval(wi, wo)
@@ -111,7 +111,7 @@ def test_renderer_evaluation_agrees_with_ours(tmp_path, rough_glass):
     transmission). At ordinate directions no interpolation is involved: it must equal our
     f(wo, wi) times (eta_wi / eta_wo)^2 -- our f(wi, wo) by generalized reciprocity -- to float32
     precision; between ordinates it differs by the interpolation error only."""
-    table = bsdffile.read(rough_glass.export(tmp_path / "glass.bsdf") and tmp_path / "glass.bsdf")
+    table = bsdffile.read(layersim.export(rough_glass, tmp_path / "glass.bsdf") and tmp_path / "glass.bsdf")
     mu = rough_glass.grid.mu
     rng = np.random.default_rng(1)
     k_i, k_o = rng.integers(2, mu.size, 400), rng.integers(2, mu.size, 400)
@@ -140,7 +140,7 @@ def test_rgb_files_store_luminance_red_blue(tmp_path):
         {"kind": "conductor", "roughness": 0.3, "ior": GOLD_RGB}],
         "discretization": {"n": 48, "md": 64}})
     bsdf = layersim.solve(scene)
-    table = bsdf.export(tmp_path / "gold.bsdf")
+    table = layersim.export(bsdf, tmp_path / "gold.bsdf")
     t = pbrt_read((tmp_path / "gold.bsdf").read_bytes())
     assert t["nChannels"] == 3
     # one pair: its three blocks are Y, R, B of our coefficients times |mu_o|
@@ -168,13 +168,13 @@ def test_rgb_files_store_luminance_red_blue(tmp_path):
 def test_unscattered_transmission_survives_the_round_trip(tmp_path):
     bsdf = layersim.solve(layersim.Scene.from_dict({"layer": [
         {"kind": "medium", "albedo": 0.5, "tau": 0.3}]}))
-    again = bsdffile.read(bsdf.export(tmp_path / "m.bsdf") and tmp_path / "m.bsdf").to_bsdf()
+    again = bsdffile.read(layersim.export(bsdf, tmp_path / "m.bsdf") and tmp_path / "m.bsdf").to_bsdf()
     wi = unit(35.0, 60.0)
     np.testing.assert_allclose(again.albedo(wi), bsdf.albedo(wi), rtol=1e-6)
 
 
 def test_version_2_layout(tmp_path, rough_glass):
-    table = rough_glass.export(tmp_path / "v2.bsdf", version=2)
+    table = layersim.export(rough_glass, tmp_path / "v2.bsdf", version=2)
     data = (tmp_path / "v2.bsdf").read_bytes()
     (magic, version, flags, N, n_coef, ms, md, nch, nb, nmeta, npar, npv, eta, a0, a1,
      unused) = struct.unpack_from("<7sB10If2ff", data)
@@ -186,7 +186,7 @@ def test_version_2_layout(tmp_path, rough_glass):
     tab = np.frombuffer(data, "<u4", 3 * N * N, off).reshape(N * N, 3)
     assert set(np.unique(tab[:, 1])) <= {0, 1}
     # an isotropic pair in v2 holds c_00 = a_0 and c_0d = a_d / 2 of the v1 file
-    v1 = bsdffile.read(rough_glass.export(tmp_path / "v1.bsdf") and tmp_path / "v1.bsdf")
+    v1 = bsdffile.read(layersim.export(rough_glass, tmp_path / "v1.bsdf") and tmp_path / "v1.bsdf")
     p = int(np.argmax(v1.shape))
     a = v1.coef[v1.offsets[p]:v1.offsets[p] + v1.shape[p]]
     c = table.coef[table.offsets[p]:table.offsets[p] + table.shape[p, 1]]
@@ -251,13 +251,13 @@ def test_version_2_series_are_evaluated_with_the_2d_formula(imag):
     (lambda d: d[:12] + struct.pack("<I", 0xFFFFFFF0) + d[16:], "size mismatch"),
 ])
 def test_corrupt_files_are_rejected(tmp_path, lambertian, mutate, match):
-    data = lambertian.export(tmp_path / "ok.bsdf").to_bytes()
+    data = layersim.export(lambertian, tmp_path / "ok.bsdf").to_bytes()
     with pytest.raises(FileFormatError, match=match):
         bsdffile.FourierTable.from_bytes(mutate(data))
 
 
 def test_corrupt_offset_table_is_rejected(tmp_path, lambertian):
-    table = lambertian.export(tmp_path / "ok.bsdf")
+    table = layersim.export(lambertian, tmp_path / "ok.bsdf")
     data = bytearray(table.to_bytes())
     N = table.n_nodes
     start = 64 + 4 * N + 4 * N * N
@@ -277,7 +277,7 @@ def test_corrupt_offset_table_is_rejected(tmp_path, lambertian):
 
 
 def test_foreign_nodes_are_refused_for_conversion_but_evaluated(tmp_path, lambertian):
-    table = lambertian.export(tmp_path / "ok.bsdf")
+    table = layersim.export(lambertian, tmp_path / "ok.bsdf")
     table.metadata = ""
     h = lambertian.grid.h
     table.nodes[h + 2:] = np.linspace(0.05, 1.0, h).astype(np.float32)
@@ -309,7 +309,7 @@ def aniso(tmp_path_factory):
     out = {}
     for name, scene in ANISO_SCENES.items():
         bsdf = layersim.solve(layersim.Scene.from_dict(scene))
-        table = bsdf.export(d / f"{name}.bsdf")
+        table = layersim.export(bsdf, d / f"{name}.bsdf")
         out[name] = (bsdf, table, d / f"{name}.bsdf")
     return out
 
@@ -457,7 +457,7 @@ def test_unscattered_transmission_survives_the_anisotropic_round_trip(tmp_path):
     blocks["Rt"] = m.blocks["Rt"] + 0.05 * c.blocks["Rt"]
     op = AnisoOperator(m.grid, 8, blocks, m.eta_top, m.eta_bottom, m.delta)
     bsdf = layersim.BSDF([op])
-    table = bsdf.export(tmp_path / "m.bsdf")
+    table = layersim.export(bsdf, tmp_path / "m.bsdf")
     assert table.anisotropic and table.is_complex
     back = bsdffile.read(tmp_path / "m.bsdf").to_bsdf()
     assert back.anisotropic and set(back.operators[0].delta) == {"Ttb", "Tbt"}
@@ -521,7 +521,7 @@ def test_relative_truncation_shrinks_version_2_files_within_its_bound(aniso, tmp
     errors, sizes = [], []
     for relerr in (1e-6, 1e-3):
         path = tmp_path / f"trunc_{relerr:g}.bsdf"
-        table = bsdf.export(path, relerr=relerr)
+        table = layersim.export(bsdf, path, relerr=relerr)
         assert path.stat().st_size == table.nbytes()
         assert table.coef.size <= full.coef.size
         sizes.append(table.coef.size)
@@ -531,15 +531,15 @@ def test_relative_truncation_shrinks_version_2_files_within_its_bound(aniso, tmp
     assert errors[0] < 1e-6 and 1e-6 < errors[1] < 3e-3, errors
     assert sizes[1] < full.coef.size
     with pytest.raises(ValueError, match="relerr"):
-        bsdf.export(tmp_path / "bad.bsdf", relerr=1.0)
+        layersim.export(bsdf, tmp_path / "bad.bsdf", relerr=1.0)
     iso = layersim.solve(layersim.Scene.from_dict(
         {"layer": [{"kind": "conductor", "ior": [0.2, 3.0], "roughness": 0.3}],
          "discretization": {"n": 12, "md": 6}}))
     with pytest.raises(ValueError, match="version 2 files only"):
-        iso.export(tmp_path / "v1.bsdf", version=1, relerr=1e-3)
+        layersim.export(iso, tmp_path / "v1.bsdf", version=1, relerr=1e-3)
 
 
 def test_version_1_refuses_anisotropic_stacks(aniso, tmp_path):
     bsdf = aniso["brushed"][0]
     with pytest.raises(InfeasibleError, match="version 1 .* isotropic BSDFs only"):
-        bsdf.export(tmp_path / "v1.bsdf", version=1)
+        layersim.export(bsdf, tmp_path / "v1.bsdf", version=1)

@@ -111,6 +111,24 @@ def test_eval_prints_one_value_per_channel(glass_files, capsys):
     assert f.size == 3 and f[0] > f[2] > 0          # gold: red above blue
 
 
+def test_energy_notes_go_into_the_bsdf_info_and_info_prints_them(glass_files, glass, tmp_path,
+                                                                  capsys):
+    from layersim.solver import _check_energy
+    scene = layersim.Scene.from_toml(glass_files / "glass.toml")
+    plan = layersim.make_plan(scene)
+    before = list(plan.notes)
+    over = glass.operators[0].map_blocks(lambda mat: mat * 1.002)   # 0.2 % too much energy
+    notes = _check_energy(over, 0, scene.layers[0], plan)
+    assert len(notes) == 1 and "over-counted energy" in notes[0]
+    assert plan.notes == before                                      # the plan is not touched
+    alb = over.albedo()
+    assert np.max(alb["Rt"] + alb["Ttb"]) <= 1.0 + 1e-12            # and the excess is removed
+    saved = layersim.BSDF(glass.operators, None, {**glass.info, "notes": notes})
+    saved.save(tmp_path / "noted.lsim")
+    assert cli_main(["info", str(tmp_path / "noted.lsim")]) == 0
+    assert f"note: {notes[0]}" in capsys.readouterr().out
+
+
 def test_export_version_2(glass_files, capsys):
     out_file = glass_files / "glass_v2.bsdf"
     assert cli_main(["export", str(glass_files / "glass.lsim"), "-o", str(out_file),
@@ -120,6 +138,7 @@ def test_export_version_2(glass_files, capsys):
     assert table.version == 2 and table.alpha == pytest.approx((0.3, 0.3))
 
 
+@pytest.mark.slow
 def test_anisotropic_scene_exports_evaluates_and_plots(tmp_path, capsys):
     """A rotated brushed metal: export writes version 2 with complex coefficients by default
     (version 1 is refused), eval of the file equals eval of the scene (and of the solved BSDF;

@@ -7,6 +7,7 @@ import scipy.sparse as sps
 
 import layersim
 from layersim import adding
+from layersim.config import configure
 from layersim.errors import InfeasibleError, OperatorError
 from layersim.ingredients import diffuse_operator, interface_operator, medium_operator
 from layersim.operator import Grid, IsoOperator
@@ -284,12 +285,12 @@ def test_nearly_index_matched_interface_is_refused_up_front():
         layersim.make_plan(scene)
 
 
-def test_memory_limit_is_enforced_before_any_heavy_work(monkeypatch):
-    monkeypatch.setenv("LAYERSIM_MAX_MEMORY", "1000000")
+def test_memory_limit_is_enforced_before_any_heavy_work():
     scene = layersim.Scene.from_dict({"layer": [
         {"kind": "dielectric", "ior": 1.5, "roughness": 0.1},
         {"kind": "conductor", "ior": [0.143552, 3.98397], "roughness": 0.1}]})
-    with pytest.raises(InfeasibleError, match="GiB.*LAYERSIM_MAX_MEMORY"):
+    with configure(max_memory=1_000_000), \
+            pytest.raises(InfeasibleError, match="GiB.*LAYERSIM_MAX_MEMORY"):
         layersim.solve(scene)
 
 

@@ -76,6 +76,7 @@ def test_early_stop_on_target_stderr():
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("d", [COATED, SLAB], ids=["coated", "slab"])
 def test_warp_and_opencl_agree(d, cl_device):
     w = run(d, 40_000, seed=5)
@@ -92,6 +93,7 @@ def test_warp_and_opencl_agree(d, cl_device):
     assert abs(w.events - o.events) <= 1e-3 * w.events
 
 
+@pytest.mark.slow
 def test_opencl_is_deterministic_across_batch_sizes(cl_device):
     a = run(COATED, 30_000, backend="opencl", seed=8)
     b = run(COATED, 30_000, backend="opencl", seed=8, batch_size=7000)

@@ -118,6 +118,7 @@ def probes(tmp_path_factory, cl_device):
     return ps, table
 
 
+@pytest.mark.slow
 def test_translated_functions_agree_with_warp(probes):
     ps, table = probes
     failures = []

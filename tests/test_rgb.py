@@ -41,7 +41,7 @@ def test_every_output_carries_three_channels(tmp_path, fig7d):
     wo_s, weight, pdf = bsdf.sample(wi[1], np.random.default_rng(0).random((100, 2)))
     assert weight.shape == (100, 3) and pdf.shape == (100,)
     assert bsdf.pdf(wi[1], wo_s).shape == (100,)
-    table = bsdf.export(tmp_path / "fig7d.bsdf")
+    table = layersim.export(bsdf, tmp_path / "fig7d.bsdf")
     assert table.channels == 3 and table.eval(wi, wo).shape == (3, 3)
     assert bsdffile.read(tmp_path / "fig7d.bsdf").to_bsdf().eval(wi, wo).shape == (3, 3)
     img = plot.slice_images(bsdf, wi[1], resolution=16)["reflection"]

@@ -167,6 +167,7 @@ def test_cli_prints_one_line_and_exits_nonzero_on_bad_input(tmp_path, capsys):
     assert cli_main(["plan", str(tmp_path / "missing.toml")]) == 2
 
 
+@pytest.mark.slow
 def test_cli_subprocess_has_no_traceback(tmp_path):
     path = tmp_path / "bad.toml"
     path.write_text('[[layer]]\nkind = "conductor"\nior = [0.2, 3.0]\n[[layer]]\n'

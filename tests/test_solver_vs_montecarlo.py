@@ -2,6 +2,7 @@
 measure discretisation error, which must stay within the Monte Carlo standard errors."""
 
 import numpy as np
+import pytest
 
 import layersim
 import layersim.montecarlo as mc
@@ -41,6 +42,7 @@ def compare(scene, wi, particles, seed=11, min_fraction=0.99):
     return z
 
 
+@pytest.mark.slow
 def test_single_rough_interface_bins_agree_within_4_sigma():
     # The transmitted lobe is a ridge mu_o = T(mu_i) that moves quickly with the incident
     # elevation (slope eta^2 mu_i / mu_t leaving the glass): interpolating between incident

@@ -14,7 +14,7 @@ from layersim.ingredients import interface_operator, medium_operator
 from layersim.ingredients.aniso_microfacet import aniso_interface_operator
 from layersim.operator import Grid
 from layersim.scene import Conductor, Dielectric
-from layersim.subtract import _negativity
+from layersim.subtract import negativity as _negativity
 
 G48 = Grid.make("gauss-lobatto", 48)
 G32 = Grid.make("gauss-lobatto", 32)
@@ -56,6 +56,7 @@ def test_removing_a_known_bottom_layer_recovers_the_top_layer(iso_layers):
     assert got.info["subtract"]["side"] == "bottom"
 
 
+@pytest.mark.slow
 def test_anisotropic_subtraction_recovers_the_hidden_layer():
     dust = medium_operator(G32, 16, 0.9, 0.6, 0.2, 1.0)
     brushed = aniso_interface_operator(G32, 16, 3, Conductor(ior=complex(0.2, 3.0), alpha_u=0.2,
@@ -104,6 +105,7 @@ def test_layers_that_hide_what_is_below_are_refused(iso_layers):
         layersim.subtract(glass, glass, side="middle")
 
 
+@pytest.mark.slow
 def test_subtract_on_solved_bsdfs_and_the_cli(tmp_path, capsys):
     from layersim.cli import main
     dust = {"kind": "medium", "albedo": 0.9, "g": 0.5, "tau": 0.2}

@@ -1,7 +1,7 @@
 """The real Fourier basis of the coupled-mode (anisotropic) operators, and its relation to the
 complex exponential basis of the Layer Laboratory paper.
 
-Complex basis (seed 000 eq. (2), (7)-(10))
+Complex basis (Zeltner & Jakob 2018 eq. (2), (7)-(10))
 ------------------------------------------
 Radiance ``Phi(mu, phi) = sum_l Phi_l(mu) exp(i l phi)`` and a BSDF between propagation directions
 

@@ -1,14 +1,16 @@
 """Evaluation, energy fractions and bin energies of solved anisotropic stacks.
 
-:class:`layersim.bsdf.BSDF` delegates here when its operators are
-:class:`~layersim.aniso.operator.AnisoOperator`. Conventions are those of
+:class:`layersim.bsdf.BSDF` evaluates a channel whose operator is an
+:class:`~layersim.aniso.operator.AnisoOperator` with an :class:`AnisoEvaluator` (the registry
+:data:`layersim.bsdf.EVALUATORS`). Conventions are those of
 :mod:`layersim.bsdf` (one place converts public directions to the solver's): ``mu_in = wi.z``,
 ``mu_out = -wo.z``, and the *propagation* azimuths ``phi_i = atan2(-wi.y, -wi.x)``,
 ``phi_o = atan2(wo.y, wo.x)`` in the stack frame, ``phi_d = phi_o - phi_i``,
 ``phi_s = phi_o + phi_i``.
 
 * ``eval``: cubic spline interpolation of the coefficients between ordinates (as for isotropic
-  stacks) and the 2-D series of seed 000 eq. (7) (:mod:`layersim.kernels.fourier_eval2d`).
+  stacks) and the 2-D series of Zeltner & Jakob 2018 eq. (7)
+  (:mod:`layersim.kernels.fourier_eval2d`).
 * ``albedo``: the discretisation's own quadrature. A collimated beam from node ``i`` at
   azimuth ``phi_i`` delivers ``sum_b E[b, i] v_b(phi_i)`` (``v = (1, 2 cos k phi,
   2 sin k phi)``, :meth:`AnisoOperator.albedo_slots`): the directional albedo of an anisotropic
@@ -25,7 +27,8 @@ import math
 
 import numpy as np
 
-from ..bsdf import block_taps, closed_bin
+from ..interpolation import (bin_quadrature, block_taps, closed_bin, hat_weights,
+                             side_energies, spline_weights)
 from ..kernels import fourier_eval2d
 from ..operator import BLOCKS
 from . import basis
@@ -125,19 +128,6 @@ def _prop_azimuths(wi, wo):
     return phi_i, phi_o
 
 
-def eval_channel(bsdf, c: int, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-    """f(wi, wo) (1/sr) for flattened directions (Q, 3) of channel ``c``."""
-    table = bsdf._table(c)
-    mu_in, mu_out = wi[:, 2], -wo[:, 2]
-    phi_i, phi_o = _prop_azimuths(wi, wo)
-    out = np.zeros(mu_in.size)
-    for sel, pair, weight in block_taps(bsdf.operators[c], table, mu_in, mu_out):
-        out[sel] = fourier_eval2d.eval_series2d(table, pair, weight,
-                                                 phi_o[sel] - phi_i[sel],
-                                                 phi_o[sel] + phi_i[sel])
-    return out
-
-
 def _v(md: int, phi) -> np.ndarray:
     """Incident weights ``v_b(phi)`` = (1, 2 cos k phi, 2 sin k phi), shape (S,) + phi.shape."""
     phi = np.asarray(phi, float)
@@ -156,74 +146,103 @@ def node_energy(op, name: str, phi_in: np.ndarray) -> np.ndarray:
     return np.einsum("sh,sq->qh", E, _v(op.md, phi_in))
 
 
-def albedo_channel(bsdf, c: int, wi: np.ndarray):
-    """(R, T) for flattened incident directions (Q, 3)."""
-    from ..bsdf import side_energies
-    op = bsdf.operators[c]
-    phi_in = np.arctan2(-wi[:, 1], -wi[:, 0])
-    return side_energies(wi[:, 2], op.grid.mu, lambda name, q: None if op.blocks[name] is None
-                         else node_energy(op, name, phi_in[q]))
+class AnisoEvaluator:
+    """Evaluation of one coupled operator (one channel of a BSDF); directions are validated,
+    flattened arrays (Q, 3) in the public convention.
 
+    Parameters
+    ----------
+    op : AnisoOperator
+    """
 
-def bins_channel(bsdf, c: int, wi: np.ndarray, mu_edges: np.ndarray,
-                 phi_edges: np.ndarray) -> dict:
-    """Bin energies of channel ``c`` for one incident direction (see
-    :meth:`layersim.bsdf.BSDF.bin_energies`)."""
-    from ..bsdf import _bin_quadrature, hat_weights, spline_weights
-    op = bsdf.operators[c]
-    grid = op.grid
-    h, md, S = op.h, op.md, op.slots
-    fw = grid.flux_weight
-    mu_in = wi[2]
-    phi_in_prop = math.atan2(-wi[1], -wi[0])
-    ii, wi_ = hat_weights(grid.mu, np.array([abs(mu_in)]))
-    ii, wi_ = ii[0], wi_[0]
-    v = _v(md, np.array(phi_in_prop))                      # (S,)
-    pts, gw, bin_of = _bin_quadrature(grid.mu, mu_edges)
-    io, wo_ = spline_weights(grid.mu, pts)
-    full_pts, full_w, _ = _bin_quadrature(grid.mu, np.array([0.0, 1.0]))
-    full_io, full_wo = spline_weights(grid.mu, full_pts)
-    # azimuth integrals of u_a(phi_o) = 1, cos l phi, sin l phi over each phi bin
-    mode = basis.slot_mode(md)[:, None].astype(float)
-    is_sin = basis.slot_is_sin(md)[:, None]
-    e0, e1 = phi_edges[None, :-1], phi_edges[None, 1:]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ci = (np.sin(mode * e1) - np.sin(mode * e0)) / mode
-        si = (np.cos(mode * e0) - np.cos(mode * e1)) / mode
-    phi_int = np.where(is_sin, si, ci)
-    phi_int[0] = (e1 - e0)[0]
-    top_from = ("Rt", "Ttb") if mu_in > 0 else ("Tbt", "Rb")
-    out = {}
-    for side, name in zip(("top", "bottom"), top_from):
-        E = np.zeros((mu_edges.size - 1, phi_edges.size - 1))
-        blk = op.blocks[name]
-        if blk is not None:
-            G = op.coefficients(name)
-            F = np.zeros((S, h))
-            delta = op.delta.get(name)
-            for tap, wt in zip(ii, wi_):
-                if wt == 0.0:
-                    continue
-                cols = np.arange(S) * h + tap
-                sub = G[:, cols].toarray()                         # (S h, S)
+    def __init__(self, op):
+        self.op = op
+        self._table = None
+
+    @property
+    def table(self) -> SeriesTable2D:
+        """The operator's per-pair runs of complex ``f_{d,s}`` (built on first use)."""
+        if self._table is None:
+            self._table = SeriesTable2D(self.op)
+        return self._table
+
+    def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """f(wi, wo) (1/sr), shape (Q,)."""
+        table = self.table
+        mu_in, mu_out = wi[:, 2], -wo[:, 2]
+        phi_i, phi_o = _prop_azimuths(wi, wo)
+        out = np.zeros(mu_in.size)
+        for sel, pair, weight in block_taps(self.op, table, mu_in, mu_out):
+            out[sel] = fourier_eval2d.eval_series2d(table, pair, weight,
+                                                     phi_o[sel] - phi_i[sel],
+                                                     phi_o[sel] + phi_i[sel])
+        return out
+
+    def albedo(self, wi: np.ndarray):
+        """(R, T), each (Q,), for azimuth-dependent incidence (module docstring)."""
+        op = self.op
+        phi_in = np.arctan2(-wi[:, 1], -wi[:, 0])
+        return side_energies(wi[:, 2], op.grid.mu,
+                             lambda name, q: None if op.blocks[name] is None
+                             else node_energy(op, name, phi_in[q]))
+
+    def bins(self, wi: np.ndarray, mu_edges: np.ndarray, phi_edges: np.ndarray) -> dict:
+        """Bin energies for one incident direction ``wi`` (3,) (see
+        :meth:`layersim.bsdf.BSDF.bin_energies`)."""
+        op = self.op
+        grid = op.grid
+        h, md, S = op.h, op.md, op.slots
+        fw = grid.flux_weight
+        mu_in = wi[2]
+        phi_in_prop = math.atan2(-wi[1], -wi[0])
+        ii, wi_ = hat_weights(grid.mu, np.array([abs(mu_in)]))
+        ii, wi_ = ii[0], wi_[0]
+        v = _v(md, np.array(phi_in_prop))                      # (S,)
+        pts, gw, bin_of = bin_quadrature(grid.mu, mu_edges)
+        io, wo_ = spline_weights(grid.mu, pts)
+        full_pts, full_w, _ = bin_quadrature(grid.mu, np.array([0.0, 1.0]))
+        full_io, full_wo = spline_weights(grid.mu, full_pts)
+        # azimuth integrals of u_a(phi_o) = 1, cos l phi, sin l phi over each phi bin
+        mode = basis.slot_mode(md)[:, None].astype(float)
+        is_sin = basis.slot_is_sin(md)[:, None]
+        e0, e1 = phi_edges[None, :-1], phi_edges[None, 1:]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ci = (np.sin(mode * e1) - np.sin(mode * e0)) / mode
+            si = (np.cos(mode * e0) - np.cos(mode * e1)) / mode
+        phi_int = np.where(is_sin, si, ci)
+        phi_int[0] = (e1 - e0)[0]
+        top_from = ("Rt", "Ttb") if mu_in > 0 else ("Tbt", "Rb")
+        out = {}
+        for side, name in zip(("top", "bottom"), top_from):
+            E = np.zeros((mu_edges.size - 1, phi_edges.size - 1))
+            blk = op.blocks[name]
+            if blk is not None:
+                G = op.coefficients(name)
+                F = np.zeros((S, h))
+                delta = op.delta.get(name)
+                for tap, wt in zip(ii, wi_):
+                    if wt == 0.0:
+                        continue
+                    cols = np.arange(S) * h + tap
+                    sub = G[:, cols].toarray()                         # (S h, S)
+                    if delta is not None:
+                        for a in range(S):
+                            sub[a * h + tap, a] -= delta[tap] / (2.0 * np.pi * fw[tap])
+                    F += wt * (sub @ v).reshape(S, h)
+                vals = np.einsum("pk,apk->ap", wo_, F[:, io])           # (S, points)
+                M = np.zeros((S, mu_edges.size - 1))
+                np.add.at(M.T, bin_of, (vals * (gw * pts)[None, :]).T)
+                E = M.T @ phi_int
+                interp = 2.0 * np.pi * np.sum(np.einsum("pk,pk->p", full_wo, F[0][full_io])
+                                              * full_w * full_pts)
+                quad = 2.0 * np.pi * np.sum(F[0] * fw)
+                if interp != 0.0:
+                    E *= quad / interp
                 if delta is not None:
-                    for a in range(S):
-                        sub[a * h + tap, a] -= delta[tap] / (2.0 * np.pi * fw[tap])
-                F += wt * (sub @ v).reshape(S, h)
-            vals = np.einsum("pk,apk->ap", wo_, F[:, io])           # (S, points)
-            M = np.zeros((S, mu_edges.size - 1))
-            np.add.at(M.T, bin_of, (vals * (gw * pts)[None, :]).T)
-            E = M.T @ phi_int
-            interp = 2.0 * np.pi * np.sum(np.einsum("pk,pk->p", full_wo, F[0][full_io])
-                                          * full_w * full_pts)
-            quad = 2.0 * np.pi * np.sum(F[0] * fw)
-            if interp != 0.0:
-                E *= quad / interp
-            if delta is not None:
-                energy = float(np.dot(wi_, delta[ii]))
-                kmu = closed_bin(mu_edges, abs(mu_in))
-                kphi = closed_bin(phi_edges, (math.atan2(wi[1], wi[0]) + np.pi) % (2 * np.pi))
-                if kmu is not None and kphi is not None:
-                    E[kmu, kphi] += energy
-        out[side] = E
-    return out
+                    energy = float(np.dot(wi_, delta[ii]))
+                    kmu = closed_bin(mu_edges, abs(mu_in))
+                    kphi = closed_bin(phi_edges, (math.atan2(wi[1], wi[0]) + np.pi) % (2 * np.pi))
+                    if kmu is not None and kphi is not None:
+                        E[kmu, kphi] += energy
+            out[side] = E
+        return out

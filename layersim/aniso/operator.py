@@ -1,12 +1,12 @@
 """Scattering operators with coupled Fourier modes (anisotropic layers and stacks).
 
-An :class:`AnisoOperator` holds the four blocks ``Rt, Rb, Ttb, Tbt`` of seed 000 sec. 3.2 (same
-meaning and solver convention as :class:`~layersim.operator.IsoOperator`: ``mu > 0`` propagates
-down, blocks indexed ``[outgoing, incident]``) as real sparse matrices of shape ``(S h, S h)`` in
+An :class:`AnisoOperator` holds the four blocks ``Rt, Rb, Ttb, Tbt`` of Zeltner & Jakob 2018
+sec. 3.2 (same meaning and solver convention as :class:`~layersim.operator.IsoOperator`:
+``mu > 0`` propagates down, blocks indexed ``[outgoing, incident]``) as real sparse matrices of shape ``(S h, S h)`` in
 the slot basis of :mod:`layersim.aniso.basis` (``S = 2 md - 1`` real slots of ``h`` ordinates).
 Row/column ``slot * h + node``. The block coupling Fourier mode ``k`` to ``l`` holds
-``B_{l,k} = 2 pi f_{(l+k)/2, (l-k)/2} w |mu|`` (seed 000 eq. (10)); ``ms`` records the largest
-coupling ``|l - k| / 2`` present (0: block diagonal, i.e. isotropic).
+``B_{l,k} = 2 pi f_{(l+k)/2, (l-k)/2} w |mu|`` (Zeltner & Jakob 2018 eq. (10)); ``ms`` records
+the largest coupling ``|l - k| / 2`` present (0: block diagonal, i.e. isotropic).
 
 Unscattered transmission through media (a delta in direction) sits on the diagonal of the
 transmission blocks in every slot, and is recorded per node in ``delta`` exactly as for
@@ -15,12 +15,14 @@ isotropic operators.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import scipy.sparse as sps
 
 from ..errors import FileFormatError, OperatorError
-from ..operator import (BLOCKS, DROP_TOLERANCE, Grid, IsoOperator, header_arrays,
-                        read_blocks, read_delta, write_blocks)
+from ..operator import (BLOCKS, DROP_TOLERANCE, Grid, IsoOperator, Operator, header_arrays,
+                        read_blocks, read_delta, register, write_blocks)
 from ..outofcore import memory
 from ..outofcore.assemble import select_entries
 from ..outofcore.parking import Parked
@@ -32,8 +34,10 @@ from .pairs import slot_pairs
 from .reciprocity import reciprocal_image, with_reciprocal_image
 
 
-class AnisoOperator:
-    """Operator of an anisotropic layer or stack in the real slot basis (module docstring).
+@register
+class AnisoOperator(Operator):
+    """Operator of an anisotropic layer or stack in the real slot basis (module docstring);
+    implements :class:`layersim.operator.Operator`.
 
     Parameters
     ----------
@@ -79,14 +83,6 @@ class AnisoOperator:
         self.consumed = False           # see consume()
 
     # ---- structure ---------------------------------------------------------------------
-
-    @property
-    def opaque(self) -> bool:
-        return self.blocks["Ttb"] is None
-
-    @property
-    def h(self) -> int:
-        return self.grid.h
 
     @property
     def m(self) -> int:
@@ -136,7 +132,8 @@ class AnisoOperator:
 
     def density(self) -> float:
         """Fraction of nonzero entries over the present blocks, counted on the complex
-        operator of seed 000 (modes ``-(md-1)..md-1``, the same count as the real one)."""
+        operator of Zeltner & Jakob 2018 (modes ``-(md-1)..md-1``, the same count as the real
+        one)."""
         present = sum(1 for m in self.blocks.values() if m is not None)
         return self.nnz() / max(1, present * self.size * self.size)
 
@@ -196,6 +193,17 @@ class AnisoOperator:
     @classmethod
     def identity(cls, grid: Grid, md: int, eta: float) -> "AnisoOperator":
         return cls.from_iso(IsoOperator.identity(grid, md, eta), md)
+
+    def as_coupled(self, md: int | None = None) -> "AnisoOperator":
+        return self if md is None else self.with_md(md)
+
+    def map_blocks(self, fn: Callable) -> "AnisoOperator":
+        blocks = {k: None if v is None else fn(v) for k, v in self.blocks.items()}
+        return AnisoOperator(self.grid, self.md, blocks, self.eta_top, self.eta_bottom,
+                             self.delta)
+
+    def reciprocity_error(self) -> float:
+        return reciprocity_error(self)
 
     def with_md(self, md: int) -> "AnisoOperator":
         """The same operator with ``md`` orders (slots beyond are dropped / zero)."""

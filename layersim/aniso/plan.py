@@ -1,15 +1,16 @@
-"""Planning of anisotropic stacks: the coupling width ``ms`` per layer, the pre-pass of the
-Fourier orders of anisotropic interfaces, and memory estimates.
+"""Planning of anisotropic stacks: the coupling width ``ms`` per layer, the truncation of the
+coupled coefficients, and memory estimates (the pre-pass of their Fourier orders is the
+projection's, :func:`layersim.ingredients.aniso_microfacet.series_lengths`).
 
 ``ms`` (coupling half-width, modes ``s in [-ms, ms]`` of the azimuth sum) grows with the
-roughness ratio ``r = max(alpha_u / alpha_v, alpha_v / alpha_u)``. Seed 000 eq. (25) fits
-``ms = ceil(2.58 r - 1.82)`` as the smallest ``ms`` with a relative L2 error below 1 %. Our
-study (``benchmarks/ms_study.py``: relative cosine-weighted L2 norm of the dropped ``f_{d,s}``
-of Beckmann and GGX conductors and Beckmann dielectrics, r = 1.5 ... 6, alpha_min = 0.1 and
-0.2) confirms it where ``max(alpha) <= 0.5`` (errors 0.1-0.7 % at the paper's ms) and finds that
-rougher layers need one more mode (1.0-1.3 % at the paper's ms, below 1 % with one more):
-:func:`ms_for_layer` adds it. Isotropic layers (``r = 1``) need ``ms = 0``, and a stack pays
-for coupling only if one of its layers is anisotropic.
+roughness ratio ``r = max(alpha_u / alpha_v, alpha_v / alpha_u)``. Zeltner & Jakob 2018,
+eq. (25), fit ``ms = ceil(2.58 r - 1.82)`` as the smallest ``ms`` with a relative L2 error
+below 1 %. ``benchmarks/ms_study.py`` (relative cosine-weighted L2 norm of the dropped
+``f_{d,s}`` of Beckmann and GGX conductors and Beckmann dielectrics, r = 1.5 ... 6,
+alpha_min = 0.1 and 0.2) confirms the fit where ``max(alpha) <= 0.5`` and shows that rougher
+layers need one more mode to stay below 1 %: :func:`ms_for_layer` adds it. Isotropic layers
+(``r = 1``) need ``ms = 0``, and a stack pays for coupling only if one of its layers is
+anisotropic.
 """
 
 from __future__ import annotations
@@ -18,26 +19,26 @@ import math
 
 import numpy as np
 
-#: ms = ceil(MS_SLOPE * r + MS_OFFSET) for r > 1 (seed 000 eq. (25); see module docstring),
-#: plus one mode when the roughest axis exceeds MS_ROUGH.
+#: ms = ceil(MS_SLOPE * r + MS_OFFSET) for r > 1 (Zeltner & Jakob 2018, eq. (25); see the
+#: module docstring), plus one mode when the roughest axis exceeds MS_ROUGH.
 MS_SLOPE, MS_OFFSET = 2.58, -1.82
 MS_ROUGH = 0.5
 #: Target of the ms rule: relative (cosine-weighted) L2 error of the dropped coefficients.
 MS_TARGET = 0.01
 #: Relative truncation of each ordinate pair's coefficients ``f_{d,s}`` on the coupled path
 #: (projection and the pre-pass that sets ``md``); the isotropic path keeps
-#: ``layersim.plan.SERIES_RELERR`` = 1e-7. The ``ms`` rule already accepts a relative L2
-#: error of up to :data:`MS_TARGET` (1 %); dropping coefficients below 1e-5 of their pair's
-#: largest removes ~30 % of the nonzeros of the layers of Table 2 row 7 (the work of the
-#: adding equations scales with them) and changes its BSDF by 1.4e-6 median, 6e-5 at the 99th
-#: percentile (relative, within 80 degrees), its albedo by 2e-8 (README, Table 2).
+#: ``layersim.ingredients.microfacet.RELERR`` = 1e-7. The ``ms`` rule already accepts a
+#: relative L2 error of up to :data:`MS_TARGET` (1 %); dropping coefficients below 1e-5 of
+#: their pair's largest removes a large share of the nonzeros of coupled layers (the work of
+#: the adding equations scales with them) for changes of the BSDF and the albedo far below
+#: that error (docs/performance.md, Table 2).
 COUPLED_RELERR = 1e-5
 #: Truncation per ordinate pair of the operators of a stack (:func:`layersim.aniso.adding.add`:
 #: the result, and the intermediate products). Tighter than the layers': subtraction inverts
 #: the adding equations, which amplifies errors of the stack (through the inverse transmission
 #: of the known layer) but not those that the layers share with the stack. Recovering a
-#: conductor (0.3, 0.2) from under a dust layer (tests/test_subtract.py) gives energy errors of
-#: 9e-7 at (1e-7, 1e-6), 1.3e-5 with intermediates at 1e-5, 1e-3 with the result at 1e-5.
+#: conductor (0.3, 0.2) from under a dust layer (tests/test_subtract.py) keeps its energy error
+#: near 1e-6 with these values; looser ones raise it by one to three orders of magnitude.
 STACK_RELERR, STACK_RELERR_INTERMEDIATE = 1e-7, 1e-6
 
 
@@ -65,28 +66,17 @@ def ms_for_layer(layer) -> int:
     return ms
 
 
-def interface_prepass(grid, layer, eta_above: float, ms: int, relerr: float = COUPLED_RELERR):
-    """Series lengths (in ``phi_d``) of the significant ordinate pairs of an anisotropic
-    interface (maximum over ``phi_s``) and whether both elevations are within the plan's
-    ``THETA_FULL``: the same quantities as the isotropic pre-pass, from one cheap kernel pass
-    per block (:func:`layersim.ingredients.aniso_microfacet.coarse_lengths`)."""
-    from ..ingredients.aniso_microfacet import coarse_lengths
-    return coarse_lengths(grid, layer, eta_above, ms, relerr)
-
-
-#: Measured fraction of the (d, s) coefficients of a pair's rectangle that survive pruning
-#: (Table 2 of seed 000: 0.41 for gold (0.05, 0.15), 0.55 for glass (0.3, 0.1)).
+#: Fraction of the (d, s) coefficients of a pair's rectangle that survive pruning (Zeltner &
+#: Jakob 2018, Table 2: 0.41 for gold (0.05, 0.15), 0.55 for glass (0.3, 0.1)).
 FILL = 0.5
 #: Peak bytes of a solve per (estimated) nonzero of its lowest anisotropic operator (its
 #: reflection is multiplied with the layers above in the adding equations, and the solution
 #: of the adding equations grows with it) and per nonzero of the others (held as 12-byte CSR
-#: entries while the stack is added, plus the products with them). Fitted on the peak resident
-#: memory above the baseline of an imported, warmed-up process (``benchmarks/table2.py``,
-#: ``benchmarks/memory_phases.py``) of Table 2 of seed 000 after the adding released its
-#: operands as it went (``add(consume=...)``): measured 43-49 bytes per estimated nonzero of
-#: the lowest operator alone (rows 4, 5), 7-12 per nonzero of the coating on top of it with 50
-#: for the base (rows 6, 7); the constants keep the estimate an upper bound with margin
-#: (1.2-1.6x, benchmarks/table2.txt).
+#: entries while the stack is added, plus the products with them). Fitted to the peak resident
+#: memory above the baseline of an imported, warmed-up process on the stacks of Zeltner &
+#: Jakob 2018, Table 2 (``benchmarks/table2.py``, ``benchmarks/memory_phases.py``; the adding
+#: releases its operands as it goes), with margin, so that the estimate is an upper bound
+#: (``benchmarks/table2.txt`` prints it beside the measured peak).
 BYTES_LOWEST, BYTES_OTHER = 60, 18
 
 

@@ -1,4 +1,5 @@
-"""Fourier-series tools for the projection of anisotropic microfacet BSDFs (seed 000 sec. 4.1).
+"""Fourier-series tools for the projection of anisotropic microfacet BSDFs (Zeltner & Jakob
+2018, sec. 4.1).
 
 All series are batched over rows. A real ``2 pi``-periodic function is represented by its
 complex coefficients for non-negative frequencies only, ``g(t) = sum_n G_n exp(i n t)`` with
@@ -7,11 +8,12 @@ peak factors are those of :mod:`layersim.fourier` (exact series of ``peak(q)`` f
 ``q = c - d cos(t)``), shifted to the peak's azimuth.
 
 * :func:`peak_shift_params` -- ``q(phi_d)`` at fixed ``phi_s`` is ``a + b cos(phi_d) +
-  c sin(phi_d)`` (the phasor form of seed 000 eq. (24)); from its values at ``0, pi/2, pi`` we
-  get the peak azimuth ``theta0`` and the endpoints ``q0 = min q``, ``qpi = max q``, so that
+  c sin(phi_d)`` (the phasor form of Zeltner & Jakob 2018, eq. (24)); from its values at
+  ``0, pi/2, pi`` we get the peak azimuth ``theta0`` and the endpoints ``q0 = min q``,
+  ``qpi = max q``, so that
   ``q = (q0 + qpi)/2 - (qpi - q0)/2 cos(phi_d - theta0)``.
 * :func:`peak_series_shifted` -- the exact series of the peak factor about a chosen centre
-  (phase-shifted Jacobi-Anger / Bessel series for Beckmann, seed 000 eq. (23); geometric series
+  (phase-shifted Jacobi-Anger / Bessel series for Beckmann, their eq. (23); geometric series
   for GGX), and :func:`peak_samples`, the same function sampled (its FFT is that series).
 * :func:`fit_restricted` -- weighted least-squares fit of the smooth factor on the support of
   the peak (Chebyshev basis, batched QR, several right-hand sides per factorisation).
@@ -67,12 +69,13 @@ def peak_samples(q0, qpi, shift, dist: str, t: np.ndarray, trig=None) -> np.ndar
     ``c = (q0 + qpi)/2``, ``d = (qpi - q0)/2``, written as in
     :func:`layersim.fourier.peak_series`: ``exp(-q0) exp(-d (1 - cos))`` for Beckmann (its
     FFT gives the Jacobi-Anger/Bessel coefficients ``exp(-q0) I_k(d) e^-d``, phase-shifted by
-    ``exp(-i k shift)``: seed 000 eq. (23)-(24)), ``1 / (1 + q)^2`` for GGX (geometric series).
+    ``exp(-i k shift)``: Zeltner & Jakob 2018, eq. (23)-(24)), ``1 / (1 + q)^2`` for GGX
+    (geometric series).
 
     ``trig = (cos t, sin t)``, precomputed by a caller that samples the same azimuths for
     many shifts (every ``phi_s`` sample of a batch), gives ``cos(t - shift)`` by the angle
-    difference formula: two products instead of a cosine per sample (the cosines were 40 % of
-    the projection's peak sampling on Table 2 row 6 of seed 000); its rounding error, a few
+    difference formula: two products instead of a cosine per sample (cosines dominate the
+    cost of sampling the peak otherwise); its rounding error, a few
     ulp of 1, changes the exponent ``d (1 - cos)`` by ``~d 1e-16``, far below the projection's
     tolerances for any ``d`` a double-precision peak can have."""
     q0 = np.asarray(q0, float)[:, None]
@@ -118,13 +121,13 @@ def fit_restricted(x: np.ndarray, weights: np.ndarray, values: np.ndarray,
 
     The support ``[-w, w]`` is mapped to ``x in [-1, 1]`` and the fit uses Chebyshev
     polynomials ``T_n(x)``, ``n < L``: unlike cosines on a small interval (the basis of
-    seed 000 sec. 4.1.2, whose conditioning grows like ``(pi / w)^L``), they stay well
-    conditioned however narrow the support. The fit is only ever evaluated inside the support
-    (the product with the peak factor is formed in sample space, where the peak is below the
-    support tolerance outside), so the soft zero constraints of the paper, which keep a
-    coefficient-space product from picking up the extrapolated fit, are not needed. Rows are
-    weighted by the peak factor (``envelope``, floored at ``floor``) so that the fit is
-    accurate where the product matters; solved by batched QR (not SVD), several right-hand
+    Zeltner & Jakob 2018, sec. 4.1.2, whose conditioning grows like ``(pi / w)^L``), they
+    stay well conditioned however narrow the support. The fit is only ever evaluated inside
+    the support (the product with the peak factor is formed in sample space, where the peak is
+    below the support tolerance outside), so the soft zero constraints of the paper, which
+    keep a coefficient-space product from picking up the extrapolated fit, are not needed.
+    Rows are weighted by the peak factor (``envelope``, floored at ``floor``) so that the fit
+    is accurate where the product matters; solved by batched QR (not SVD), several right-hand
     sides per factorisation.
 
     Parameters

@@ -7,6 +7,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from ..errors import InfeasibleError
+from . import report, runner, stability as stab
+
 #: Scenes of the quick run (isotropic, solved in seconds).
 QUICK_SCENES = ("vandehulst_slab", "coated_gold", "dusty_gold")
 
@@ -36,9 +39,6 @@ def run(out, quick: bool = False, stability: bool = False, backends=("auto",),
     scenes : sequence of str, optional
         Scene names (file stems) to run (default: all, or :data:`QUICK_SCENES` when quick).
     """
-    from . import report, runner, stability as stab
-    from ..errors import InfeasibleError
-
     scene_dir = Path(scene_dir) if scene_dir else default_scene_dir()
     files = sorted(scene_dir.glob("*.toml"))
     if not files:

@@ -12,20 +12,19 @@ import time
 from pathlib import Path
 
 import numpy as np
+import scipy
+
+from ..kernels.runtime import cuda_available
 
 
 def machine_info(command: str) -> dict:
-    import numpy
-    import scipy
-
     info = {"cpu": _cpu_name(), "cores": os.cpu_count(), "platform": platform.platform(),
-            "python": platform.python_version(), "numpy": numpy.__version__,
+            "python": platform.python_version(), "numpy": np.__version__,
             "scipy": scipy.__version__, "command": command,
             "date": time.strftime("%Y-%m-%d %H:%M:%S")}
-    try:
+    try:            # warp and pyopencl are imported here only to describe the machine
         import warp
         info["warp"] = warp.config.version
-        from ..kernels.runtime import cuda_available
         if cuda_available():
             info["gpu"] = [str(d) for d in warp.get_cuda_devices()]
     except Exception:  # pragma: no cover - warp is a dependency; keep the report robust
@@ -88,6 +87,7 @@ def _json_default(x):
 # ---- plots ---------------------------------------------------------------------------------
 
 def _plt():
+    """pyplot on the Agg backend, imported when a plot is drawn (matplotlib is slow to import)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

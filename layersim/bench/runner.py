@@ -27,7 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LayersimError
+from ..plan import make_plan
 from ..scene import Scene
+from ..solver import solve
 
 
 @dataclass
@@ -63,7 +65,7 @@ def direction(theta_deg: float, phi_deg: float = 0.0) -> np.ndarray:
 
 def montecarlo_module():
     """``layersim.montecarlo`` if installed, else None."""
-    try:
+    try:            # optional: the Monte Carlo reference is a separate install
         from .. import montecarlo
     except ImportError:
         return None
@@ -129,9 +131,6 @@ def _within(bins, ref, sigma, particles, k=3.0) -> float:
 
 def run_scene(path: Path, s: Settings, log=print) -> dict:
     """Benchmark one scene file; returns the ``scenes[]`` entry of results.json."""
-    from ..plan import make_plan
-    from ..solver import solve
-
     scene = Scene.from_toml(path)
     out = {"name": scene.name, "file": str(path), "angles": list(s.angles), "solver": [],
            "montecarlo": []}

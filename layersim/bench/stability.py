@@ -29,8 +29,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import LayersimError
-from ..scene import Scene
+from ..adding import add
+from ..errors import InfeasibleError, LayersimError
+from ..ingredients import medium_operator
+from ..ingredients.numeric import numeric_interface_operator
+from ..operator import Grid
+from ..scene import Conductor, Dielectric, Scene
+from ..solver import solve as solve_scene
+from ..subtract import negativity, relative_error, subtract, with_noise
 
 GOLD = [0.143552, 3.98397]
 
@@ -73,7 +79,7 @@ class Case:
 
 
 def cases() -> list:
-    """The named cases of issue 5 (and any added with :func:`register`)."""
+    """The named stability cases (and any added with :func:`register`)."""
     diel = lambda eta, a: {"kind": "dielectric", "ior": eta, "roughness": a}
     cond = lambda ior, a: {"kind": "conductor", "ior": ior, "roughness": a}
     med = lambda albedo, tau, g=0.0: {"kind": "medium", "albedo": albedo, "tau": tau, "g": g}
@@ -98,8 +104,8 @@ def cases() -> list:
         Case("grazing_89", [diel(1.5, 0.1), cond(GOLD, 0.1)], "coated gold lit at 89 deg",
              angles=(89.0,)),
         # 89.9 deg lies beyond the first ordinate of the default plan (n = 196: 89.5 deg), where
-        # incident directions take that ordinate's values (0.75 % low here; README limits):
-        # the case checks a plan that resolves it
+        # incident directions take that ordinate's values (see the README's limits): the case
+        # checks a plan that resolves it
         Case("grazing_89.9", [diel(1.5, 0.1), cond(GOLD, 0.1)],
              "coated gold lit at 89.9 deg, n = 800 (first ordinate at 89.8 deg)",
              angles=(89.9,), discretization={"n": 800}, small={"n": 196}),
@@ -122,10 +128,10 @@ _registered: list = []
 
 @dataclass
 class SubtractCase:
-    """A subtraction case (seed 000 sec. 3.4): build ``add(top, bottom)``, optionally perturb
-    it with multiplicative noise, and recover ``bottom`` with automatic regularisation. Passes
-    if the result is finite, conserves energy, has no negative lobes deeper than the noise, and
-    is within ``tolerance`` of the truth (:func:`layersim.subtract.relative_error`); an
+    """A subtraction case (Zeltner & Jakob 2018 sec. 3.4): build ``add(top, bottom)``, optionally
+    perturb it with multiplicative noise, and recover ``bottom`` with automatic regularisation.
+    Passes if the result is finite, conserves energy, has no negative lobes deeper than the noise,
+    and is within ``tolerance`` of the truth (:func:`layersim.subtract.relative_error`); an
     ill-posed removal must be refused."""
 
     name: str
@@ -135,14 +141,6 @@ class SubtractCase:
     tolerance: float = 0.15
 
     def run(self) -> dict:
-        from ..adding import add
-        from ..errors import InfeasibleError
-        from ..ingredients import medium_operator
-        from ..ingredients.numeric import numeric_interface_operator
-        from ..operator import Grid
-        from ..scene import Conductor, Dielectric
-        from ..subtract import _negativity, relative_error, subtract, with_noise
-
         grid, m = Grid.make("gauss-lobatto", 48), 24
         if self.blurring:
             top = medium_operator(grid, m, 0.9, 0.3, 10.0, 1.0)
@@ -167,7 +165,7 @@ class SubtractCase:
         alb = got.albedo_nodes()
         err = relative_error(got, bottom)
         total = max(float(np.max(alb["Rt"] + alb["Ttb"])), float(np.max(alb["Rb"] + alb["Tbt"])))
-        neg = _negativity(got)
+        neg = negativity(got)
         info = got.info.get("subtract", {}) if hasattr(got, "info") else {}
         problems = []
         if not all(np.all(np.isfinite(v)) for v in alb.values()):
@@ -236,7 +234,7 @@ def run_case(case: Case, mc=None, solve=None, small: bool = False) -> dict:
         result["seconds"] = time.perf_counter() - t0
         return result
     if solve is None:
-        from ..solver import solve
+        solve = solve_scene
     t0 = time.perf_counter()
     try:
         scene = case.scene(small)

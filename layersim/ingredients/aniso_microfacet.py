@@ -1,5 +1,5 @@
 """Anisotropic rough dielectric and conductor interfaces: semi-analytic projection onto the
-coupled-mode basis (seed 000 sec. 4.1, eq. (17)-(24)).
+coupled-mode basis (Zeltner & Jakob 2018, sec. 4.1, eq. (17)-(24)).
 
 For every ordinate pair ``(mu_i, mu_o)`` of a block we need ``f_{d,s}``, the 2-D Fourier
 coefficients of the BSDF in ``phi_d = phi_o - phi_i`` and ``phi_s = phi_o + phi_i`` (interface
@@ -7,10 +7,11 @@ frame). The BSDF is split by the kernels into ``f = smooth * peak(q)``
 (:func:`layersim.kernels.projection.microfacet_split_ds`), and:
 
 1. ``phi_s`` is sampled at ``Q_s`` equispaced azimuths (trapezoidal rule = FFT, spectrally
-   accurate for the smooth periodic dependence on ``phi_s``; seed 000 uses Filon quadrature).
+   accurate for the smooth periodic dependence on ``phi_s``; Zeltner & Jakob use Filon
+   quadrature).
    Aligned interfaces are mirror symmetric, ``f(phi_d, -phi_s) = f(-phi_d, phi_s)``, so only
    ``phi_s in [0, pi]`` is sampled and the coefficients are real.
-2. At fixed ``phi_s``, ``q`` is ``a + b cos(phi_d) + c sin(phi_d)`` (seed 000 eq. (22), (24));
+2. At fixed ``phi_s``, ``q`` is ``a + b cos(phi_d) + c sin(phi_d)`` (their eq. (22), (24));
    the constants come from the kernel's ``q`` at ``phi_d = 0, pi/2, pi`` (no formula is repeated
    on the host). The peak factor then has an exact series about its azimuth ``theta0``
    (phase-shifted Jacobi-Anger/Bessel for Beckmann, eq. (23); geometric series for GGX), with
@@ -18,7 +19,7 @@ frame). The BSDF is split by the kernels into ``f = smooth * peak(q)``
 3. The smooth factor (Fresnel, shadowing-masking, Jacobian) is fitted per pair with a short
    trigonometric series on the union of the peak's supports over ``phi_s``, weighted by the
    envelope of the peak factor, with soft zero constraints outside, by QR (one factorisation per
-   pair, all ``phi_s`` samples as right-hand sides; seed 000 sec. 4.1.2). Pairs whose fit
+   pair, all ``phi_s`` samples as right-hand sides; their sec. 4.1.2). Pairs whose fit
    residual is large (a Fresnel kink at the critical angle) are refitted with more terms.
 4. The two series are multiplied in coefficient space, shifted to ``phi_d``, and transformed
    over the ``phi_s`` samples. Aliasing in ``phi_s`` is controlled a posteriori: pairs whose
@@ -47,15 +48,16 @@ from .. import fourier
 from ..aniso import basis, series
 from ..aniso.operator import AnisoOperator, rotate_block, slot_column_scale
 from ..aniso.reciprocity import reciprocal_image, with_reciprocal_image
+from ..config import settings
 from ..kernels import projection as kproj
 from ..operator import Grid
 from ..outofcore.assemble import from_parts
 from ..outofcore.workspace import Workspace
 from ..scene import Conductor
-from ..threads import parallel_map, workers
+from ..threads import parallel_map
 from .microfacet import L_FIT as ISO_L_FIT
 from .microfacet import (ENERGY_DROP, RELERR, SUPPORT_TOLERANCE, TAPER_THRESHOLD,
-                         ProjectionStats, _block_pairs)
+                         ProjectionStats, block_pairs)
 
 #: Smallest number of phi_s samples (a power of two; mirror symmetry samples half + 1 of them).
 QS_MIN = 16
@@ -76,22 +78,19 @@ L_REFIT, Q_REFIT = 48, 128
 FIT_RESIDUAL = 1e-5
 N_KINK = 512
 #: Orders kept for the tail of a kinked smooth factor (beyond the peak's own length): the
-#: truncated series of a square-root kink rings by ~K^-1/2 of the kink's size next to it
-#: (measured on internal reflection at alpha 0.3: 3 % at 96 orders, 1.2 % at 200, 0.16 % at
-#: 1000), so the kink limits the accuracy there at any practical md; more orders cost storage
-#: and time in every later operation (kinked pairs are 20-45 % of a rough dielectric's).
+#: truncated series of a square-root kink rings by ~K^-1/2 of the kink's size next to it, so
+#: the kink limits the accuracy there at any practical md, while more orders cost storage and
+#: time in every later operation (kinked pairs are a large share of a rough dielectric's).
 K_KINK = 160
 #: Coarse samples used to bound the BSDF of a pair before projecting it.
 N_COARSE_D = 17
 #: Pairs x coarse samples evaluated at once by _coarse: the kernel's inputs and outputs take
-#: about six arrays of 8 bytes per element (~48 MiB); all pairs of a block at once took
-#: 355 MiB above the baseline in the plan of Table 2 row 6 of seed 000 at n = 390 (97 MiB
-#: in chunks).
+#: about six arrays of 8 bytes per element (~48 MiB a chunk), where all pairs of a large block
+#: at once would take several times that.
 COARSE_ELEMENTS = 1 << 20
 #: Bound on (pairs x (phi_s samples + fit terms) x FFT length) per batch, one batch per
-#: thread. The temporaries take several times 8 bytes per element: projecting a triangle of
-#: the coating's Rb on Table 2 row 6 of seed 000 peaked 370 MiB above the baseline (116 MiB
-#: with 1M elements, but the projection took 33 % longer; 2M: 21 % longer).
+#: thread. The temporaries take several times 8 bytes per element; smaller batches hold less
+#: memory but make the projection slower (more, shorter FFTs and fits).
 BATCH_ELEMENTS = 4_000_000
 
 
@@ -105,7 +104,7 @@ class AnisoProjectionStats(ProjectionStats):
     """Largest relative L2 norm (over all d, s of a pair) of the coefficients with |s| > ms."""
     s_dropped_energy: float = 0.0
     """Relative cosine-weighted L2 norm of the dropped coefficients over all pairs: the error
-    of truncating at ms, in the sense of seed 000 eq. (25)."""
+    of truncating at ms, in the sense of Zeltner & Jakob 2018, eq. (25)."""
     _num: float = 0.0
     _den: float = 0.0
 
@@ -157,26 +156,47 @@ def _coarse_chunk(mu_i, mu_o, eta, au, av, dist, qs):
     return theta0, q0, qpi, bound
 
 
-def coarse_lengths(grid: Grid, layer, eta_above: float, ms: int, relerr: float):
-    """Plan pre-pass: series length in ``phi_d`` (maximum over ``phi_s``, plus the smooth
-    factor's terms) of the significant pairs of every block, and whether both elevations lie
-    within ``layersim.plan.THETA_FULL`` of the normal."""
-    from ..plan import THETA_FULL
+def series_lengths(grid: Grid, layer, eta_above: float, ms: int, relerr: float):
+    """Pre-pass of the projection for the plan: how many orders in ``phi_d`` each significant
+    pair of an anisotropic interface needs (the maximum over coarse ``phi_s`` samples, plus the
+    smooth factor's terms), from one cheap kernel pass per block (:func:`_coarse`).
+
+    Parameters
+    ----------
+    grid : Grid
+    layer : Dielectric or Conductor
+        Validated rough interface (``alpha_u``, ``alpha_v``; its rotation does not change the
+        lengths).
+    eta_above : float
+        Absolute index of the medium above the interface.
+    ms : int
+        Coupling half-width the layer is projected with (sets the ``phi_s`` sampling).
+    relerr : float
+        Relative truncation of each pair's coefficients
+        (:data:`layersim.aniso.plan.COUPLED_RELERR` on the coupled path).
+
+    Returns
+    -------
+    lengths : int ndarray (P,)
+        Orders each significant pair of the interface's blocks needs.
+    mu_min : ndarray (P,)
+        ``min(|mu_i|, |mu_o|)`` of each of those pairs, as
+        :func:`layersim.ingredients.microfacet.series_lengths` returns it.
+    """
     eta = complex(layer.ior) / eta_above
     names = ("Rt",) if isinstance(layer, Conductor) else ("Rt", "Rb", "Ttb", "Tbt")
     fw = grid.flux_weight
-    mu_full = math.cos(math.radians(THETA_FULL))
-    lengths, full = [], []
+    lengths, mu_min = [], []
     qs = max(8, _qs_for(ms) // 2)
     for name in names:
-        mu_i, mu_o, o, i = _block_pairs(grid, name, triangle=False)
+        mu_i, mu_o, o, i = block_pairs(grid, name, triangle=False)
         _, q0, qpi, bound = _coarse(mu_i, mu_o, eta, layer.alpha_u, layer.alpha_v,
                                     layer.distribution, qs)
         sig = bound * 2.0 * np.pi * np.maximum(fw[i], fw[o]) > ENERGY_DROP
         n = fourier.peak_length(q0[sig].ravel(), qpi[sig].ravel(), layer.distribution, relerr)
         lengths.append(n.reshape(-1, q0.shape[1]).max(axis=1) + L_FIT)
-        full.append(np.minimum(np.abs(mu_i[sig]), np.abs(mu_o[sig])) >= mu_full)
-    return np.concatenate(lengths), np.concatenate(full)
+        mu_min.append(np.minimum(np.abs(mu_i[sig]), np.abs(mu_o[sig])))
+    return np.concatenate(lengths), np.concatenate(mu_min)
 
 
 def _supports(theta0, q0, qpi, dist):
@@ -393,15 +413,15 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
     list or Spool
         Chunks ``(o, i, F)``: node indices (P,) and ``F[p, d, ms + s] = f_{d,s}`` (P, md,
         2 ms + 1), or ``convert(o, i, F)`` of each chunk, applied as soon as the chunk is
-        projected (the dense chunks of a block took several times the memory of its sparse
+        projected (the dense chunks of a block take several times the memory of its sparse
         entries), appended to ``out`` (a new list by default; a
-        :class:`~layersim.outofcore.spool.Spool` keeps them in a file, out of the way of the
-        projection's temporaries). Batches are projected one per worker thread
-        (:func:`layersim.threads.workers`) at a time, so that only those batches' dense
+        :class:`~layersim.outofcore.spool.Spool` keeps them in a file, where the entries of a
+        large block do not compete with the projection's temporaries). Batches are projected
+        ``layersim.config.settings().threads`` at a time, so that only those batches' dense
         temporaries are alive at once.
     """
-    THREADS = workers()
-    mu_i, mu_o, o, i = _block_pairs(grid, name, triangle)
+    threads = settings().threads
+    mu_i, mu_o, o, i = block_pairs(grid, name, triangle)
     stats.pairs += mu_i.size
     fw = grid.flux_weight
     qs = _qs_for(ms)
@@ -441,9 +461,11 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
             return _project_pairs(mu_i[todo[sel]], mu_o[todo[sel]], eta, au, av, dist, ms, md,
                                   qs, geo, relerr)
 
+        # groups of `threads` batches on the pool (numpy and Warp release the GIL)
         for sel, (F, alias, dropped, tot, plen, nrefit) in (
-                (sel, res) for g in range(0, len(batches), THREADS)
-                for sel, res in zip(batches[g:g + THREADS], _map(work, batches[g:g + THREADS]))):
+                (sel, res) for g in range(0, len(batches), threads)
+                for sel, res in zip(batches[g:g + threads],
+                                    parallel_map(work, batches[g:g + threads]))):
             stats.refit += nrefit
             ok = ~alias if qs < QS_MAX else np.ones(sel.size, bool)
             if (~ok).any():
@@ -466,11 +488,6 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
     if stats._den:
         stats.s_dropped_energy = math.sqrt(stats._num / stats._den)
     return chunks
-
-
-def _map(fn, items):
-    """:func:`layersim.threads.parallel_map` (batches release the GIL in numpy and Warp)."""
-    return parallel_map(fn, items)
 
 
 def _entries(grid: Grid, md: int, ms: int, o, i, F):

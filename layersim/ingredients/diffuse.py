@@ -1,4 +1,4 @@
-"""Opaque Lambertian base (seed 004 sec. 4.1)."""
+"""Opaque Lambertian base (Jakob's layerlab tutorial sec. 4.1)."""
 
 from __future__ import annotations
 

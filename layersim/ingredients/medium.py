@@ -8,7 +8,8 @@ Discrete-ordinates equations of Fourier order ``l`` (solver convention: ``I+`` p
 
 with ``M = diag(mu)``, ``W = diag(w)``, ``c_0 = 2 pi``, ``c_l = pi`` and ``P_same/opp`` the
 azimuthal Fourier components of the phase function between ordinates in the same/opposite
-hemispheres. The operator of a slab is built as in seed 004 sec. 4.4 (van de Hulst 1963):
+hemispheres. The operator of a slab is built as in Jakob's layerlab tutorial sec. 4.4 (van de
+Hulst 1963):
 
 1. an initial thin slab of thickness ``tau0 = tau / 2^k <= mu_min / 2`` whose operator is exact
    (to rounding) for the discrete equations: the transfer matrix ``expm(tau0 K)`` converted to

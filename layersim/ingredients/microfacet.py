@@ -4,9 +4,9 @@ For every ordinate pair (mu_i, mu_o) of every block, the BSDF is split by the ke
 ``f(phi) = S(phi) * peak(q(phi))`` (see :mod:`layersim.kernels.physics`); the cosine series of
 the peak factor is exact (:func:`layersim.fourier.peak_series`), the smooth factor ``S`` is fitted
 with a short cosine series on the support of the peak (:func:`layersim.fourier.fit_restricted`),
-and the two are multiplied in coefficient space (seed 004 sec. 5.2, seed 000 sec. 4.1; Jakob et
-al. 2014). Pairs are processed in batches grouped by series length, so the work is
-proportional to the number of coefficients kept.
+and the two are multiplied in coefficient space (Jakob's layerlab tutorial sec. 5.2; Zeltner &
+Jakob 2018 sec. 4.1; Jakob et al. 2014). Pairs are processed in batches grouped by series
+length, so the work is proportional to the number of coefficients kept.
 
 Accuracy (``tests/test_projection.py``, against composite Gauss-Legendre quadrature graded around
 the peak, including every grazing pair of a 64-ordinate grid): away from total internal
@@ -22,7 +22,6 @@ wide.
 
 from __future__ import annotations
 
-import os
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -30,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import fourier
+from ..config import settings
 from ..kernels import projection as kproj
 from ..kernels.runtime import device_for
 from ..operator import Grid, IsoOperator
@@ -73,9 +73,8 @@ N_COARSE = 17
 #: Pairs per batch (bounds the temporary memory of the fit: ~Q*L*8 bytes per pair; small
 #: enough that a block gives the thread pool several batches).
 BATCH = 1024
-#: Threads projecting the blocks of an interface concurrently (``$LAYERSIM_BLOCK_WORKERS``;
-#: default: the number of CPU cores). Batches within a block run on :mod:`layersim.threads`.
-BLOCK_WORKERS = int(os.environ.get("LAYERSIM_BLOCK_WORKERS", "0")) or (os.cpu_count() or 1)
+#: Azimuths (on [0, pi]) at which the plan's pre-pass (:func:`series_lengths`) samples each pair.
+N_PREPASS = 9
 
 
 @dataclass
@@ -112,7 +111,7 @@ class ProjectionStats:
         self.series_seconds += other.series_seconds
 
 
-def _block_pairs(grid: Grid, name: str, triangle: bool):
+def block_pairs(grid: Grid, name: str, triangle: bool):
     """Signed (mu_i, mu_o) of the pairs of a block and their node indices (o, i); with
     ``triangle`` only pairs with ``o <= i`` (reflection blocks are symmetric)."""
     h = grid.h
@@ -129,7 +128,7 @@ def _block_pairs(grid: Grid, name: str, triangle: bool):
 
 def significant_pairs(grid: Grid, name: str, triangle: bool, eta: complex, alpha: float,
                       dist: str, device=None):
-    """The pairs of a block (see :func:`_block_pairs`) and which of them can carry more than
+    """The pairs of a block (see :func:`block_pairs`) and which of them can carry more than
     :data:`ENERGY_DROP` of a beam's energy, from a coarse bound on the device.
 
     Returns
@@ -140,7 +139,7 @@ def significant_pairs(grid: Grid, name: str, triangle: bool, eta: complex, alpha
     keep : int ndarray
         Indices of the significant pairs.
     """
-    mu_i, mu_o, o, i = _block_pairs(grid, name, triangle)
+    mu_i, mu_o, o, i = block_pairs(grid, name, triangle)
     fw = grid.flux_weight
     smax, q0, qpi = kproj.coarse_bound(mu_i, mu_o, eta, alpha, alpha, dist, N_COARSE,
                                        device=device)
@@ -148,6 +147,50 @@ def significant_pairs(grid: Grid, name: str, triangle: bool, eta: complex, alpha
     bound = 10.0 * fourier.peak_values(q0, dist) * smax
     energy = bound * 2.0 * np.pi * np.maximum(fw[i], fw[o])
     return mu_i, mu_o, o, i, q0, qpi, np.flatnonzero(energy > ENERGY_DROP)
+
+
+def series_lengths(grid: Grid, layer, eta_above: float, relerr: float = RELERR):
+    """Pre-pass of the projection for the plan: how many cosine orders each significant pair
+    of an isotropic interface needs, from one cheap kernel launch per block.
+
+    The peak factor's series length is known analytically (:func:`fourier.peak_length`); the
+    smooth factor adds up to :data:`L_FIT` orders. Pairs whose bound (from
+    :data:`N_PREPASS` azimuths) carries less than :data:`ENERGY_DROP` of a beam's energy are
+    left out, as the projection leaves them out.
+
+    Parameters
+    ----------
+    grid : Grid
+    layer : Dielectric or Conductor
+        Validated isotropic rough interface.
+    eta_above : float
+        Absolute index of the medium above the interface.
+    relerr : float
+        Relative truncation of the series (the projection's :data:`RELERR`).
+
+    Returns
+    -------
+    lengths : int ndarray (P,)
+        Orders each significant pair of the interface's blocks needs.
+    mu_min : ndarray (P,)
+        ``min(|mu_i|, |mu_o|)`` of each of those pairs (the elevation closer to the horizon,
+        which sets how wide the lobe is in azimuth).
+    """
+    eta = complex(layer.ior) / eta_above
+    names = ("Rt",) if isinstance(layer, Conductor) else ("Rt", "Rb", "Ttb", "Tbt")
+    dist = layer.distribution
+    fw = grid.flux_weight
+    lengths, mu_min = [], []
+    for name in names:
+        mu_i, mu_o, o, i = block_pairs(grid, name, triangle=False)
+        phi = np.broadcast_to(np.linspace(0.0, np.pi, N_PREPASS), (mu_i.size, N_PREPASS))
+        s, q = kproj.microfacet_split(mu_i, mu_o, phi, eta, layer.alpha, layer.alpha, dist)
+        q0, qpi = q[:, 0], q[:, -1]
+        bound = 10.0 * fourier.peak_values(q0, dist) * np.abs(s).max(axis=1)
+        sig = bound * 2.0 * np.pi * np.maximum(fw[i], fw[o]) > ENERGY_DROP
+        lengths.append(fourier.peak_length(q0[sig], qpi[sig], dist, relerr) + L_FIT)
+        mu_min.append(np.minimum(np.abs(mu_i[sig]), np.abs(mu_o[sig])))
+    return np.concatenate(lengths), np.concatenate(mu_min)
 
 
 def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, dist: str,
@@ -159,7 +202,7 @@ def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, di
     computes the series of a batch (default: the semi-analytic :func:`pair_series`) of at
     most ``batch`` pairs; ``device`` runs the coarse sampling that bounds each pair's energy.
     """
-    method = method or _project_pairs
+    method = method or project_pairs
     mu_i, mu_o, o, i, q0, qpi, keep = significant_pairs(grid, name, triangle, eta, alpha, dist,
                                                         device)
     stats.pairs += mu_i.size
@@ -182,7 +225,7 @@ def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, di
 
     starts = range(0, order.size, batch)
     # one launch already fills a GPU: batches for it run in the calling thread
-    results = [work(x) for x in starts] if _on_gpu(device) else parallel_map(work, starts)
+    results = [work(x) for x in starts] if on_gpu(device) else parallel_map(work, starts)
     for chunk, part in results:
         chunks.append(chunk)
         stats.merge(part)
@@ -190,7 +233,8 @@ def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, di
     return chunks
 
 
-def _on_gpu(device) -> bool:
+def on_gpu(device) -> bool:
+    """Whether ``device`` (a Warp device name or None for the configured one) is a GPU."""
     return device_for(device).is_cuda
 
 
@@ -326,7 +370,9 @@ def apply_taper(series: np.ndarray, rows: np.ndarray, stats: ProjectionStats) ->
         stats.tapered += int(np.count_nonzero(rows))
 
 
-def _project_pairs(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats):
+def project_pairs(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats):
+    """The default ``method`` of :func:`interface_operator`: :func:`pair_series` of a batch,
+    returned as a chunk ``(o, i, series)``."""
     series, _ = pair_series(mu_i, mu_o, eta, alpha, dist, m, q0, qpi, K, stats=stats)
     return o, i, series
 
@@ -376,7 +422,8 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
     eta, dist, alpha, opaque, names = interface_setup(layer, eta_above)
     series = {}
     # Blocks are independent: project them concurrently (Warp CPU launches, FFTs and LAPACK
-    # release the GIL), one worker per core up to the number of blocks.
+    # release the GIL), one worker per thread of layersim.config (threads) up to the number of
+    # blocks.
     def project(name, triangle):
         own = ProjectionStats()       # one per block: no counters shared between threads
         chunks = _project_block(grid, name, m, eta, alpha, dist, own, triangle=triangle,
@@ -389,7 +436,7 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
         jobs = {name: (name, name != "Ttb") for name in names if name != "Tbt"}
     else:
         jobs = {name: (name, False) for name in names}
-    workers = 1 if _on_gpu(device) else min(len(jobs), BLOCK_WORKERS)
+    workers = 1 if on_gpu(device) else min(len(jobs), settings().threads)
     if workers > 1:
         with ThreadPoolExecutor(workers) as pool:
             done = dict(zip(jobs, pool.map(lambda job: project(*job), jobs.values())))

@@ -7,8 +7,8 @@ the number of azimuth samples: the trapezoidal rule with N samples aliases coeff
 ``l`` onto ``N - l``, so a pair whose series has ``K`` significant orders needs
 ``N >= m + K`` for its first ``m`` orders to be clean. Pairs are grouped by that N (a power of
 two), capped at ``max_samples``; pairs that would need more (counted in ``stats.aliased``) are
-projected by the semi-analytic path instead. On a GPU this path is far cheaper than the semi-analytic one (no fits, one
-launch per group); on a single CPU thread it is usually slower.
+projected by the semi-analytic path instead. On a GPU this path is far cheaper than the
+semi-analytic one (no fits, one launch per group); on a single CPU thread it is usually slower.
 
 Everything else (pairs, energy pruning, reciprocity shortcut, truncation with Lanczos tapering,
 assembly) follows the semi-analytic path. On a CUDA device a whole operator is built without
@@ -71,7 +71,7 @@ def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, 
         stats.aliased += int(np.count_nonzero(aliased))
         rest = np.flatnonzero(~aliased)
         out = np.zeros((mu_i.size, m))
-        out[aliased] = microfacet._project_pairs(
+        out[aliased] = microfacet.project_pairs(
             mu_i[aliased], mu_o[aliased], o[aliased], i[aliased], q0[aliased], qpi[aliased],
             K, m, eta, alpha, dist, stats)[2]
         if rest.size:
@@ -114,7 +114,7 @@ def numeric_interface_operator(grid: Grid, m: int, layer, eta_above: float,
     scratch block fits :data:`DEVICE_DENSE_MAX`).
     """
     fits = m * grid.h * grid.h <= DEVICE_DENSE_MAX
-    if microfacet._on_gpu(device) and on_device is None:
+    if microfacet.on_gpu(device) and on_device is None:
         on_device = fits
     if on_device:
         if not fits:
@@ -128,7 +128,7 @@ def numeric_interface_operator(grid: Grid, m: int, layer, eta_above: float,
                                min_samples=min_samples)
     # on a GPU a whole block is one batch (a few launches, one per sample count); on the CPU
     # the semi-analytic path's batches keep the temporaries small and the thread pool busy
-    batch = GPU_BATCH if microfacet._on_gpu(device) else microfacet.BATCH
+    batch = GPU_BATCH if microfacet.on_gpu(device) else microfacet.BATCH
     return microfacet.interface_operator(grid, m, layer, eta_above, stats,
                                          reciprocity=reciprocity, method=method, batch=batch,
                                          device=device)
@@ -156,7 +156,7 @@ def _device_block(grid: Grid, name: str, triangle: bool, m: int, eta: complex, a
         stats.aliased += sel.size
         K = int(min(fourier.peak_length(q0[sel], qpi[sel], dist, microfacet.RELERR).max(),
                     m + microfacet.L_HARD))
-        parts.append(microfacet._project_pairs(mu_i[sel], mu_o[sel], o[sel], i[sel], q0[sel],
+        parts.append(microfacet.project_pairs(mu_i[sel], mu_o[sel], o[sel], i[sel], q0[sel],
                                                qpi[sel], K, m, eta, alpha, dist, stats))
     rest = np.flatnonzero(~aliased)
     if rest.size:

@@ -1,0 +1,78 @@
+"""Discretisation plan: from a validated scene, decide what to compute and at what resolution.
+
+The plan is made before any heavy work, and says what it chose and why. Each decision is one
+module of this package, and :func:`make_plan` composes them in order:
+
+* **What each layer gets** (:mod:`.layers`): interfaces are projected, media added by
+  adding-doubling, a diffuse base needs order 0; transmission blocks below an opaque base,
+  index-matched interfaces and empty media (exact no-ops) are left out.
+* **Representation and coupling** ``ms`` (:mod:`.coupling`; see :mod:`layersim.aniso`):
+  isotropic stacks use the cosine series of :class:`~layersim.operator.IsoOperator`. A stack
+  with an anisotropic interface (``alpha_u != alpha_v``) uses coupled modes; each anisotropic
+  layer is projected with the ``ms`` its roughness ratio needs
+  (:func:`layersim.aniso.plan.ms_for_layer`), isotropic layers keep their cheaper operators
+  and runs of them are added isotropically before conversion.
+* **Ordinates** ``n`` (:mod:`.ordinates`; quadrature on mu in [-1, 1]): from the narrowest
+  angular lobe of the stack.
+* **Fourier orders** ``md`` (:mod:`.orders`): from the lobes themselves, through the
+  projection's pre-pass over every ordinate pair (a public function of the projection
+  modules); pairs near the horizon beyond :data:`THETA_FULL` are truncated and tapered, which
+  never changes energy, and the plan reports how many.
+* **Memory** (:mod:`.budget`): estimated from the same pre-pass (coefficients actually stored)
+  and refused up front when it exceeds the limit (``LAYERSIM_MAX_MEMORY`` bytes, default: half
+  the available RAM); coupled plans are first checked against a lower bound, before the
+  pre-pass.
+
+A ``[discretization]`` table in the scene overrides ``n``, ``md``, ``ms`` and the quadrature
+rule.
+"""
+
+from __future__ import annotations
+
+from ..operator import Grid
+from ..scene import Scene
+from .budget import (MD_LOWER_PER_INV_ALPHA, PROJECTION_BYTES, estimate_bytes, memory_limit,
+                     refuse_below_lower_bound, refuse_over_limit)
+from .coupling import choose_ms, needed_ms
+from .layers import survey_layers
+from .model import LayerPlan, Plan
+from .ordinates import DEFAULT_RULE, N_MAX, N_MIN, N_PER_WIDTH, choose_n
+from .orders import MD_MAX, THETA_FULL, choose_md, interface_lengths, truncation_notes
+
+__all__ = ["Plan", "LayerPlan", "make_plan", "memory_limit", "THETA_FULL", "N_PER_WIDTH",
+           "N_MIN", "N_MAX", "MD_MAX", "MD_LOWER_PER_INV_ALPHA", "PROJECTION_BYTES",
+           "DEFAULT_RULE"]
+
+
+def make_plan(scene: Scene) -> Plan:
+    """Plan the solve of a monochromatic or RGB scene (RGB channels share one plan).
+
+    Raises
+    ------
+    InfeasibleError
+        If a layer cannot be represented (smooth interface) or the discretisation it needs
+        exceeds the limits (ordinates, orders, memory). The message names the layer, the limit
+        and what to change.
+    """
+    disc = scene.discretization
+    rule = disc.quadrature or DEFAULT_RULE
+    notes: list[str] = []
+    overridden: dict = {}
+    survey = survey_layers(scene)
+    layers = survey.layers
+    ms_needed = needed_ms(layers, survey.left_out, notes)
+    anisotropic = ms_needed > 0
+    grid = Grid.make(rule, choose_n(disc, rule, survey.widths, notes, overridden))
+    mono = scene.channel(0)
+    refuse_below_lower_bound(disc, mono, layers, grid, survey.media_orders, ms_needed)
+    lengths = interface_lengths(grid, mono, layers)
+    md_needed = max([survey.media_orders] + [lp.orders for lp, _ in lengths])
+    md = choose_md(disc, md_needed, notes, overridden)
+    ms = choose_ms(disc, layers, ms_needed, notes, overridden)
+    truncation_notes(lengths, md, notes)
+    memory = estimate_bytes(layers, lengths, grid, md, survey.media_orders, scene.channels,
+                            anisotropic)
+    refuse_over_limit(memory, grid.n, md, ms, anisotropic)
+    return Plan(rule=rule, n=grid.n, md=md, ms=ms, layers=layers, left_out=survey.left_out,
+                notes=notes, memory_bytes=memory, overridden=overridden,
+                representation="anisotropic" if anisotropic else "isotropic")

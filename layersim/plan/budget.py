@@ -1,0 +1,128 @@
+"""Memory of a plan: estimated from the projection's pre-pass (coefficients actually stored)
+and refused up front when it exceeds the limit (``layersim.config.settings().max_memory``,
+``LAYERSIM_MAX_MEMORY``; default: half the available memory).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+from ..aniso import plan as aplan
+from ..config import settings
+from ..errors import InfeasibleError
+from ..operator import Grid
+from ..scene import Discretization, Scene
+
+#: Lower bound on the orders a lobe of roughness alpha needs: md >= this / alpha (half the
+#: estimate for a Beckmann lobe at the plan's THETA_FULL), used to refuse before the pre-pass.
+MD_LOWER_PER_INV_ALPHA = 10.0
+#: Peak bytes of projecting an isotropic interface, per (order x h x h) entry: the series of
+#: every block's pairs (~16) plus the dense per-block assembly and its temporaries (~24).
+#: ``benchmarks/memory_phases.py`` compares the estimate with the measured peak.
+PROJECTION_BYTES = 40
+
+
+def available_memory() -> int:
+    """Physical memory available now (bytes; 8 GiB where the system does not say)."""
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
+        return 8 << 30
+
+
+def memory_limit() -> int:
+    """Bytes a solve may use: ``settings().max_memory`` (``LAYERSIM_MAX_MEMORY``) or half the
+    available memory."""
+    limit = settings().max_memory
+    return available_memory() // 2 if limit is None else limit
+
+
+def refuse_below_lower_bound(disc: Discretization, mono: Scene, layers: list, grid: Grid,
+                             media_orders: int, ms_needed: int) -> None:
+    """Refuse a coupled plan whose memory is over the limit already at a lower bound of
+    ``md``, before paying for a pre-pass that would itself grow like ``n^2 ms``.
+
+    A Beckmann lobe at 80 deg needs ~22.8 / alpha orders (``K ~ sqrt(2 B ln(1/eps))``,
+    ``B = tan^2(theta) / (2 alpha^2)``); half of that is a safe lower bound on ``md``, at which
+    the block-LU factors of the adding equations (:func:`layersim.aniso.plan.factor_bytes`)
+    bound the memory from below. Isotropic plans and plans with ``md`` from the scene go on
+    to the pre-pass.
+
+    Raises
+    ------
+    InfeasibleError
+        Naming the bound, the limit and what to change.
+    """
+    if ms_needed == 0 or disc.md is not None:
+        return
+    alpha_min = min(min(mono.layers[lp.index].alpha_u, mono.layers[lp.index].alpha_v)
+                    for lp in layers if lp.action.startswith("project"))
+    md_lower = max(media_orders, math.ceil(MD_LOWER_PER_INV_ALPHA / alpha_min))
+    ms = disc.ms or ms_needed
+    lower = aplan.factor_bytes(grid.h, md_lower, 2 * ms)
+    limit = memory_limit()
+    if lower > limit:
+        raise InfeasibleError(
+            f"the plan (n = {grid.n}, md >= {md_lower}, ms = {ms}) needs at least "
+            f"{lower / 2**30:.1f} GiB, over the limit of {limit / 2**30:.2f} GiB "
+            "(LAYERSIM_MAX_MEMORY); increase the roughness of the smoothest interface, reduce "
+            "the anisotropy, or lower n, md or ms in [discretization]")
+
+
+def estimate_bytes(layers: list, lengths: list, grid: Grid, md: int, media_orders: int,
+                   channels: int, anisotropic: bool) -> int:
+    """Estimated peak memory of the solve (bytes).
+
+    Parameters
+    ----------
+    layers : list of LayerPlan
+    lengths : list of (LayerPlan, ndarray)
+        The pre-pass of the projected interfaces (:func:`layersim.plan.orders.interface_lengths`),
+        with the coupled layers' final ``ms``.
+    grid : Grid
+    md, media_orders : int
+        Fourier orders of the solve and of the media's phase functions.
+    channels : int
+        Colour channels (each solved with its own operators).
+    anisotropic : bool
+        Whether the stack is solved with coupled modes.
+    """
+    h = grid.h
+    # coefficients of the isotropic interfaces (the coupled ones: layersim.aniso.plan)
+    stored = sum(int(np.minimum(pair_lengths, md).sum())
+                 for lp, pair_lengths in lengths if not lp.ms)
+    media = sum(1 for lp in layers if lp.action == "adding-doubling")
+    stored += media * (4 * media_orders * h * h + 4 * md * h)
+    # the stack itself (assumed as dense as the densest ingredient, at most dense) plus the
+    # adding's temporaries: per order per thread ~12 dense h x h arrays
+    stored_bytes = int(12 * min(stored * 2, 4 * md * h * h)) + 12 * 8 * h * h * 8
+    if anisotropic:
+        entries = [aplan.operator_entries(pair_lengths, md, lp.ms)
+                   for lp, pair_lengths in lengths if lp.ms]
+        stored_bytes += aplan.solve_bytes(entries)
+    else:
+        # projecting an interface holds every block's per-pair series and then, per block,
+        # the dense scatter of the operator's assembly with its temporaries
+        stored_bytes += PROJECTION_BYTES * md * h * h
+    return stored_bytes * max(1, channels)
+
+
+def refuse_over_limit(memory: int, n: int, md: int, ms: int, anisotropic: bool) -> None:
+    """Refuse a plan whose estimated ``memory`` (bytes) exceeds :func:`memory_limit`.
+
+    Raises
+    ------
+    InfeasibleError
+        Naming the plan, its estimate, the limit and what to lower.
+    """
+    limit = memory_limit()
+    if memory > limit:
+        raise InfeasibleError(
+            f"the plan (n = {n}, md = {md}{f', ms = {ms}' if anisotropic else ''}) needs about "
+            f"{memory / 2**30:.2f} GiB, over the limit of {limit / 2**30:.2f} GiB "
+            "(LAYERSIM_MAX_MEMORY); lower n or md" + (" or ms" if anisotropic else "")
+            + " in [discretization], or increase the roughness of the smoothest interface"
+            + (" or reduce the anisotropy" if anisotropic else ""))

@@ -1,0 +1,130 @@
+"""Per-layer actions: what the solve does with each layer, and the lobes that set ``n``.
+
+Interfaces are projected (with coupled modes if anisotropic); media are added by
+adding-doubling with the Fourier orders of their phase function; a diffuse base needs order 0
+only. Index-matched interfaces and empty media are exact no-ops and are left out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from ..aniso import plan as aplan
+from ..errors import InfeasibleError
+from ..ingredients.medium import hg_orders
+from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
+from .model import LayerPlan
+
+
+@dataclass
+class Survey:
+    """The per-layer actions of a stack and what they imply for the discretisation.
+
+    Attributes
+    ----------
+    layers : list of LayerPlan
+    left_out : list of str
+        What the solve leaves out, and why (report lines).
+    widths : list of (float, int, str, str)
+        ``(width in radians, layer index, kind, lobe)`` of every lobe that competes to set
+        ``n``.
+    media_orders : int
+        Fourier orders the media's phase functions need.
+    """
+
+    layers: list = field(default_factory=list)
+    left_out: list = field(default_factory=list)
+    widths: list = field(default_factory=list)
+    media_orders: int = 1
+
+
+def survey_layers(scene: Scene) -> Survey:
+    """The action of every layer of ``scene`` (RGB channels share it: the geometry is the
+    first channel's, and a layer is left out only if it is a no-op in every channel).
+
+    Raises
+    ------
+    InfeasibleError
+        For a smooth interface (not representable in the Fourier basis).
+    """
+    survey = Survey()
+    mono = scene.channel(0)
+    for i, layer in enumerate(mono.layers):
+        if isinstance(layer, (Dielectric, Conductor)):
+            _interface(scene, i, layer, survey)
+        elif isinstance(layer, Medium):
+            _medium(scene, i, layer, survey)
+        elif isinstance(layer, Diffuse):
+            survey.layers.append(LayerPlan(i, layer.kind, "diffuse", "order 0 only"))
+    if scene.opaque:
+        survey.left_out.append("transmission blocks (Ttb, Tbt) and bottom reflection: the "
+                               "base is opaque")
+    return survey
+
+
+def _channels(scene: Scene):
+    return [scene.channel(c) for c in range(scene.channels)]
+
+
+def _interface(scene: Scene, i: int, layer, survey: Survey) -> None:
+    kind = layer.kind
+    if isinstance(layer, Dielectric) and all(s.relative_ior(i) == 1.0 for s in _channels(scene)):
+        survey.left_out.append(f"layer {i} (dielectric): index-matched interface (relative "
+                               "index 1) is an exact no-op")
+        survey.layers.append(LayerPlan(i, kind, "left out", "index-matched"))
+        return
+    if layer.smooth:
+        raise InfeasibleError(
+            f"layer {i} ({kind}): smooth interfaces (roughness 0) are not representable "
+            "in the Fourier basis yet (their reflection is a delta in every Fourier "
+            "order); give a small roughness (e.g. 0.01), or use layersim.montecarlo, "
+            "which handles smooth interfaces exactly")
+    eta_rel = scene.channel(0).relative_ior(i)
+    width, what = interface_width(layer, eta_rel)
+    survey.widths.append((width, i, kind, what))
+    if layer.anisotropic:
+        ms = aplan.ms_for_layer(layer)
+        rot = f", rotated {math.degrees(layer.rotation):g} deg" if layer.rotation else ""
+        survey.layers.append(LayerPlan(
+            i, kind, "project (coupled modes)",
+            f"{layer.distribution} alpha=({layer.alpha_u:g}, {layer.alpha_v:g}){rot}, "
+            f"relative index {_fmt_eta(eta_rel)}; ratio {aplan.anisotropy_ratio(layer):.3g} "
+            f"-> ms = {ms}", width=width, ms=ms))
+    else:
+        survey.layers.append(LayerPlan(i, kind, "project",
+                                       f"{layer.distribution} alpha={layer.alpha_u:g}, relative "
+                                       f"index {_fmt_eta(eta_rel)}", width=width))
+
+
+def _medium(scene: Scene, i: int, layer, survey: Survey) -> None:
+    kind = layer.kind
+    if layer.tau == 0.0:
+        survey.left_out.append(f"layer {i} (medium): tau = 0 is an exact no-op")
+        survey.layers.append(LayerPlan(i, kind, "left out", "tau = 0"))
+        return
+    scatters = max(s.layers[i].albedo for s in _channels(scene)) > 0
+    orders = hg_orders(layer.g) if scatters else 1
+    survey.media_orders = max(survey.media_orders, orders)
+    if layer.g != 0.0:
+        survey.widths.append((math.sqrt(1.0 - abs(layer.g)), i, kind, "phase-function lobe"))
+    survey.layers.append(LayerPlan(i, kind, "adding-doubling",
+                                   f"tau={layer.tau:g}, g={layer.g:g}: scattering in {orders} "
+                                   "order(s), unscattered beam in all", orders=orders))
+
+
+def interface_width(layer, eta_rel: complex) -> tuple[float, str]:
+    """Angular width (radians) of the narrowest lobe of a rough interface and its name: about
+    ``alpha`` in reflection, ``alpha |1 - 1/eta|`` in refraction (the refracted direction moves
+    by that fraction of the facet tilt); infinite for an index-matched dielectric."""
+    alpha = min(layer.alpha_u, layer.alpha_v)
+    if isinstance(layer, Conductor):
+        return alpha, "reflection lobe"
+    eta = eta_rel.real
+    if eta == 1.0:
+        return math.inf, ""
+    return alpha * abs(1.0 - 1.0 / max(eta, 1.0 / eta)), "refraction lobe"
+
+
+def _fmt_eta(eta: complex) -> str:
+    return f"{eta.real:.4g}" if eta.imag == 0 else f"{eta.real:.4g}+{eta.imag:.4g}i"

@@ -1,0 +1,83 @@
+"""What a plan says: the discretisation chosen, what each layer gets, and why."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ..operator import Grid
+
+
+@dataclass
+class LayerPlan:
+    """What the solve does with one layer of the stack.
+
+    Attributes
+    ----------
+    index : int
+        Position in the stack (0 = top).
+    kind : str
+        The scene layer's kind (``"dielectric"``, ``"conductor"``, ``"medium"``, ``"diffuse"``).
+    action : str
+        ``"project"``, ``"project (coupled modes)"``, ``"adding-doubling"``, ``"diffuse"`` or
+        ``"left out"``.
+    detail : str
+        One line of what the action depends on, for the report.
+    width : float or None
+        Narrowest angular lobe of the layer (radians), when it competes to set ``n``.
+    orders : int
+        Fourier orders the layer needs (from the projection's pre-pass for interfaces).
+    ms : int
+        Coupling half-width of an anisotropic interface (0 otherwise).
+    """
+
+    index: int
+    kind: str
+    action: str
+    detail: str = ""
+    width: float | None = None
+    orders: int = 1
+    ms: int = 0
+
+
+@dataclass
+class Plan:
+    """What :func:`layersim.solve` will compute (see :mod:`layersim.plan`)."""
+
+    rule: str
+    n: int
+    md: int
+    ms: int = 0
+    representation: str = "isotropic"
+    layers: list = field(default_factory=list)
+    left_out: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
+    memory_bytes: int = 0
+    overridden: dict = field(default_factory=dict)
+
+    @property
+    def grid(self) -> Grid:
+        return Grid.make(self.rule, self.n)
+
+    def report(self) -> str:
+        """Human-readable summary (printed by ``layersim plan`` and ``layersim solve``)."""
+        src = lambda k: " (from the scene)" if k in self.overridden else ""
+        basis = ("(cosine series in the azimuth difference)" if self.representation == "isotropic"
+                 else "(Fourier series in phi_d and phi_s, coupled modes, Zeltner & Jakob 2018, "
+                      "eq. (7)-(10))")
+        lines = [
+            f"representation: {self.representation} {basis}",
+            f"ordinates: n = {self.n}{src('n')}, {self.rule}{src('quadrature')} "
+            f"({self.n // 2} per hemisphere)",
+            f"Fourier orders: md = {self.md}{src('md')}" + (f", ms = {self.ms}{src('ms')}"
+                                                          if self.representation != "isotropic"
+                                                          else ", ms = 0"),
+            f"estimated memory: {self.memory_bytes / 2**20:.1f} MiB",
+        ]
+        for lp in self.layers:
+            lines.append(f"  layer {lp.index} ({lp.kind}): {lp.action}"
+                         + (f" -- {lp.detail}" if lp.detail else ""))
+        for item in self.left_out:
+            lines.append(f"  left out: {item}")
+        for note in self.notes:
+            lines.append(f"  note: {note}")
+        return "\n".join(lines)

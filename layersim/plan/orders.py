@@ -1,0 +1,84 @@
+"""The Fourier orders ``md``: from the lobes themselves, through the projection's pre-pass.
+
+The pre-pass (:func:`layersim.ingredients.microfacet.series_lengths`, and
+:func:`layersim.ingredients.aniso_microfacet.series_lengths` for coupled modes) returns the
+length of every significant ordinate pair's series; the plan keeps every order needed by pairs
+whose incident and outgoing elevations are both within :data:`THETA_FULL` of the normal. A lobe
+at elevation theta is ~alpha cos(theta) wide in azimuth, so pairs closer to the horizon would
+need ~1/(alpha mu) orders (thousands at the most grazing ordinates); they are truncated and
+tapered (Lanczos sigma factors, so that they blur instead of ringing negative). Truncating
+orders never changes energy (only order 0 carries energy). Media add the reach of their phase
+function.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..aniso import plan as aplan
+from ..errors import InfeasibleError
+from ..ingredients import aniso_microfacet, microfacet
+from ..operator import Grid
+from ..scene import Discretization, Scene
+
+#: Lobes with both elevations within this angle (degrees) of the normal keep all their
+#: Fourier orders.
+THETA_FULL = 80.0
+MD_MAX = 20_000
+
+
+def interface_lengths(grid: Grid, mono: Scene, layers: list) -> list:
+    """The pre-pass of every projected interface of ``mono`` (one channel): a list of
+    ``(LayerPlan, lengths)``, with each layer plan's ``orders`` set to the longest series of
+    its pairs within :data:`THETA_FULL`. Coupled layers (``ms > 0``) are measured at their
+    ``ms`` and :data:`layersim.aniso.plan.COUPLED_RELERR`."""
+    mu_full = math.cos(math.radians(THETA_FULL))
+    out = []
+    for lp in layers:
+        if not lp.action.startswith("project"):
+            continue
+        layer, eta_above = mono.layers[lp.index], mono.ior_above(lp.index)
+        if lp.ms:
+            lengths, mu_min = aniso_microfacet.series_lengths(grid, layer, eta_above, lp.ms,
+                                                              aplan.COUPLED_RELERR)
+        else:
+            lengths, mu_min = microfacet.series_lengths(grid, layer, eta_above)
+        full = mu_min >= mu_full
+        lp.orders = int(lengths[full].max()) if full.any() else 1
+        out.append((lp, lengths))
+    return out
+
+
+def choose_md(disc: Discretization, md_needed: int, notes: list, overridden: dict) -> int:
+    """``md``: the scene's override (with a note if below ``md_needed``) or ``md_needed``.
+
+    Raises
+    ------
+    InfeasibleError
+        Above :data:`MD_MAX` orders.
+    """
+    if disc.md is not None:
+        md = disc.md
+        overridden["md"] = md
+        if md < md_needed:
+            notes.append(f"md = {md} from the scene is below the {md_needed} orders the lobes "
+                         "need: lobes are truncated in azimuth (ringing)")
+    else:
+        md = max(1, md_needed)
+    if md > MD_MAX:
+        raise InfeasibleError(f"the stack needs {md} Fourier orders (limit {MD_MAX}); increase "
+                              "the roughness of the smoothest interface or use layersim.montecarlo")
+    return md
+
+
+def truncation_notes(lengths: list, md: int, notes: list) -> None:
+    """A note per interface whose pairs (beyond :data:`THETA_FULL`) need more than ``md``
+    orders (``lengths``: the ``(LayerPlan, lengths)`` of :func:`interface_lengths`)."""
+    for lp, pair_lengths in lengths:
+        trunc = int(np.count_nonzero(pair_lengths > md))
+        if trunc:
+            notes.append(f"layer {lp.index}: {trunc} ordinate pairs beyond {THETA_FULL:g} deg "
+                         f"would need up to {int(pair_lengths.max())} orders; they keep {md} "
+                         "(tapered; energy unaffected)")
