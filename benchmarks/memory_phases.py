@@ -94,8 +94,11 @@ class Sampler:
 def main(argv) -> int:
     import layersim
     from layersim import solver
-    from layersim.aniso import adding, banded, operator
+    from layersim.aniso import adding, banded, operator, reciprocity
+    from layersim.config import settings
     from layersim.ingredients import aniso_microfacet as am
+    from layersim.outofcore import memory
+    memory.cap_arenas(settings().malloc_arenas)     # this script owns its process
     sys.path.insert(0, os.path.dirname(__file__))
     import table2
 
@@ -120,14 +123,14 @@ def main(argv) -> int:
     s.wrap(am, "reciprocal_image", "  reciprocal image")
     s.wrap(adding, "add", "adding step")
     s.wrap(adding, "banded_solve", "  banded solve")
-    s.wrap(adding, "_block_rows", "    dense block rows")
+    s.wrap(banded, "_block_rows", "    dense block rows")
     s.wrap(banded.BlockBandedLU, "__init__", "    block LU")
-    s.wrap(adding, "_solve_groups", "    substitutions")
-    s.wrap(adding, "_residual", "    residual check")
-    s.wrap(adding, "from_parts", "    assemble solution")
+    s.wrap(banded, "_solve_groups", "    substitutions")
+    s.wrap(banded, "_residual", "    residual check")
+    s.wrap(banded, "from_parts", "    assemble solution")
     s.wrap(adding, "_sum", "  sum")
     s.wrap(operator, "reciprocal_image", "    reciprocal image")
-    s.wrap(operator, "sum_pieces", "    sum in pieces")
+    s.wrap(reciprocity, "sum_pieces", "    sum in pieces")
     s.wrap(adding.AnisoOperator, "pruned", "  pruned (result)")
     s.wrap(adding, "pruned_product", "  product (pruned)")
     s.wrap(adding, "prune", "  prune (sums)")

@@ -42,6 +42,7 @@ import layersim
 from layersim import solver
 from layersim.aniso import AnisoOperator
 from layersim.config import settings
+from layersim.outofcore import memory
 
 GOLD = [0.143552, 3.98397]
 ROWS = [  # (top alpha_u, alpha_v), (bottom alpha_u, alpha_v), paper: total s, adding s,
@@ -66,6 +67,7 @@ def _density(op) -> float:
 
 
 def run_row(k: int) -> dict:
+    memory.cap_arenas(settings().malloc_arenas)     # the row's process is this script's
     top, bottom = ROWS[k - 1][:2]
     scene = {"layer": [{"kind": "dielectric", "ior": 1.5, "roughness": list(top)},
                        {"kind": "conductor", "ior": GOLD, "roughness": list(bottom)}]}

@@ -8,8 +8,6 @@ Public entry points (see docs/conventions.md)::
     layersim.export(bsdf, path)                   # .bsdf file for renderers
     stack = layersim.add(top, bottom); layer = layersim.subtract(stack, known, side="top")
 """
-from . import memory as _memory
-_memory.limit_arenas()          # before any worker thread allocates (layersim.memory)
 from .errors import LayersimError, SceneError, InfeasibleError, OperatorError, FileFormatError
 from .scene import Scene, Dielectric, Conductor, Medium, Diffuse, Discretization
 from .plan import Plan, make_plan

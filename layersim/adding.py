@@ -1,6 +1,6 @@
 """The adding equations for isotropic operators, and adding-doubling.
 
-For a top layer 1 and a bottom layer 2 (seed 004 eq. (3); Grant & Hunt 1969)::
+For a top layer 1 and a bottom layer 2 (Jakob's layerlab tutorial eq. (3); Grant & Hunt 1969)::
 
     Rt  = Rt1 + Tbt1 (I - Rt2 Rb1)^-1 Rt2 Ttb1
     Rb  = Rb2 + Ttb2 (I - Rb1 Rt2)^-1 Rb1 Tbt2
@@ -8,8 +8,8 @@ For a top layer 1 and a bottom layer 2 (seed 004 eq. (3); Grant & Hunt 1969)::
     Tbt = Tbt1 (I - Rt2 Rb1)^-1 Tbt2
 
 With ``A = I - Rb1 Rt2`` and the push-through identities ``(I - Rt2 Rb1)^-1 Rt2 = Rt2 A^-1`` and
-``(I - Rt2 Rb1)^-1 = I + Rt2 A^-1 Rb1`` (seed 000 eq. (12)), all four outputs need solves with
-``A`` only, which is factorised once per Fourier order::
+``(I - Rt2 Rb1)^-1 = I + Rt2 A^-1 Rb1`` (Zeltner & Jakob 2018 eq. (12)), all four outputs need
+solves with ``A`` only, which is factorised once per Fourier order::
 
     [Y1 | Y2] = A^-1 [Ttb1 | Rb1 Tbt2]
     Ttb = Ttb2 Y1          Rt  = Rt1 + Tbt1 Rt2 Y1
@@ -21,16 +21,14 @@ blocks (:data:`SPARSE_DENSITY`, :data:`SPARSE_MIN_H`).
 
 Threads: orders are independent and can be spread over a thread pool (``threads=``), but on the
 block sizes of typical plans (h <= 256) the per-order work is too small for Python threads to pay
-off, and OpenBLAS's own threads slow small dense products down several-fold (measured on the
-2-core CI machine, coated gold n = 196: 1.9 s with 2 BLAS threads, 0.21 s with one; a 2-thread
-pool: 0.34 s). Adding therefore runs orders sequentially by default with BLAS limited to one
-thread (via threadpoolctl) for blocks below :data:`BLAS_SINGLE_BELOW` ordinates.
+off, and OpenBLAS's own threads slow small dense products down several-fold. Adding therefore
+runs orders sequentially by default (``layersim.config.settings().order_threads``) with BLAS
+limited to one thread (via threadpoolctl) for blocks below :data:`BLAS_SINGLE_BELOW` ordinates.
 """
 
 from __future__ import annotations
 
 import functools
-import os
 from concurrent.futures import ThreadPoolExecutor
 
 from contextlib import nullcontext
@@ -41,8 +39,9 @@ import scipy.sparse.linalg as spla
 
 from threadpoolctl import threadpool_limits
 
+from .config import settings
 from .errors import OperatorError
-from .operator import IsoOperator, OrderStack, prune_order as _prune
+from .operator import IsoOperator, OrderStack, prune_order
 
 try:  # optional, faster sparse LU
     import scikits.umfpack as _umfpack  # noqa: F401
@@ -53,20 +52,18 @@ except ImportError:  # pragma: no cover - depends on the environment
 #: Orders whose blocks hold fewer than this fraction of nonzeros use sparse LU ...
 SPARSE_DENSITY = 0.05
 #: ... if their blocks have at least this many ordinates per hemisphere: below it, SciPy's
-#: per-call overhead outweighs what sparsity saves (Table 2 row 1 of seed 000, h = 98, on
-#: the 2-core CI machine: the adding 0.46 s with every order dense against 0.64-0.83 s
-#: mixed; h = 128 and 150 even; h = 195: 1.28-1.39 s mixed against 1.41-1.96 s dense).
+#: per-call overhead outweighs what sparsity saves (docs/performance.md).
 SPARSE_MIN_H = 128
 #: Entries of one (orders x h x h) array of a batch of orders (2 MiB): below SPARSE_MIN_H
 #: every order is dense, and orders are added in batches (:func:`_add_orders_dense`).
 ORDER_BATCH_ELEMENTS = 1 << 18
-#: Worker threads for independent Fourier orders (``$LAYERSIM_THREADS``, default 1; see above).
-THREADS = int(os.environ.get("LAYERSIM_THREADS", "1"))
 #: Blocks with fewer ordinates per hemisphere than this run with single-threaded BLAS.
 BLAS_SINGLE_BELOW = 512
 
 
-def _check_pair(top: IsoOperator, bottom: IsoOperator) -> None:
+def check_pair(top, bottom) -> None:
+    """Refuse to stack ``top`` on ``bottom`` unless they share a grid, ``top`` is transmissive
+    and the index of the medium between them agrees (either representation)."""
     if top.grid != bottom.grid:
         raise OperatorError(f"cannot add operators on different grids ({top.grid.rule} n="
                             f"{top.grid.n} over {bottom.grid.rule} n={bottom.grid.n}); "
@@ -86,7 +83,9 @@ def add(top: IsoOperator, bottom: IsoOperator, threads: int | None = None) -> Is
     top, bottom : IsoOperator
         ``top`` must be transmissive; ``bottom`` may be opaque (then only ``Rt`` is formed).
     threads : int, optional
-        Worker threads for the Fourier orders (default :data:`THREADS`).
+        Worker threads for the Fourier orders (default
+        ``layersim.config.settings().order_threads``, ``LAYERSIM_ORDER_THREADS``; see the
+        module docstring).
 
     Returns
     -------
@@ -94,7 +93,7 @@ def add(top: IsoOperator, bottom: IsoOperator, threads: int | None = None) -> Is
         With ``max(top.m, bottom.m)`` orders, ``eta_top`` of ``top`` and ``eta_bottom`` of
         ``bottom``.
     """
-    _check_pair(top, bottom)
+    check_pair(top, bottom)
     m = max(top.m, bottom.m)
     opaque = bottom.opaque
 
@@ -112,7 +111,7 @@ def add(top: IsoOperator, bottom: IsoOperator, threads: int | None = None) -> Is
         work = functools.partial(_add_orders_dense, top, bottom, opaque=opaque)
     else:
         tasks, work = range(m), one
-    threads = threads or THREADS
+    threads = threads or settings().order_threads
     limit = threadpool_limits(1, user_api="blas") if top.h < BLAS_SINGLE_BELOW else nullcontext()
     with limit:
         if threads > 1 and len(tasks) > 4:
@@ -211,10 +210,12 @@ def _add_order_dense(b1, b2, opaque, coupled, h):
         out["Ttb"] = Ttb2 @ Y1
         out["Rb"] = Rb2 + Ttb2 @ Y2
         out["Tbt"] = Tbt1 @ Tbt2 + Tbt1 @ (Rt2 @ Y2)
-    return {k: _prune(sps.csr_matrix(v)) for k, v in out.items()}
+    return {k: prune_order(sps.csr_matrix(v)) for k, v in out.items()}
 
 
-def _sparse_lu(A: sps.csc_matrix):
+def sparse_lu(A: sps.csc_matrix):
+    """A solve function of the sparse LU factorisation of ``A`` (UMFPACK where installed,
+    else SuperLU with COLAMD ordering)."""
     if _HAVE_UMFPACK:  # pragma: no cover - optional dependency
         return spla.factorized(A)
     lu = spla.splu(A, permc_spec="COLAMD")
@@ -232,8 +233,8 @@ def _add_order_sparse(b1, b2, opaque, coupled):
         rhs = sps.hstack([Ttb1, Rb1 @ Tbt2], format="csc")
     if coupled:
         A = (sps.identity(h, format="csc") - (Rb1 @ Rt2)).tocsc()
-        solve = _sparse_lu(A)
-        Y = sps.csr_matrix(_solve_columns(solve, rhs.tocsc()))
+        solve = sparse_lu(A)
+        Y = sps.csr_matrix(solve_columns(solve, rhs.tocsc()))
     else:
         Y = sps.csr_matrix(rhs)
     Y1 = Y[:, :h]
@@ -243,12 +244,12 @@ def _add_order_sparse(b1, b2, opaque, coupled):
         out["Ttb"] = Ttb2 @ Y1
         out["Rb"] = Rb2 + Ttb2 @ Y2
         out["Tbt"] = Tbt1 @ Tbt2 + Tbt1 @ (Rt2 @ Y2)
-    return {k: _prune(sps.csr_matrix(v)) for k, v in out.items()}
+    return {k: prune_order(sps.csr_matrix(v)) for k, v in out.items()}
 
 
-def _solve_columns(solve, rhs: sps.csc_matrix) -> np.ndarray:
+def solve_columns(solve, rhs: sps.csc_matrix) -> np.ndarray:
     """Solve for the nonzero columns of a sparse right-hand side only (empty columns stay
-    zero): the sparse-RHS shortcut of seed 000 sec. 3.3."""
+    zero): the sparse-RHS shortcut of Zeltner & Jakob 2018 sec. 3.3."""
     out = np.zeros(rhs.shape)
     cols = np.flatnonzero(np.diff(rhs.indptr))
     if cols.size:

@@ -30,7 +30,9 @@ import numpy as np
 
 from .bsdf import BSDF
 from .bsdffile import FourierTable, export, read
+from .config import settings
 from .errors import FileFormatError, InfeasibleError, LayersimError
+from .outofcore import memory
 from .plan import make_plan
 from .scene import Scene
 from .solver import solve
@@ -346,6 +348,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(_attach_negative_values(argv))
     args.argv = argv
     try:
+        memory.cap_arenas(settings().malloc_arenas)     # the command owns its process
         return args.func(args)
     except (LayersimError, ValueError, OSError) as exc:
         msg = str(exc).replace("\n", " ")

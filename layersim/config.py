@@ -17,8 +17,9 @@ variable                   field               meaning (default)
 ``LAYERSIM_PARK_DIR``      ``park_dir``        directory of the temporary files that hold
                                                idle blocks of coupled solves (the system's
                                                temporary directory; ``off``: in memory)
-``LAYERSIM_MALLOC_ARENAS`` ``malloc_arenas``   glibc malloc arenas while a solve runs (1;
-                                               0 keeps glibc's default)
+``LAYERSIM_MALLOC_ARENAS`` ``malloc_arenas``   glibc malloc arenas, capped at start-up by
+                                               the command line and benchmarks (1; 0
+                                               keeps glibc's default)
 ``LAYERSIM_THREADS``       ``threads``         worker threads for projection batches,
                                                blocks, products and substitutions (cores)
 ``LAYERSIM_ORDER_THREADS`` ``order_threads``   threads for independent Fourier orders of
@@ -55,7 +56,9 @@ class Settings:
     park_dir : str or None
         Directory for the temporary files of coupled solves; None keeps everything in memory.
     malloc_arenas : int
-        Cap on glibc's malloc arenas while a solve runs; 0 leaves the process's setting alone.
+        Cap on glibc's malloc arenas that programs owning their process apply at start-up
+        (:func:`layersim.outofcore.memory.cap_arenas`; irreversible, so the library itself
+        never applies it); 0 leaves the process's setting alone.
     threads : int
         Worker threads of :mod:`layersim.threads` (>= 1; 1 runs in the calling thread).
     order_threads : int

@@ -49,8 +49,9 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sps
 
-from . import energy, memory, quadrature
+from . import energy, quadrature
 from .errors import FileFormatError, OperatorError
+from .outofcore import memory
 
 BLOCKS = ("Rt", "Rb", "Ttb", "Tbt")
 #: Relative drop threshold for operator entries (per block and order).

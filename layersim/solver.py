@@ -7,7 +7,7 @@ from dataclasses import replace
 
 from threadpoolctl import threadpool_limits
 
-from . import adding, memory
+from . import adding
 from .aniso import adding as aniso_adding
 from .bsdf import BSDF, channel_pairs
 from .errors import InfeasibleError
@@ -15,6 +15,8 @@ from .ingredients import diffuse_operator, interface_operator, medium_operator
 from .ingredients.microfacet import ProjectionStats
 from .ingredients.numeric import numeric_interface_operator
 from .operator import IsoOperator, Operator, common_representation
+from .outofcore import memory
+from .outofcore.workspace import Workspace
 from .plan import Plan, make_plan
 from .scene import Conductor, Dielectric, Diffuse, Medium, Scene
 
@@ -34,8 +36,8 @@ PROJECTIONS = ("numeric", "semi-analytic")
 
 
 def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionStats,
-                    projection: str = "numeric", device=None, park_dir: str | None = None,
-                    notes: list | None = None):
+                    projection: str = "numeric", device=None,
+                    workspace: Workspace | None = None, notes: list | None = None):
     """The operator of layer ``i``; diagnostics of interfaces are appended to ``notes``."""
     notes = [] if notes is None else notes
     layer = scene.layers[i]
@@ -46,7 +48,7 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
         lp = next(lp for lp in plan.layers if lp.index == i)
         from .aniso.plan import COUPLED_RELERR
         op = aniso_interface_operator(grid, plan.md, lp.ms, layer, eta_above, stats,
-                                      relerr=COUPLED_RELERR, park_dir=park_dir)
+                                      relerr=COUPLED_RELERR, workspace=workspace)
         notes += _check_energy(op, i, layer, plan)
         return op
     if isinstance(layer, (Dielectric, Conductor)):
@@ -156,15 +158,14 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
     monos = [scene.channel(c) for c in range(scene.channels)]
     keys = [[(mono.layers[lp.index], mono.ior_above(lp.index)) for lp in used]
             for mono in monos]
-    memory.release()                # the plan's temporaries (~100 MiB on Table 2 row 6)
+    memory.release()                # the plan's temporaries
     for c, mono in enumerate(monos):
         later = {k for ks in keys[c + 1:] for k in ks}
         owned = [key not in later and keys[c].count(key) == 1 for key in keys[c]]
-        # anisotropic operators that a coupled adding step will consume wait on disk as their
-        # blocks are built (aniso_interface_operator(park_dir=...)): the directory, if any
-        from .aniso.park import park_directory
-        park_dir = park_directory(plan.memory_bytes) \
-            if plan.representation == "anisotropic" and len(keys[c]) > 1 else None
+        # anisotropic operators that a coupled adding step will consume wait in the workspace
+        # as their blocks are built (aniso_interface_operator(workspace=...))
+        workspace = Workspace.for_bytes(plan.memory_bytes) \
+            if plan.representation == "anisotropic" and len(keys[c]) > 1 else Workspace()
         # projected bottom up: the base of a coated stack is the smaller operator (one block
         # below an opaque interface), so the coating's projection, the larger transient, runs
         # beside it rather than the other way round (Table 2 row 6 of seed 000: 300 MiB less)
@@ -172,7 +173,7 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
             if key not in cache:
                 t0 = time.perf_counter()
                 cache[key] = _layer_operator(plan, grid, mono, lp.index, stats, projection,
-                                             device, park_dir if own else None, notes)
+                                             device, workspace if own else None, notes)
                 memory.release()
                 t_layers += time.perf_counter() - t0
         ops = [cache[key] for key in keys[c]]
@@ -182,7 +183,7 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
         if not ops:
             stack = IsoOperator.identity(grid, plan.md, scene.top_ior)
         elif plan.representation == "anisotropic":
-            stack = _add_mixed(ops, owned, threads)
+            stack = _add_mixed(ops, owned, threads, workspace)
         else:
             stack = ops[-1]
             for op in reversed(ops[:-1]):
@@ -211,13 +212,13 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
     return BSDF(stacks, plan, info)
 
 
-def _add_mixed(ops, owned, threads):
+def _add_mixed(ops, owned, threads, workspace=None):
     """Stack a list of isotropic and anisotropic operators (top to bottom): runs of isotropic
     operators are added with the cheaper isotropic equations, then the runs and the anisotropic
     operators with the coupled-mode ones (adding is associative). ``ops`` is emptied; the
     operators flagged in ``owned`` (referenced nowhere else) and the intermediate stacks are
-    consumed by the adding steps, which release their blocks as soon as they are used."""
-    from .aniso import adding as aniso_adding
+    consumed by the adding steps, which release their blocks as soon as they are used and
+    keep idle blocks and intermediate pieces in ``workspace``."""
     from .aniso.plan import STACK_RELERR, STACK_RELERR_INTERMEDIATE
     reduced = _reduce_isotropic_runs(ops, owned, threads)
     stack, own_stack = reduced.pop()
@@ -227,7 +228,7 @@ def _add_mixed(ops, owned, threads):
                    (False, True): "bottom"}.get((own, own_stack))
         stack = aniso_adding.add(op, stack, relerr=STACK_RELERR,
                                  relerr_intermediate=STACK_RELERR_INTERMEDIATE,
-                                 consume=consume)
+                                 consume=consume, workspace=workspace)
         own_stack = True
         del op
     return stack

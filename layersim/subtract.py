@@ -67,7 +67,7 @@ import scipy.sparse as sps
 from .adding import add as iso_add
 from .aniso import basis
 from .aniso.adding import add as coupled_add
-from .aniso.adding import banded_solve
+from .aniso.banded import banded_solve
 from .aniso.operator import AnisoOperator, prune
 from .bsdf import BSDF, channel_pairs
 from .errors import InfeasibleError, OperatorError

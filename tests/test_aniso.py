@@ -4,6 +4,7 @@ symmetries (isotropic limit, axis swap = 90 degree rotation, reciprocity, conser
 coupled adding equations against isotropic adding and a dense solve, and the plan/solve/BSDF
 pipeline."""
 
+import contextlib
 import os
 
 import numpy as np
@@ -13,7 +14,7 @@ import scipy.sparse as sps
 import layersim
 from layersim import adding
 from layersim.aniso import AnisoOperator, adding as aniso_adding, basis, reciprocity_error
-from layersim.aniso.adding import banded_solve
+from layersim.aniso.banded import banded_solve
 from layersim.config import configure
 from layersim.errors import InfeasibleError
 from layersim.ingredients.numeric import numeric_interface_operator
@@ -31,7 +32,7 @@ GOLD = complex(0.143552, 3.98397)
 
 def files_in(directory) -> list:
     """Our files in ``directory``: the named ones, and the spool files held open by this
-    process (layersim.aniso.park.Spool removes a file from the directory as it creates it, so
+    process (layersim.outofcore.spool.Spool removes a file from the directory as it creates it, so
     that it lives only while open; Linux /proc lists it as ``path (deleted)``)."""
     prefix = os.path.join(str(directory), "")
     held = []
@@ -43,6 +44,14 @@ def files_in(directory) -> list:
         if target.startswith(prefix):
             held.append(target)
     return held + [str(p) for p in directory.iterdir()]
+
+
+@pytest.fixture
+def park_dir():
+    """``park_dir(where)`` sets ``settings().park_dir`` for the rest of the test (None: parking
+    off)."""
+    with contextlib.ExitStack() as stack:
+        yield lambda where: stack.enter_context(configure(park_dir=where))
 
 
 def slot_values(op, name, o, i, phi_i, phi_o):
@@ -314,14 +323,14 @@ def test_coupled_stack_never_creates_energy_and_is_reciprocal(coupled_layers):
 @pytest.mark.slow
 @pytest.mark.parametrize("parking", [False, True])
 def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(
-        coupled_layers, parking, tmp_path, monkeypatch):
+        coupled_layers, parking, tmp_path, monkeypatch, park_dir):
     """``consume`` only changes when blocks are released (and, with parking, that the idle
     ones wait on disk): same result, with and without the per-pair truncation of the solver,
     transmissive and opaque bottoms; consumed operands refuse to be used again; no parked
     file is left behind."""
-    from layersim.aniso import park
+    from layersim.outofcore import parking as park
     from layersim.errors import OperatorError
-    monkeypatch.setenv("LAYERSIM_PARK_DIR", str(tmp_path) if parking else "off")
+    park_dir(str(tmp_path) if parking else None)
     monkeypatch.setattr(park, "PARK_MIN_BYTES", 0)
     written = []
     init = park.Parked.__init__
@@ -356,23 +365,28 @@ def test_consuming_adding_gives_the_same_stack_and_releases_the_operands(
     assert files_in(tmp_path) == []
 
 
-def test_malloc_arena_cap_follows_the_environment(monkeypatch):
-    """layersim caps glibc's malloc arenas at LAYERSIM_MALLOC_ARENAS (default 1), 0 leaves
-    glibc's default; a value that is not an integer falls back to the default."""
-    from layersim import memory
+def test_malloc_arena_cap_is_explicit_and_not_applied_on_import():
+    """Importing layersim leaves glibc's malloc untouched (mallopt is never called); a program
+    that owns its process caps the arenas with cap_arenas (0 leaves glibc's default). Run in a
+    fresh process: the cap cannot be undone."""
+    import subprocess
+    import sys
+    from layersim.outofcore import memory
     if not memory._load() or not hasattr(memory._load(), "mallopt"):
         pytest.skip("not glibc")
-    try:
-        monkeypatch.setenv("LAYERSIM_MALLOC_ARENAS", "0")
-        assert memory.limit_arenas() is False
-        monkeypatch.setenv("LAYERSIM_MALLOC_ARENAS", "2")
-        assert memory.limit_arenas() is True
-        monkeypatch.setenv("LAYERSIM_MALLOC_ARENAS", "many")
-        assert memory.limit_arenas() is True
-        assert memory.limit_arenas(0) is False
-    finally:
-        monkeypatch.delenv("LAYERSIM_MALLOC_ARENAS")
-        memory.limit_arenas()
+    code = ("import ctypes\n"
+            "from layersim.outofcore import memory\n"
+            "calls = []\n"
+            "class Libc:\n"
+            "    def __init__(self, lib): self.lib = lib\n"
+            "    def malloc_trim(self, pad): return self.lib.malloc_trim(pad)\n"
+            "    def mallopt(self, *a): calls.append(a); return self.lib.mallopt(*a)\n"
+            "memory._libc = Libc(memory._load())\n"
+            "import layersim\n"
+            "print(len(calls), memory.cap_arenas(0), memory.cap_arenas(2), len(calls))\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["0", "False", "True", "1"]
 
 
 @pytest.mark.slow
@@ -383,7 +397,7 @@ def test_a_killed_solve_leaves_no_spool_file(tmp_path):
     import subprocess
     import sys
     code = ("import os, signal, numpy as np\n"
-            "from layersim.aniso.park import Spool\n"
+            "from layersim.outofcore.spool import Spool\n"
             f"s = Spool({str(tmp_path)!r})\n"
             "s.append((np.arange(100000.0),))\n"
             "assert s.on_disk and next(iter(s))[0][-1] == 99999.0\n"
@@ -395,8 +409,9 @@ def test_a_killed_solve_leaves_no_spool_file(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_parked_block_round_trip_and_where_parking_is_refused(tmp_path, monkeypatch):
-    from layersim.aniso import park
+def test_parked_block_round_trip_and_where_parking_is_refused(tmp_path, monkeypatch,
+                                                             park_dir):
+    from layersim.outofcore import parking as park
     mat = sps.random(50, 40, 0.2, random_state=2, format="csr")
     ref = mat.copy()
     monkeypatch.setattr(park, "PARK_MIN_BYTES", 0)
@@ -411,15 +426,15 @@ def test_parked_block_round_trip_and_where_parking_is_refused(tmp_path, monkeypa
     assert park.park(ref, None) is ref                          # nowhere to park
     monkeypatch.setattr(park, "PARK_MIN_BYTES", 1 << 40)
     assert park.park(ref, str(tmp_path)) is ref                 # too small to bother
-    monkeypatch.setenv("LAYERSIM_PARK_DIR", "off")
+    park_dir(None)
     assert park.park_directory() is None
-    monkeypatch.setenv("LAYERSIM_PARK_DIR", str(tmp_path))
+    park_dir(str(tmp_path))
     assert park.park_directory(1) == str(tmp_path)
     assert park.park_directory(1 << 62) is None                 # not enough free space
-    monkeypatch.setenv("LAYERSIM_PARK_DIR", str(tmp_path / "missing"))
+    park_dir(str(tmp_path / "missing"))
     assert park.park_directory() is None
     monkeypatch.setattr(park, "_filesystem", lambda path: "tmpfs")
-    monkeypatch.setenv("LAYERSIM_PARK_DIR", str(tmp_path))
+    park_dir(str(tmp_path))
     assert park.park_directory() is None                        # RAM-backed: no gain
 
 
@@ -428,8 +443,9 @@ def test_spooled_parts_assemble_as_a_list_of_them_does(on_disk, tmp_path):
     """A Spool reads its tuples back in order, as often as asked, and from_parts of a spool
     (with a pair pruning applied as the parts are read) equals from_parts of the list; the
     file goes once the spool is drained."""
-    from layersim.aniso import operator as aop
-    from layersim.aniso.park import Spool
+    from layersim.aniso.pairs import PairPruner
+    from layersim.outofcore.assemble import from_parts
+    from layersim.outofcore.spool import Spool
     rng = np.random.default_rng(5)
     shape, h = (30, 24), 6
     parts = [(rng.integers(0, shape[0], k).astype(np.int32),
@@ -443,21 +459,21 @@ def test_spooled_parts_assemble_as_a_list_of_them_does(on_disk, tmp_path):
     for _ in range(2):
         for got, ref in zip(spool, parts):
             assert all(np.array_equal(x, y) and x.dtype == y.dtype for x, y in zip(got, ref))
-    keep = aop.PairPruner(h, 1e-3)
+    keep = PairPruner(h, 1e-3)
     for part in parts:
         keep(*part)                                 # the stream's pair maxima
-    ref = aop.from_parts([keep.final_filter(*p) for p in parts], shape)
-    got = aop.from_parts(spool, shape, select=keep.final_filter)
+    ref = from_parts([keep.final_filter(*p) for p in parts], shape)
+    got = from_parts(spool, shape, select=keep.final_filter)
     assert sum(keep.final_filter(*p)[0].size for p in parts) < sum(p[0].size for p in parts)
     assert (got != ref).nnz == 0 and np.array_equal(got.indices, ref.indices)
     assert len(spool) == 0 and files_in(tmp_path) == []
 
 
 def test_csr_product_equals_scipys_product():
-    """Rows lo..hi of a @ b without the symbolic pass (output sized by the multiply-adds)
-    equal scipy's product entry for entry and in order: 32- and 64-bit indices, empty rows,
-    an empty product, one row, and cancellation to exact zeros (dropped by both)."""
-    from layersim.aniso import operator as aop
+    """Rows lo..hi of a @ b, read in place from a, equal scipy's product of the slice entry
+    for entry and in order: 32- and 64-bit indices, empty rows, an empty product, one row,
+    and cancellation to exact zeros (dropped by both)."""
+    from layersim.outofcore import products as aop
     rng = np.random.default_rng(11)
     a = sps.random(60, 80, 0.08, random_state=rng, format="csr")
     b = sps.random(80, 70, 0.1, random_state=rng, format="csr")
@@ -486,8 +502,9 @@ def test_pruned_product_is_the_pair_pruned_product(monkeypatch, tmp_path):
     pieces in memory or in a file; the left factor whole or read in row pieces from a file)
     keeps exactly the entries of prune_pairs of the whole product, with chunks of one row up
     to one chunk."""
-    from layersim.aniso import operator as aop, rowpieces
-    monkeypatch.setattr(rowpieces, "PIECE_ENTRIES", 150)       # a written in several pieces
+    from layersim.aniso import pairs
+    from layersim.outofcore import assemble, products, rowpieces, rows
+    monkeypatch.setattr(rows, "PIECE_ENTRIES", 150)            # a written in several pieces
     rng = np.random.default_rng(3)
     for n, m, density in ((83, 250, 0.05), (97, 113, 0.2), (40, 30, 0.0)):
         a = sps.random(n, m, density, random_state=rng, format="csr")
@@ -498,19 +515,20 @@ def test_pruned_product_is_the_pair_pruned_product(monkeypatch, tmp_path):
                               for r in range(n)], int)
         flops = int(row_flops.sum())
         for chunk_flops, stack_every in ((1, 1), (max(1, flops // 7), 50), (flops + 1, 1 << 22)):
-            monkeypatch.setattr(aop, "PRODUCT_CHUNK_FLOPS", chunk_flops)
-            monkeypatch.setattr(aop, "RELEASE_ENTRIES", stack_every)
-            starts = aop.product_row_chunks(a, b, chunk_flops)
+            monkeypatch.setattr(products, "PRODUCT_CHUNK_FLOPS", chunk_flops)
+            monkeypatch.setattr(assemble, "RELEASE_ENTRIES", stack_every)
+            starts = products.product_row_chunks(a, b, chunk_flops)
             assert starts[0] == 0 and starts[-1] == n and np.all(np.diff(starts) > 0)
             for lo, hi in zip(starts[:-1], starts[1:]):     # the bound, or a single row
                 assert hi - lo == 1 or row_flops[lo:hi].sum() <= chunk_flops
                 assert hi == n or row_flops[lo:hi + 1].sum() > chunk_flops   # greedy
-            whole, ref = aop.pruned_product(a, b, 5, None), sps.csr_matrix(a @ b)
+            whole, ref = pairs.pruned_product(a, b, 5, None), sps.csr_matrix(a @ b)
             assert np.array_equal(whole.indptr, ref.indptr)         # relerr None: a @ b
             assert np.array_equal(whole.indices, ref.indices)
             assert np.array_equal(whole.data, ref.data)
             for h, relerr in ((5, 1e-6), (7, 0.3)):
-                got, ref = aop.pruned_product(a, b, h, relerr), aop.prune_pairs(a @ b, h, relerr)
+                got = pairs.pruned_product(a, b, h, relerr)
+                ref = pairs.prune_pairs(a @ b, h, relerr)
                 assert got.shape == ref.shape and got.nnz == ref.nnz
                 assert np.array_equal(got.indptr, ref.indptr)
                 assert np.array_equal(got.indices, ref.indices)
@@ -520,8 +538,8 @@ def test_pruned_product_is_the_pair_pruned_product(monkeypatch, tmp_path):
                 for where in (None, str(tmp_path)):             # pieces in memory, on disk
                     left = rowpieces.RowPieces.written(a, where)   # a read piece by piece
                     for factor in (a, left):
-                        pieces = aop.pruned_product(factor, b, h, relerr, pieces=True,
-                                                    directory=where)
+                        pieces = pairs.pruned_product(factor, b, h, relerr, pieces=True,
+                                                      directory=where)
                         assert pieces.on_disk == (where is not None) and pieces.nnz == ref.nnz
                         whole = pieces.to_csr()
                         assert np.array_equal(whole.indptr, ref.indptr)
@@ -539,14 +557,15 @@ def test_sums_and_reciprocal_pruning_in_pieces_equal_the_whole(coupled_layers, o
     """sum_pieces (row chunks, in memory or in a file, assembled one piece at a time) equals
     scipy's sum, and reciprocal_prune through many pieces (in memory or in files) equals it
     in one piece; the pruned stack is exactly reciprocal and lost entries; no file is left."""
-    from layersim.aniso import operator as aop, rowpieces
-    monkeypatch.setattr(aop, "CHUNK_ENTRIES", 5000)             # many pieces
-    monkeypatch.setattr(rowpieces, "PIECE_ENTRIES", 3000)       # blocks written in pieces
+    from layersim.aniso import operator as aop
+    from layersim.outofcore import rows, sums
+    monkeypatch.setattr(sums, "CHUNK_ENTRIES", 5000)            # many pieces
+    monkeypatch.setattr(rows, "PIECE_ENTRIES", 3000)            # blocks written in pieces
     where = str(tmp_path) if on_disk else None
     d, hg, c, glass_out = coupled_layers
     a, b = d.blocks["Rt"], glass_out.blocks["Tbt"]
     for alpha, beta in ((1.0, 1.0), (0.5, -0.5)):
-        pieces = aop.sum_pieces(a, b, alpha, beta, where)
+        pieces = sums.sum_pieces(a, b, alpha, beta, where)
         assert pieces.on_disk == on_disk and len(list(pieces)) > 3
         got, ref = pieces.to_csr(release=True), alpha * a + beta * b
         assert got.nnz == ref.nnz and abs(got - ref).max() <= 1e-15 * abs(ref).max()
@@ -555,7 +574,7 @@ def test_sums_and_reciprocal_pruning_in_pieces_equal_the_whole(coupled_layers, o
     ref, got = dict(slab.blocks), dict(slab.blocks)
     args = (slab.grid, slab.md, slab.eta_top, slab.eta_bottom, slab.delta, 1e-5)
     with monkeypatch.context() as m:                # the reference: one piece each
-        m.setattr(aop, "CHUNK_ENTRIES", 10 ** 9)
+        m.setattr(sums, "CHUNK_ENTRIES", 10 ** 9)
         aop.reciprocal_prune(ref, *args)
     aop.reciprocal_prune(got, *args, directory=where)
     for name in ref:
@@ -573,7 +592,9 @@ def test_transpose_and_sum_of_a_matrix_in_row_pieces(on_disk, tmp_path):
     piece by piece (rows between pieces taken from the other term) to the whole sum and
     prunes piece by piece as the whole matrix does."""
     from layersim.aniso import operator as aop
-    from layersim.aniso.rowpieces import RowPieces
+    from layersim.outofcore.rowpieces import RowPieces
+    from layersim.outofcore.sums import sum_pieces
+    from layersim.outofcore.transpose import transposed
     rng = np.random.default_rng(4)
     A = sps.random(60, 45, density=0.2, random_state=rng, format="csr")
     A = sps.csr_matrix(sps.diags((np.arange(60) % 7 != 3).astype(float)) @ A)   # empty rows
@@ -587,10 +608,10 @@ def test_transpose_and_sum_of_a_matrix_in_row_pieces(on_disk, tmp_path):
         held[lo:hi] = 1.0
     A = sps.csr_matrix(sps.diags(held) @ A)
     A.eliminate_zeros()
-    T = aop._transposed(pieces)
+    T = transposed(pieces)
     assert T.has_canonical_format and T.shape == (45, 60) and T.nnz == A.nnz
     assert np.array_equal(T.toarray(), A.T.toarray())
-    got = aop.sum_pieces(pieces, B, 0.5, -2.0, str(tmp_path) if on_disk else None)
+    got = sum_pieces(pieces, B, 0.5, -2.0, str(tmp_path) if on_disk else None)
     assert np.allclose(got.to_csr(release=True).toarray(), (0.5 * A - 2.0 * B).toarray(),
                        rtol=0, atol=1e-15)
     cut = 0.5 * abs(A).max()                    # prune: piece by piece as whole
@@ -605,7 +626,7 @@ def test_transpose_and_sum_of_a_matrix_in_row_pieces(on_disk, tmp_path):
 def test_from_parts_sums_duplicates_in_either_format(monkeypatch):
     """from_parts (counting sort of the parts into CSR, trimming the heap as it goes) equals
     scipy's COO conversion, duplicates summed, for CSR and CSC, with empty parts."""
-    from layersim.aniso import operator as aop
+    from layersim.outofcore import assemble as aop
     monkeypatch.setattr(aop, "RELEASE_ENTRIES", 10)
     rng = np.random.default_rng(11)
     shape = (37, 23)
@@ -671,7 +692,7 @@ def test_banded_solve_with_block_lu_growth_falls_back_to_sparse_lu(monkeypatch):
     residual check on random dense right-hand sides catches; the sparse LU (pivoting across
     orders) then gives the accurate solution. Without the check the block-LU answer is wrong
     far beyond the tolerance below."""
-    from layersim.aniso import adding as aadd
+    from layersim.aniso import banded as aadd
     h, md = 4, 5
     A, B = _swapped_orders_system(h, md, diagonal=1e-14, coupling=2.0, fill=0.3)
     ref = np.linalg.solve(A.toarray(), B.toarray())
@@ -692,8 +713,8 @@ def test_banded_solve_reads_a_matrix_in_row_pieces(on_disk, tmp_path, monkeypatc
     """``I - K`` with ``K`` given as row pieces (in memory or in a file; rows left out of
     every piece, pieces of one row) solves as the assembled matrix does, and the pieces read
     back as the matrix they hold (counts, products, columns, diagonal, slot pairs)."""
-    from layersim.aniso import rowpieces
-    from layersim.aniso.operator import slot_pairs
+    from layersim.aniso.pairs import slot_pairs
+    from layersim.outofcore import rowpieces, rows
     h, md = 6, 9
     N = basis.n_slots(md) * h
     mode = basis.slot_mode(md)[np.arange(N) // h]
@@ -719,7 +740,7 @@ def test_banded_solve_reads_a_matrix_in_row_pieces(on_disk, tmp_path, monkeypatc
     assert abs(pieces.columns([3, 50, 7]) - K[:, [3, 50, 7]]).max() == 0.0
     assert np.array_equal(pieces.diagonal(), K.diagonal())
     assert all(np.array_equal(x, y) for x, y in zip(slot_pairs(pieces, h), slot_pairs(K, h)))
-    monkeypatch.setattr(rowpieces, "PIECE_ENTRIES", 100)       # RowPieces.of: many pieces
+    monkeypatch.setattr(rows, "PIECE_ENTRIES", 100)            # RowPieces.of: many pieces
     wrapped = rowpieces.RowPieces.of(K)
     assert len(list(wrapped)) > 5 and abs(wrapped.to_csr() - K).max() == 0.0
     ref = np.linalg.solve(np.eye(N) - K.toarray(), B.toarray())
@@ -801,13 +822,13 @@ def test_solved_anisotropic_stack_eval_albedo_bins_and_persistence(brushed_coati
 @pytest.mark.slow
 @pytest.mark.parametrize("parking", [False, True])
 def test_rgb_stack_shares_layers_across_channels_and_matches_per_channel_solves(
-        parking, tmp_path, monkeypatch):
+        parking, tmp_path, monkeypatch, park_dir):
     """The solver hands a layer operator over to the adding (which releases its blocks) only
     at its last use: a coating shared by all channels and a base shared by channels 0 and 2
     give, channel by channel, the stacks of separate monochrome solves; with parking, the
     operators projected for their last use wait on disk (same result, no file left)."""
-    from layersim.aniso import park
-    monkeypatch.setenv("LAYERSIM_PARK_DIR", str(tmp_path) if parking else "off")
+    from layersim.outofcore import parking as park
+    park_dir(str(tmp_path) if parking else None)
     monkeypatch.setattr(park, "PARK_MIN_BYTES", 0)
     written = []
     init = park.Parked.__init__
@@ -838,19 +859,21 @@ def test_rgb_stack_shares_layers_across_channels_and_matches_per_channel_solves(
 @pytest.mark.slow
 def test_projection_parks_the_blocks_of_an_operator_handed_to_the_adding(
         coupled_layers, tmp_path, monkeypatch):
-    """aniso_interface_operator(park_dir=...) parks each block as it is built (rotated, its
+    """aniso_interface_operator(workspace=...) on disk parks each block as it is built (rotated, its
     slot-0 rows kept): the energy check reads the same albedos, a parked block refuses direct
     use, and a consuming adding step gives the stack of the resident operators."""
-    from layersim.aniso import park
     from layersim.errors import OperatorError
+    from layersim.outofcore import parking as park
+    from layersim.outofcore.workspace import Workspace
     monkeypatch.setattr(park, "PARK_MIN_BYTES", 0)
+    ws = Workspace(str(tmp_path))
     d, _, c, _ = coupled_layers
     top = aniso_interface_operator(G32, 16, 3, Dielectric(ior=1.5, alpha_u=0.2, alpha_v=0.35,
                                                           rotation=0.4), 1.0,
-                                   park_dir=str(tmp_path))
+                                   workspace=ws)
     base = aniso_interface_operator(G32, 16, 3, Conductor(ior=complex(0.2, 3.0), alpha_u=0.35,
                                                           alpha_v=0.2), 1.5,
-                                    park_dir=str(tmp_path))
+                                    workspace=ws)
     assert all(isinstance(m, park.Parked) for m in top.blocks.values())
     assert len(files_in(tmp_path)) == 5 and base.ms == c.ms and top.memory_bytes() == 0
     for name, alb in d.albedo_slots().items():
@@ -860,9 +883,9 @@ def test_projection_parks_the_blocks_of_an_operator_handed_to_the_adding(
     for kw in ({}, {"relerr": 1e-7, "relerr_intermediate": 1e-6}):
         if kw:      # a second pair: the first was consumed
             top = aniso_interface_operator(G32, 16, 3, Dielectric(
-                ior=1.5, alpha_u=0.2, alpha_v=0.35, rotation=0.4), 1.0, park_dir=str(tmp_path))
+                ior=1.5, alpha_u=0.2, alpha_v=0.35, rotation=0.4), 1.0, workspace=ws)
             base = aniso_interface_operator(G32, 16, 3, Conductor(
-                ior=complex(0.2, 3.0), alpha_u=0.35, alpha_v=0.2), 1.5, park_dir=str(tmp_path))
+                ior=complex(0.2, 3.0), alpha_u=0.35, alpha_v=0.2), 1.5, workspace=ws)
         ref = aniso_adding.add(d, c, **kw)
         got = aniso_adding.add(top, base, consume="both", **kw)
         assert abs(ref.blocks["Rt"] - got.blocks["Rt"]).max() == 0.0

@@ -1,11 +1,14 @@
-"""Coupled-mode (anisotropic) layer calculus (seed 000, sec. 3-4).
+"""Coupled-mode (anisotropic) layer calculus (Zeltner & Jakob 2018, sec. 3-4).
 
 * :mod:`.basis` -- the real slot basis and its relation to the complex exponential basis of
-  seed 000 eq. (7)-(10) (and to the isotropic cosine basis);
+  Zeltner & Jakob 2018 eq. (7)-(10) (and to the isotropic cosine basis);
 * :mod:`.operator` -- :class:`AnisoOperator`, the four banded-block scattering matrices;
+* :mod:`.pairs` -- slot pairs holding entries, and pruning per ordinate pair;
+* :mod:`.reciprocity` -- the reciprocal image of a block;
 * :mod:`.banded` -- block-banded LU with pruned block substitution (the solver of the adding
   and subtracting equations);
-* :mod:`.adding` -- the adding equations (seed 000 eq. (11)-(12)) on coupled operators.
+* :mod:`.adding` -- the adding equations (Zeltner & Jakob 2018 eq. (11)-(12)) on coupled
+  operators, their blocks held by a :class:`~layersim.outofcore.workspace.Workspace`.
 
 Isotropic layers and stacks keep the cheaper :class:`~layersim.operator.IsoOperator`; they are
 converted (block diagonal, no coupling) only when combined with an anisotropic one.

@@ -44,14 +44,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import fourier, memory
+from .. import fourier
 from ..aniso import basis, series
-from ..aniso.operator import (AnisoOperator, from_parts, reciprocal_image, rotate_block,
-                              slot_column_scale, with_reciprocal_image)
-from ..aniso.park import Spool, park
+from ..aniso.operator import AnisoOperator, rotate_block, slot_column_scale
+from ..aniso.reciprocity import reciprocal_image, with_reciprocal_image
 from ..config import settings
 from ..kernels import projection as kproj
 from ..operator import Grid
+from ..outofcore.assemble import from_parts
+from ..outofcore.workspace import Workspace
 from ..scene import Conductor
 from ..threads import parallel_map
 from .microfacet import L_FIT as ISO_L_FIT
@@ -414,7 +415,7 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
         2 ms + 1), or ``convert(o, i, F)`` of each chunk, applied as soon as the chunk is
         projected (the dense chunks of a block take several times the memory of its sparse
         entries), appended to ``out`` (a new list by default; a
-        :class:`~layersim.aniso.park.Spool` keeps them in a file, where the entries of a
+        :class:`~layersim.outofcore.spool.Spool` keeps them in a file, where the entries of a
         large block do not compete with the projection's temporaries). Batches are projected
         ``layersim.config.settings().threads`` at a time, so that only those batches' dense
         temporaries are alive at once.
@@ -529,7 +530,7 @@ def _entries(grid: Grid, md: int, ms: int, o, i, F):
 def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: float,
                              stats: AnisoProjectionStats | None = None,
                              reciprocity: bool = True, relerr: float = RELERR,
-                             park_dir: str | None = None) -> AnisoOperator:
+                             workspace: Workspace | None = None) -> AnisoOperator:
     """Operator of an anisotropic (or rotated) rough interface in the slot basis.
 
     Parameters
@@ -553,12 +554,12 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
         (default: the isotropic projection's ``RELERR``; :func:`layersim.solve` passes the
         plan's :data:`layersim.aniso.plan.COUPLED_RELERR`). Truncation is per pair, and mirrored
         blocks reuse the projected pairs, so reciprocity stays exact at any ``relerr``.
-    park_dir : str, optional
-        Park each block on disk there as soon as it is built (:mod:`layersim.aniso.park`,
-        its slot-0 rows kept for the energy check), for a caller that hands the operator to
-        an adding step that consumes it: the blocks of a coating wait on disk while the
-        others are projected (on Table 2 row 6 of seed 000 the coating's first two blocks
-        and the base, 525 MiB, were resident through the projection of the third).
+    workspace : Workspace, optional
+        Where the projected parts wait, and, if it is on disk, where each block is parked as
+        soon as it is built (:mod:`layersim.outofcore.parking`, its slot-0 rows kept for the
+        energy check), for a caller that hands the operator to an adding step that consumes
+        it: the blocks of a coating wait on disk while the others are projected. Default: in
+        memory, nothing parked.
     """
     if layer.smooth:
         raise ValueError("aniso_interface_operator needs a rough interface")
@@ -570,23 +571,24 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
     names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
     N = basis.n_slots(md) * grid.h
     col_scale = slot_column_scale(grid, md)
+    workspace = workspace or Workspace()
 
     def project(name, triangle=False):
         """The block's matrix from its (triangle of) pairs, assembled batch by batch."""
         parts = _project_block(grid, name, md, ms, eta, au, av, dist, stats, triangle=triangle,
                                relerr=relerr, convert=lambda o, i, F: _entries(grid, md, ms,
                                                                                o, i, F),
-                               out=Spool(park_dir))     # in memory without park_dir
+                               out=workspace.spool())
         return from_parts(parts, (N, N))
 
     def done(*names):
         """Blocks complete (no other derives from them): rotated and parked if asked."""
-        if park_dir is None:
+        if not workspace.on_disk:
             return
         for name in names:
-            blocks[name] = park(rotate_block(blocks[name], md, grid.h, layer.rotation),
-                                park_dir, head=grid.h)
-        memory.release()
+            blocks[name] = workspace.park(rotate_block(blocks[name], md, grid.h,
+                                                       layer.rotation), head=grid.h)
+        workspace.release()
 
     blocks = {}
     for name in names:
@@ -601,12 +603,13 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
         else:                   # one triangle of pairs and its reciprocal image
             blocks[name] = with_reciprocal_image(project(name, triangle=True), grid.h,
                                                  col_scale, 1.0, 1.0, skip_diagonal=True,
-                                                 directory=park_dir).to_csr(release=True)
+                                                 directory=workspace.directory
+                                                 ).to_csr(release=True)
             done(name)
-        memory.release()
+        workspace.release()
     op = AnisoOperator(grid, md, blocks, eta_top=eta_above,
                        eta_bottom=None if opaque else layer.ior.real, ms=ms)
-    if park_dir is None:
+    if not workspace.on_disk:
         op = op.rotated(layer.rotation)
     stats.seconds += time.perf_counter() - t0
     return op

@@ -1,17 +1,16 @@
 """A sparse matrix held as consecutive pieces of rows, on disk between its uses.
 
 The coupled adding equations (:mod:`layersim.aniso.adding`) solve with ``A = I - K``,
-``K = Rt2 Rb1``, and the banded solve reads ``K`` only row by row: its structure, its dense
-block rows over the band, the columns of the eliminated unknowns and the residual check
-(:func:`~layersim.aniso.adding.banded_solve`). Formed as one CSR matrix, ``K`` (248 MiB on
-Table 2 row 6 of seed 000) was held beside both its factors and then beside the dense block
-rows made from it. :func:`~layersim.aniso.operator.pruned_product` can instead write each
-piece of rows to a :class:`RowPieces` file as it is formed (the operands and one piece per
-thread resident), and the solve reads the pieces back one at a time (from the page cache:
-~0.1 s per pass over ``K``).
+``K = Rt2 Rb1``, and the banded solve (:func:`layersim.aniso.banded.banded_solve`) reads ``K``
+only row by row: its structure, its dense block rows over the band, the columns of the
+eliminated unknowns and the residual check. Formed as one CSR matrix, ``K`` would be held
+beside both its factors and then beside the dense block rows made from it.
+:func:`~layersim.outofcore.products.product` instead writes each piece of rows to a
+:class:`RowPieces` file as it is formed (the operands and one piece per thread resident), and
+the solve reads the pieces back one at a time (from the page cache).
 
 A :class:`RowPieces` without a directory keeps its pieces in memory (parking off, or a
-RAM-backed temporary directory: :func:`layersim.aniso.park.park_directory`), and
+RAM-backed temporary directory: :func:`layersim.outofcore.parking.park_directory`), and
 :meth:`RowPieces.of` wraps a CSR matrix without copying it, so that callers read every
 matrix the same way.
 """
@@ -21,26 +20,11 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sps
 
-from .park import Spool
-
-#: Entries per piece when a CSR matrix is read piece by piece (:meth:`RowPieces.of`): bounds
-#: the per-entry temporaries of a pass (~16 MiB per array).
-PIECE_ENTRIES = 1 << 21
+from .assemble import stack_rows
+from .rows import row_spans
+from .spool import Spool
 
 _INDPTR, _INDICES, _DATA = np.dtype(np.int64), np.dtype(np.int32), np.dtype(np.float64)
-
-
-def row_spans(indptr, lo: int, hi: int, entries: int | None = None):
-    """``(start, stop)`` spans covering rows ``lo .. hi - 1`` of a CSR matrix with row
-    pointers ``indptr``, about ``entries`` entries each (:data:`PIECE_ENTRIES` by default;
-    one row at least)."""
-    entries = PIECE_ENTRIES if entries is None else entries
-    start = lo
-    while start < hi:
-        stop = int(np.searchsorted(indptr, indptr[start] + entries, side="right")) - 1
-        stop = min(hi, max(stop, start + 1))
-        yield start, stop
-        start = stop
 
 
 class RowPieces:
@@ -51,7 +35,7 @@ class RowPieces:
     ----------
     shape : (int, int)
     directory : str, optional
-        Keep the pieces in a temporary file there (a :class:`~layersim.aniso.park.Spool`,
+        Keep the pieces in a temporary file there (a :class:`~layersim.outofcore.spool.Spool`,
         removed by :meth:`close` or when the object goes); None keeps them in memory.
     """
 
@@ -64,8 +48,8 @@ class RowPieces:
 
     @classmethod
     def of(cls, mat) -> "RowPieces":
-        """Read a CSR matrix piece by piece (no copy; pieces of about :data:`PIECE_ENTRIES`
-        entries)."""
+        """Read a CSR matrix piece by piece (no copy; pieces of about
+        :data:`~layersim.outofcore.rows.PIECE_ENTRIES` entries)."""
         if isinstance(mat, RowPieces):
             return mat
         out = cls(mat.shape)
@@ -160,10 +144,9 @@ class RowPieces:
         if self._csr is not None:
             out = self._csr
         else:
-            from .operator import _stack_rows
             nnz = self.nnz
             items = zip(self._starts, self._spool.drain() if release else self._spool)
-            out = _stack_rows(((start, *arrays) for start, arrays in items), self.shape, nnz)
+            out = stack_rows(((start, *arrays) for start, arrays in items), self.shape, nnz)
         if release:
             self.close()
         return out
@@ -199,7 +182,6 @@ class RowPieces:
 def _vstack_at(pieces: list, starts: list, shape: tuple) -> sps.csr_matrix:
     """CSR matrix of ``shape`` whose rows ``starts[k] ..`` are ``pieces[k]`` (in order; other
     rows empty; ``pieces`` emptied)."""
-    from .operator import _stack_rows
     rows = [(s, p.indptr, p.indices, p.data) for s, p in zip(starts, pieces)]
     pieces.clear()
-    return _stack_rows(rows, shape)
+    return stack_rows(rows, shape)

@@ -1,12 +1,17 @@
-"""Returning freed memory to the operating system between the phases of a solve.
+"""Returning freed memory to the operating system, and the size of sparse blocks.
 
 numpy arrays above glibc's mmap threshold are mapped and unmapped directly, but the threshold
 adapts upwards (up to 32 MiB on 64-bit Linux) after large arrays are freed, so later
 temporaries of a coupled-mode solve (index and value arrays of millions of entries) come from
-the heap, and the heap keeps the freed pages resident: on Table 2 row 7 of seed 000 the
-resident memory at the start of the second layer's projection was 1.5 GiB with ~0.4 GiB
-alive. ``malloc_trim(0)`` releases every free page of the heap (and of the threads' arenas)
-back to the system; :func:`release` calls it at phase boundaries (it costs milliseconds).
+the heap, and the heap keeps the freed pages resident. ``malloc_trim(0)`` releases every free
+page of the heap (and of the threads' arenas) back to the system; :func:`release` calls it at
+phase boundaries (it costs milliseconds).
+
+:func:`cap_arenas` caps glibc's malloc arenas. The cap is process-wide and cannot be undone:
+glibc fixes its arena limit the first time a thread needs a new arena and ignores later
+``mallopt(M_ARENA_MAX)`` calls (and values <= 0), so no library call applies it; a program
+that owns its process (the command line, the benchmarks) may call it at start-up with
+``layersim.config.settings().malloc_arenas``.
 """
 
 from __future__ import annotations
@@ -51,25 +56,16 @@ def empty_sparse(*mats) -> None:
 _M_ARENA_MAX = -8
 
 
-def limit_arenas(count: int | None = None) -> bool:
-    """Cap glibc's malloc arenas (``mallopt(M_ARENA_MAX)``) at ``count`` (default:
-    ``LAYERSIM_MALLOC_ARENAS``, else 1; 0 leaves glibc's default of 8 per core); returns
-    whether the cap was set.
+def cap_arenas(count: int) -> bool:
+    """Cap glibc's malloc arenas (``mallopt(M_ARENA_MAX)``) at ``count`` for the rest of the
+    process (0 leaves glibc's default of 8 per core); returns whether the cap was set.
 
     Every thread that allocates gets an arena of its own, up to 8 per core, and what the
-    worker threads of the projection and of the substitutions freed stayed resident in theirs
-    even after :func:`release`: on Table 2 row 6 of seed 000 the resident memory after the
-    projection was ~100 MiB above the process's baseline with no array alive, and the peak of
-    the solve 678 MiB above the baseline against 579 MiB with one arena, in the same time
-    (111.6 and 113.5 s; ``benchmarks/memory_phases.py 6``). The cap is process-wide and
-    applies to threads created afterwards: :mod:`layersim` sets it when it is imported.
+    worker threads of the projection and of the substitutions free stays resident in theirs
+    even after :func:`release`; with one arena it goes back to the system. Call it before
+    worker threads allocate. It is irreversible (module docstring): a program that owns its
+    process calls it, a library does not.
     """
-    import os
-    if count is None:
-        try:
-            count = int(os.environ.get("LAYERSIM_MALLOC_ARENAS", "1"))
-        except ValueError:
-            count = 1
     lib = _load()
     if not lib or count <= 0 or not hasattr(lib, "mallopt"):
         return False
