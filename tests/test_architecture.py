@@ -1,0 +1,157 @@
+"""The structure of the package: imports flow one way and the two operator kinds share one
+interface (docs/method.md, "Layout").
+
+The import graph is read from the source with :mod:`ast`, counting imports inside functions too:
+a cycle hidden in a function is still a cycle for whoever reads or moves the code."""
+import ast
+import pathlib
+import re
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+PACKAGES = {"layersim": ROOT / "layersim", "layersim.kernels": ROOT / "kernels",
+            "layersim.montecarlo": ROOT / "montecarlo"}
+#: Modules that define the operator kinds and may tell them apart.
+OPERATOR_MODULES = ("layersim.operator", "layersim.aniso.operator")
+
+
+def _modules() -> dict:
+    out = {}
+    for package, folder in PACKAGES.items():
+        for path in folder.rglob("*.py"):
+            parts = list(path.relative_to(folder).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join([package] + parts)] = path
+    return out
+
+
+MODULES = _modules()
+
+
+def _target(module: str, path: pathlib.Path, node: ast.ImportFrom) -> str:
+    if node.level == 0:
+        return node.module or ""
+    base = module.split(".")
+    if path.name != "__init__.py":
+        base = base[:-1]
+    base = base[:len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def _imports():
+    """``{module: set of imported modules}`` and the list of private names imported."""
+    graph, private = {}, []
+    for module, path in MODULES.items():
+        deps = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                target = _target(module, path, node)
+                for alias in node.names:
+                    if f"{target}.{alias.name}" in MODULES:
+                        deps.add(f"{target}.{alias.name}")
+                    elif target in MODULES:
+                        deps.add(target)
+                        if (alias.name.startswith("_") and not alias.name.startswith("__")
+                                and target != module):
+                            private.append(f"{module} imports {target}.{alias.name}")
+            elif isinstance(node, ast.Import):
+                deps.update(a.name for a in node.names if a.name in MODULES)
+        deps.discard(module)
+        # a package's face importing its own modules is not a dependency of theirs on it
+        graph[module] = deps
+    return graph, private
+
+
+def _cycles(graph: dict) -> list:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on_stack, found = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return found
+
+
+def _without_faces(graph: dict) -> dict:
+    """The graph less the edges into package faces (``__init__``) from their own modules: a
+    module that imports ``from . import x`` goes through its package's face, which is the usual
+    Python layout and not a dependency on the face's other names."""
+    faces = {m for m, p in MODULES.items() if p.name == "__init__.py"}
+    return {m: {d for d in deps if not (d in faces and m.startswith(d + "."))}
+            for m, deps in graph.items()}
+
+
+def test_no_import_cycles():
+    graph, _ = _imports()
+    assert _cycles(_without_faces(graph)) == []
+
+
+def test_cycle_finder_finds_a_cycle():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_module_imports_private_names_of_another():
+    _, private = _imports()
+    assert private == []
+
+
+def test_no_branching_on_operator_kind_outside_the_operator_modules():
+    pattern = re.compile(r"isinstance\([^)]*\b(IsoOperator|AnisoOperator)\b"
+                         r"|hasattr\([^)]*[\"']albedo_slots[\"']")
+    found = [f"{m}:{i}: {line.strip()}"
+             for m, path in MODULES.items() if m not in OPERATOR_MODULES
+             for i, line in enumerate(path.read_text().splitlines(), 1)
+             if pattern.search(line)]
+    assert found == []
+
+
+def _function(module: str, name: str) -> ast.FunctionDef:
+    tree = ast.parse(MODULES[module].read_text())
+    return next(n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == name)
+
+
+@pytest.mark.parametrize("module", ["layersim.adding", "layersim.aniso.adding"])
+def test_the_adding_equations_fit_on_one_screen(module):
+    fn = _function(module, "add")
+    assert fn.end_lineno - fn.lineno + 1 <= 60
+
+
+def test_settings_are_read_from_the_environment_in_one_place():
+    """Only :mod:`layersim.config` reads ``LAYERSIM_*`` variables (other packages' own
+    variables, such as pyopencl's ``PYOPENCL_CTX``, are theirs to read)."""
+    pattern = re.compile(r"(environ\.get\(|environ\[|getenv\()\s*[\"']LAYERSIM_")
+    readers = [m for m, path in MODULES.items()
+               if m != "layersim.config" and pattern.search(path.read_text())]
+    assert readers == []
+
+
+def test_importing_layersim_changes_nothing_in_the_process():
+    """The package's face only imports and names things: no call (an allocator setting, a
+    thread pool, a kernel build) runs at ``import layersim``."""
+    tree = ast.parse(MODULES["layersim"].read_text())
+    calls = [ast.unparse(n) for n in tree.body
+             if isinstance(n, ast.Expr) and isinstance(n.value, ast.Call)]
+    assert calls == []
