@@ -60,7 +60,8 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
         notes += _check_energy(op, i, layer, plan)
         return op
     if isinstance(layer, Medium):
-        return medium_operator(grid, plan.md, layer.albedo, layer.g, layer.tau, eta_above)
+        return medium_operator(grid, plan.md, layer.albedo, layer.g, layer.tau, eta_above,
+                               name=f"layer {i} (medium)")
     if isinstance(layer, Diffuse):
         return diffuse_operator(grid, layer.albedo, eta_above)
     raise TypeError(f"layer {i}: no operator for kind {layer.kind!r}")  # pragma: no cover

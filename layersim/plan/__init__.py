@@ -12,6 +12,9 @@ module of this package, and :func:`make_plan` composes them in order:
   layer is projected with the ``ms`` its roughness ratio needs
   (:func:`layersim.aniso.plan.ms_for_layer`), isotropic layers keep their cheaper operators
   and runs of them are added isotropically before conversion.
+* **Media** (:mod:`.layers`): a Henyey-Greenstein medium with ``|g|`` above
+  :data:`layersim.ingredients.medium.G_EXACT_MAX` is delta-M scaled to the Legendre moments the
+  grid represents (Wiscombe 1977); its ``N``, ``f`` and scaled ``tau``/albedo are reported.
 * **Ordinates** ``n`` (:mod:`.ordinates`; quadrature on mu in [-1, 1]): from the narrowest
   angular lobe of the stack.
 * **Fourier orders** ``md`` (:mod:`.orders`): from the lobes themselves, through the
@@ -34,7 +37,7 @@ from ..scene import Scene
 from .budget import (MD_LOWER_PER_INV_ALPHA, PROJECTION_BYTES, estimate_bytes, memory_limit,
                      refuse_below_lower_bound, refuse_over_limit)
 from .coupling import choose_ms, needed_ms
-from .layers import survey_layers
+from .layers import scale_media, survey_layers
 from .model import LayerPlan, Plan
 from .ordinates import DEFAULT_RULE, N_MAX, N_MIN, N_PER_WIDTH, choose_n
 from .orders import MD_MAX, THETA_FULL, choose_md, interface_lengths, truncation_notes
@@ -63,6 +66,7 @@ def make_plan(scene: Scene) -> Plan:
     ms_needed = needed_ms(layers, survey.left_out, notes)
     anisotropic = ms_needed > 0
     grid = Grid.make(rule, choose_n(disc, rule, survey.widths, notes, overridden))
+    scale_media(scene, survey, grid)
     mono = scene.channel(0)
     refuse_below_lower_bound(disc, mono, layers, grid, survey.media_orders, ms_needed)
     lengths = interface_lengths(grid, mono, layers)

@@ -12,9 +12,18 @@ from dataclasses import dataclass, field
 
 from ..aniso import plan as aplan
 from ..errors import InfeasibleError
-from ..ingredients.medium import hg_orders
+from ..ingredients.medium import G_EXACT_MAX, hg_orders, hg_scaling
+from ..operator import Grid
 from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
 from .model import LayerPlan
+from .ordinates import N_PER_WIDTH
+
+#: Legendre moments a delta-M scaled medium needs (the accuracy target that sets its share of
+#: ``n``): for g = 0.99, tau 5, albedo 0.95 the albedo at normal incidence moves by 3e-5 from
+#: N = 31 to N = 195 moments (by 2.6e-4 from 15 to 31); ``benchmarks/forward_media.py``. A
+#: grid of ``n`` Gauss-Lobatto ordinates represents ``n - 1`` moments, so the planner's
+#: smallest grid (64) already meets it.
+DELTA_M_MOMENTS = 32
 
 
 @dataclass
@@ -30,13 +39,17 @@ class Survey:
         ``(width in radians, layer index, kind, lobe)`` of every lobe that competes to set
         ``n``.
     media_orders : int
-        Fourier orders the media's phase functions need.
+        Fourier orders the media's phase functions need (delta-M scaled media are counted by
+        :func:`scale_media`, once the grid is known).
+    scaled : list of LayerPlan
+        The media whose phase function is delta-M scaled (``|g| >`` ``G_EXACT_MAX``).
     """
 
     layers: list = field(default_factory=list)
     left_out: list = field(default_factory=list)
     widths: list = field(default_factory=list)
     media_orders: int = 1
+    scaled: list = field(default_factory=list)
 
 
 def survey_layers(scene: Scene) -> Survey:
@@ -104,6 +117,16 @@ def _medium(scene: Scene, i: int, layer, survey: Survey) -> None:
         survey.layers.append(LayerPlan(i, kind, "left out", "tau = 0"))
         return
     scatters = max(s.layers[i].albedo for s in _channels(scene)) > 0
+    if scatters and abs(layer.g) > G_EXACT_MAX:
+        # delta-M scaled: the scaled phase function needs DELTA_M_MOMENTS moments, i.e. a grid
+        # of DELTA_M_MOMENTS + 1 Gauss-Lobatto ordinates; N and f follow the grid (scale_media)
+        width = N_PER_WIDTH / (DELTA_M_MOMENTS + 1)
+        survey.widths.append((width, i, kind, f"delta-M scaled phase function "
+                                              f"({DELTA_M_MOMENTS} moments)"))
+        lp = LayerPlan(i, kind, "adding-doubling", f"tau={layer.tau:g}, g={layer.g:g}")
+        survey.scaled.append(lp)
+        survey.layers.append(lp)
+        return
     orders = hg_orders(layer.g) if scatters else 1
     survey.media_orders = max(survey.media_orders, orders)
     if layer.g != 0.0:
@@ -111,6 +134,28 @@ def _medium(scene: Scene, i: int, layer, survey: Survey) -> None:
     survey.layers.append(LayerPlan(i, kind, "adding-doubling",
                                    f"tau={layer.tau:g}, g={layer.g:g}: scattering in {orders} "
                                    "order(s), unscattered beam in all", orders=orders))
+
+
+def scale_media(scene: Scene, survey: Survey, grid: Grid) -> int:
+    """Delta-M scale the strongly forward-scattering media of ``survey`` on ``grid``
+    (:func:`layersim.ingredients.medium.hg_scaling`, the same function the solve uses): set
+    their ``orders`` and report lines, and return the Fourier orders the media need."""
+    for lp in survey.scaled:
+        scs = [hg_scaling(grid, s.layers[lp.index].g, s.layers[lp.index].albedo,
+                          s.layers[lp.index].tau) for s in _channels(scene)]
+        sc = scs[0]
+        albedos = "/".join(f"{c.albedo:.4g}" for c in scs)
+        lp.orders = max(c.moments for c in scs)
+        if sc.scaled:
+            lp.detail += (f": delta-M scaled (Wiscombe 1977), N = {sc.moments} moments, "
+                          f"f = {sc.f:.4g}, scaled tau = {sc.tau:.4g}, albedo = {albedos}; "
+                          f"scattering in {lp.orders} order(s), unscattered beam (with the "
+                          "truncated forward peak) in all")
+        else:
+            lp.detail += (f": scattering in {lp.orders} order(s) (the whole series fits the "
+                          "grid), unscattered beam in all")
+        survey.media_orders = max(survey.media_orders, lp.orders)
+    return survey.media_orders
 
 
 def interface_width(layer, eta_rel: complex) -> tuple[float, str]:
