@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import replace
 
+import numpy as np
 from threadpoolctl import threadpool_limits
 
 from . import adding
@@ -65,6 +67,29 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     if isinstance(layer, Diffuse):
         return diffuse_operator(grid, layer.albedo, eta_above)
     raise TypeError(f"layer {i}: no operator for kind {layer.kind!r}")  # pragma: no cover
+
+
+@contextlib.contextmanager
+def _singular_as_infeasible(where: str, advice: str):
+    """Report a singular or ill-conditioned linear system met inside the block (numpy's and
+    SciPy's ``LinAlgError``, SuperLU's "singular" ``RuntimeError``) as an
+    :class:`InfeasibleError` naming ``where`` and what to change (``advice``)."""
+    try:
+        yield
+    except np.linalg.LinAlgError as exc:
+        raise InfeasibleError(f"{where}: singular or ill-conditioned linear system ({exc}); "
+                              f"{advice}") from None
+    except RuntimeError as exc:
+        if "singular" not in str(exc).lower():
+            raise
+        raise InfeasibleError(f"{where}: singular linear system ({exc}); {advice}") from None
+
+
+#: What to change when the adding equations are singular: ``I - Rb1 Rt2`` is singular only when
+#: light can bounce between the two operands without loss in some Fourier order.
+_ADDING_ADVICE = ("the layers trap light without loss between them; give a medium an albedo "
+                  "slightly below 1, a conductor some absorption, or change n / md in "
+                  "[discretization]")
 
 
 def _check_energy(op, i: int, layer, plan: Plan) -> list[str]:
@@ -128,7 +153,8 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
     # Single-threaded BLAS: the projection's batched small QRs and the adding's small dense
     # products run several times slower with OpenBLAS threads on small matrices (2-core CI
     # machine: 13-24 s instead of 2.8 s for coated gold 0.1 over 0.3).
-    with threadpool_limits(1, user_api="blas"):
+    with threadpool_limits(1, user_api="blas"), _singular_as_infeasible(
+            f"scene {scene.name!r}", "change n / md in [discretization] or the stiffest layer"):
         return _solve(scene, like, threads, verbose, projection, device)
 
 
@@ -173,8 +199,11 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
         for lp, key, own in reversed(list(zip(used, keys[c], owned))):
             if key not in cache:
                 t0 = time.perf_counter()
-                cache[key] = _layer_operator(plan, grid, mono, lp.index, stats, projection,
-                                             device, workspace if own else None, notes)
+                with _singular_as_infeasible(f"layer {lp.index} ({lp.kind})",
+                                             "change its parameters or n / md in "
+                                             "[discretization]"):
+                    cache[key] = _layer_operator(plan, grid, mono, lp.index, stats, projection,
+                                                 device, workspace if own else None, notes)
                 memory.release()
                 t_layers += time.perf_counter() - t0
         ops = [cache[key] for key in keys[c]]
@@ -184,11 +213,14 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
         if not ops:
             stack = IsoOperator.identity(grid, plan.md, scene.top_ior)
         elif plan.representation == "anisotropic":
-            stack = _add_mixed(ops, owned, threads, workspace)
+            with _singular_as_infeasible("adding the layers (coupled modes)", _ADDING_ADVICE):
+                stack = _add_mixed(ops, owned, threads, workspace)
         else:
             stack = ops[-1]
-            for op in reversed(ops[:-1]):
-                stack = adding.add(op, stack, threads)
+            for lp, op in reversed(list(zip(used[:-1], ops[:-1]))):
+                with _singular_as_infeasible(f"adding layer {lp.index} ({lp.kind}) onto the "
+                                             "layers below it", _ADDING_ADVICE):
+                    stack = adding.add(op, stack, threads)
         del ops
         t_adding += time.perf_counter() - t0
         stacks.append(stack)

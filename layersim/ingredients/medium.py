@@ -60,6 +60,10 @@ PHASE_TOLERANCE = 1e-10
 #: the whole stack; ``benchmarks/forward_media.py`` measures both treatments (time and albedo
 #: against Monte Carlo) and docs/method.md gives the figures behind this value.
 G_EXACT_MAX = 0.9
+#: Smallest g solved at all: a backward peak is not a forward delta, so delta-M does not apply,
+#: and the whole series is used down to this value, where its discrete phase matrices are still
+#: contractions at n = 64 and 196 (largest eigenvalue 1 + 3e-15; 1.013 at g = -0.97, n = 64).
+G_BACKWARD_MIN = -0.95
 
 
 @dataclass(frozen=True)
@@ -115,10 +119,23 @@ def hg_scaling(grid: Grid, g: float, albedo: float, tau: float) -> Scaling:
     """The representation of HG(g) on ``grid``: the whole series for ``|g| <=``
     :data:`G_EXACT_MAX` (or when it fits the grid), else delta-M scaled to
     ``N = min(grid_moments(grid), legendre_terms(g))`` moments with ``f = g^N`` (Wiscombe 1977,
-    eq. 13-15; HG's moments are ``g^k``)."""
+    eq. 13-15; HG's moments are ``g^k``).
+
+    Raises
+    ------
+    InfeasibleError
+        For ``g <`` :data:`G_BACKWARD_MIN` whose series does not fit the grid (a backward peak is not
+        a forward delta).
+    """
     K = legendre_terms(g)
     N = grid_moments(grid)
-    if abs(g) <= G_EXACT_MAX or K <= N:
+    if g < G_BACKWARD_MIN and K > N:
+        raise InfeasibleError(
+            f"g = {g:g}: a strongly backward-scattering phase function needs {K} Legendre terms "
+            f"and the grid represents {N}; delta-M scaling moves forward peaks only (the "
+            "truncated moments of a backward peak alternate in sign); give g >= "
+            f"{G_BACKWARD_MIN:g}, or use layersim.montecarlo")
+    if g <= G_EXACT_MAX or K <= N:
         return Scaling(K, 0.0, tau, albedo)
     f = g ** N
     return Scaling(N, f, (1.0 - albedo * f) * tau, albedo * (1.0 - f) / (1.0 - albedo * f))

@@ -25,6 +25,9 @@ module of this package, and :func:`make_plan` composes them in order:
   and refused up front when it exceeds the limit (``LAYERSIM_MAX_MEMORY`` bytes, default: half
   the available RAM); coupled plans are first checked against a lower bound, before the
   pre-pass.
+* **Time** (:mod:`.budget`): a cost model of projection, media and adding, calibrated on the
+  CI machine (``benchmarks/time_model.py``); an isotropic plan above the limit
+  (``LAYERSIM_MAX_SECONDS``, default 600 s) is refused before any heavy work.
 
 A ``[discretization]`` table in the scene overrides ``n``, ``md``, ``ms`` and the quadrature
 rule.
@@ -34,8 +37,9 @@ from __future__ import annotations
 
 from ..operator import Grid
 from ..scene import Scene
-from .budget import (MD_LOWER_PER_INV_ALPHA, PROJECTION_BYTES, estimate_bytes, memory_limit,
-                     refuse_below_lower_bound, refuse_over_limit)
+from .budget import (MD_LOWER_PER_INV_ALPHA, PROJECTION_BYTES, estimate_bytes, estimate_seconds,
+                     memory_limit, refuse_below_lower_bound, refuse_over_limit,
+                     refuse_over_time, work_units)
 from .coupling import choose_ms, needed_ms
 from .layers import scale_media, survey_layers
 from .model import LayerPlan, Plan
@@ -77,6 +81,14 @@ def make_plan(scene: Scene) -> Plan:
     memory = estimate_bytes(layers, lengths, grid, md, survey.media_orders, scene.channels,
                             anisotropic)
     refuse_over_limit(memory, grid.n, md, ms, anisotropic)
+    seconds = work = None
+    if not anisotropic:
+        solved = [lp for lp in layers if lp.action != "left out"]
+        media = [(lp.orders, mono.layers[lp.index].tau) for lp in solved
+                 if lp.action == "adding-doubling"]
+        work = work_units(lengths, media, grid, md, len(solved) - 1, scene.channels)
+        seconds = estimate_seconds(work)
+        refuse_over_time(seconds, grid.n, md)
     return Plan(rule=rule, n=grid.n, md=md, ms=ms, layers=layers, left_out=survey.left_out,
-                notes=notes, memory_bytes=memory, overridden=overridden,
+                notes=notes, memory_bytes=memory, seconds=seconds, work=work, overridden=overridden,
                 representation="anisotropic" if anisotropic else "isotropic")

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 from ..aniso import plan as aplan
 from ..errors import InfeasibleError
-from ..ingredients.medium import G_EXACT_MAX, hg_orders, hg_scaling
+from ..ingredients.medium import G_BACKWARD_MIN, G_EXACT_MAX, hg_orders, hg_scaling
 from ..operator import Grid
 from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
 from .model import LayerPlan
@@ -117,7 +117,13 @@ def _medium(scene: Scene, i: int, layer, survey: Survey) -> None:
         survey.layers.append(LayerPlan(i, kind, "left out", "tau = 0"))
         return
     scatters = max(s.layers[i].albedo for s in _channels(scene)) > 0
-    if scatters and abs(layer.g) > G_EXACT_MAX:
+    if scatters and layer.g < G_BACKWARD_MIN:
+        raise InfeasibleError(
+            f"layer {i} (medium): field 'g' = {layer.g:g} is strongly backward-scattering; "
+            "delta-M scaling moves forward peaks only, and the whole Legendre series of this "
+            f"phase function ({hg_orders(layer.g)} terms) is not representable on the grid; "
+            f"give g >= {G_BACKWARD_MIN:g}, or use layersim.montecarlo")
+    if scatters and layer.g > G_EXACT_MAX:
         # delta-M scaled: the scaled phase function needs DELTA_M_MOMENTS moments, i.e. a grid
         # of DELTA_M_MOMENTS + 1 Gauss-Lobatto ordinates; N and f follow the grid (scale_media)
         width = N_PER_WIDTH / (DELTA_M_MOMENTS + 1)
