@@ -139,13 +139,13 @@ def refuse_over_limit(memory: int, n: int, md: int, ms: int, anisotropic: bool) 
 #: Projection of a rough interface (numeric path, CPU), per stored Fourier coefficient
 #: (``min(series length, md)`` summed over the pre-pass's ordinate pairs) plus
 #: :data:`PAIR_UNITS` per ordinate pair.
-SECONDS_PER_COEFFICIENT = 2e-7
+SECONDS_PER_COEFFICIENT = 2.5e-7
 PAIR_UNITS = 20
 #: Adding-doubling of a medium, per ``orders x h^3 x (doublings + 7)`` (the initial slab's
 #: matrix exponential costs about seven doublings).
-SECONDS_PER_MEDIUM_UNIT = 1e-9
+SECONDS_PER_MEDIUM_UNIT = 1.1e-9
 #: Adding equations, per ``orders x h^3`` per adding step (dense LU and products).
-SECONDS_PER_ADDING_UNIT = 1e-9
+SECONDS_PER_ADDING_UNIT = 2.1e-9
 
 
 def work_units(lengths: list, media: list, grid: Grid, md: int, steps: int,
