@@ -144,3 +144,15 @@ def test_max_seconds_setting():
     assert Settings().max_seconds == 600.0
     with pytest.raises(layersim.config.ConfigError, match="LAYERSIM_MAX_SECONDS"):
         Settings.from_env({"LAYERSIM_MAX_SECONDS": "-1"})
+
+
+def test_small_grids_check_the_whole_series_before_using_it():
+    """On n = 8 (scene override) the whole series of g = 0.9 amplifies (largest eigenvalue
+    1.46): the forward peak is delta-M scaled instead, and a backward one is refused."""
+    grid = Grid.make("gauss-lobatto", 8)
+    assert medium.hg_scaling(grid, 0.9, 0.95, 5.0).scaled
+    assert not medium.hg_scaling(Grid.make("gauss-lobatto", 16), 0.9, 0.95, 5.0).scaled
+    with pytest.raises(InfeasibleError, match=r"layer 0 \(medium\): field 'g'.*n >= 64"):
+        layersim.make_plan(_scene(-0.9, 0.95, disc={"n": 8}))
+    alb = layersim.solve(_scene(0.9, 1.0, disc={"n": 8})).operators[0].albedo_nodes()
+    assert np.max(np.abs(alb["Rt"] + alb["Ttb"] - 1.0)) < 1e-10

@@ -64,6 +64,10 @@ G_EXACT_MAX = 0.9
 #: and the whole series is used down to this value, where its discrete phase matrices are still
 #: contractions at n = 64 and 196 (largest eigenvalue 1 + 3e-15; 1.013 at g = -0.97, n = 64).
 G_BACKWARD_MIN = -0.95
+#: Smallest grid on which the whole series is used without checking its discrete phase
+#: matrices: g = 0.9 and -0.95 give contractions at n = 16 ... 196, g = 0.9 amplifies at n = 8
+#: (largest eigenvalue 1.46); scene overrides below this are checked (:func:`hg_scaling`).
+EXACT_MIN_N = 64
 
 
 @dataclass(frozen=True)
@@ -116,29 +120,48 @@ def grid_moments(grid: Grid, tol: float = 1e-8) -> int:
 
 
 def hg_scaling(grid: Grid, g: float, albedo: float, tau: float) -> Scaling:
-    """The representation of HG(g) on ``grid``: the whole series for ``|g| <=``
-    :data:`G_EXACT_MAX` (or when it fits the grid), else delta-M scaled to
-    ``N = min(grid_moments(grid), legendre_terms(g))`` moments with ``f = g^N`` (Wiscombe 1977,
-    eq. 13-15; HG's moments are ``g^k``).
+    """The representation of HG(g) on ``grid``: the whole series when it fits the grid, or for
+    ``G_BACKWARD_MIN <= g <=`` :data:`G_EXACT_MAX` on grids of at least :data:`EXACT_MIN_N`
+    ordinates (smaller grids: where its discrete phase matrices are contractions); else, for
+    forward peaks, delta-M scaled to ``N = grid_moments(grid)`` moments with ``f = g^N``
+    (Wiscombe 1977, eq. 13-15; HG's moments are ``g^k``).
 
     Raises
     ------
     InfeasibleError
-        For ``g <`` :data:`G_BACKWARD_MIN` whose series does not fit the grid (a backward peak is not
-        a forward delta).
+        For a backward peak (``g < 0``) whose whole series the grid cannot hold without
+        amplification: delta-M moves forward peaks only (the truncated moments of a backward
+        peak alternate in sign).
     """
     K = legendre_terms(g)
     N = grid_moments(grid)
-    if g < G_BACKWARD_MIN and K > N:
+    whole = Scaling(K, 0.0, tau, albedo)
+    if K <= N:
+        return whole
+    if G_BACKWARD_MIN <= g <= G_EXACT_MAX and (grid.n >= EXACT_MIN_N or _contracts(grid, g, K)):
+        return whole
+    if g < 0:
         raise InfeasibleError(
             f"g = {g:g}: a strongly backward-scattering phase function needs {K} Legendre terms "
-            f"and the grid represents {N}; delta-M scaling moves forward peaks only (the "
-            "truncated moments of a backward peak alternate in sign); give g >= "
-            f"{G_BACKWARD_MIN:g}, or use layersim.montecarlo")
-    if g <= G_EXACT_MAX or K <= N:
-        return Scaling(K, 0.0, tau, albedo)
+            f"and the grid (n = {grid.n}) represents {N}; delta-M scaling moves forward peaks "
+            f"only; give g >= {G_BACKWARD_MIN:g} with n >= {EXACT_MIN_N}, or use "
+            "layersim.montecarlo")
     f = g ** N
     return Scaling(N, f, (1.0 - albedo * f) * tau, albedo * (1.0 - f) / (1.0 - albedo * f))
+
+
+def _contracts(grid: Grid, g: float, K: int) -> bool:
+    """Whether the discrete phase matrices of the whole series of HG(g) (every Fourier order,
+    both parities) have spectral radius <= 1 on ``grid`` (checked on small grids only: h
+    eigenvalue problems of size h per order)."""
+    same, opp = hg_components(grid.mu, g, K, K)
+    _normalize_order0(same[0], opp[0], grid.w)
+    c = np.where(np.arange(same.shape[0]) == 0, 2 * np.pi, np.pi)[:, None, None]
+    for sign in (1.0, -1.0):
+        eig = np.linalg.eigvals(c * (same + sign * opp) * grid.w[None, None, :])
+        if np.max(np.abs(eig)) > 1.0 + 1e-9:
+            return False
+    return True
 
 
 def legendre_terms(g: float, tol: float = PHASE_TOLERANCE) -> int:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 from ..aniso import plan as aplan
 from ..errors import InfeasibleError
-from ..ingredients.medium import G_BACKWARD_MIN, G_EXACT_MAX, hg_orders, hg_scaling
+from ..ingredients.medium import G_EXACT_MAX, hg_scaling
 from ..operator import Grid
 from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
 from .model import LayerPlan
@@ -39,10 +39,11 @@ class Survey:
         ``(width in radians, layer index, kind, lobe)`` of every lobe that competes to set
         ``n``.
     media_orders : int
-        Fourier orders the media's phase functions need (delta-M scaled media are counted by
-        :func:`scale_media`, once the grid is known).
+        Fourier orders the media's phase functions need (counted by :func:`scale_media`, once
+        the grid is known).
     scaled : list of LayerPlan
-        The media whose phase function is delta-M scaled (``|g| >`` ``G_EXACT_MAX``).
+        The scattering media, whose phase-function representation (whole series or delta-M
+        scaled) :func:`scale_media` decides once the grid is known.
     """
 
     layers: list = field(default_factory=list)
@@ -116,50 +117,48 @@ def _medium(scene: Scene, i: int, layer, survey: Survey) -> None:
         survey.left_out.append(f"layer {i} (medium): tau = 0 is an exact no-op")
         survey.layers.append(LayerPlan(i, kind, "left out", "tau = 0"))
         return
-    scatters = max(s.layers[i].albedo for s in _channels(scene)) > 0
-    if scatters and layer.g < G_BACKWARD_MIN:
-        raise InfeasibleError(
-            f"layer {i} (medium): field 'g' = {layer.g:g} is strongly backward-scattering; "
-            "delta-M scaling moves forward peaks only, and the whole Legendre series of this "
-            f"phase function ({hg_orders(layer.g)} terms) is not representable on the grid; "
-            f"give g >= {G_BACKWARD_MIN:g}, or use layersim.montecarlo")
-    if scatters and layer.g > G_EXACT_MAX:
-        # delta-M scaled: the scaled phase function needs DELTA_M_MOMENTS moments, i.e. a grid
-        # of DELTA_M_MOMENTS + 1 Gauss-Lobatto ordinates; N and f follow the grid (scale_media)
-        width = N_PER_WIDTH / (DELTA_M_MOMENTS + 1)
-        survey.widths.append((width, i, kind, f"delta-M scaled phase function "
-                                              f"({DELTA_M_MOMENTS} moments)"))
-        lp = LayerPlan(i, kind, "adding-doubling", f"tau={layer.tau:g}, g={layer.g:g}")
-        survey.scaled.append(lp)
-        survey.layers.append(lp)
+    lp = LayerPlan(i, kind, "adding-doubling", f"tau={layer.tau:g}, g={layer.g:g}")
+    survey.layers.append(lp)
+    if max(s.layers[i].albedo for s in _channels(scene)) == 0:
+        lp.detail += ": no scattering, unscattered beam in all orders"
         return
-    orders = hg_orders(layer.g) if scatters else 1
-    survey.media_orders = max(survey.media_orders, orders)
-    if layer.g != 0.0:
+    if layer.g > G_EXACT_MAX:
+        # delta-M scaled: the scaled phase function needs DELTA_M_MOMENTS moments, i.e. a grid
+        # of DELTA_M_MOMENTS + 1 Gauss-Lobatto ordinates
+        survey.widths.append((N_PER_WIDTH / (DELTA_M_MOMENTS + 1), i, kind,
+                              f"delta-M scaled phase function ({DELTA_M_MOMENTS} moments)"))
+    elif layer.g != 0.0:
         survey.widths.append((math.sqrt(1.0 - abs(layer.g)), i, kind, "phase-function lobe"))
-    survey.layers.append(LayerPlan(i, kind, "adding-doubling",
-                                   f"tau={layer.tau:g}, g={layer.g:g}: scattering in {orders} "
-                                   "order(s), unscattered beam in all", orders=orders))
+    survey.scaled.append(lp)
 
 
 def scale_media(scene: Scene, survey: Survey, grid: Grid) -> int:
-    """Delta-M scale the strongly forward-scattering media of ``survey`` on ``grid``
-    (:func:`layersim.ingredients.medium.hg_scaling`, the same function the solve uses): set
-    their ``orders`` and report lines, and return the Fourier orders the media need."""
+    """Decide the phase-function representation of every scattering medium of ``survey`` on
+    ``grid`` (:func:`layersim.ingredients.medium.hg_scaling`, the same function the solve uses):
+    the whole series or delta-M scaled. Sets their ``orders`` and report lines, and returns the
+    Fourier orders the media need.
+
+    Raises
+    ------
+    InfeasibleError
+        Naming the layer and field ``g`` for a backward peak the grid cannot hold.
+    """
     for lp in survey.scaled:
-        scs = [hg_scaling(grid, s.layers[lp.index].g, s.layers[lp.index].albedo,
-                          s.layers[lp.index].tau) for s in _channels(scene)]
+        try:
+            scs = [hg_scaling(grid, s.layers[lp.index].g, s.layers[lp.index].albedo,
+                              s.layers[lp.index].tau) for s in _channels(scene)]
+        except InfeasibleError as exc:
+            raise InfeasibleError(f"layer {lp.index} (medium): field 'g': {exc}") from None
         sc = scs[0]
-        albedos = "/".join(f"{c.albedo:.4g}" for c in scs)
         lp.orders = max(c.moments for c in scs)
         if sc.scaled:
+            albedos = "/".join(f"{c.albedo:.4g}" for c in scs)
             lp.detail += (f": delta-M scaled (Wiscombe 1977), N = {sc.moments} moments, "
                           f"f = {sc.f:.4g}, scaled tau = {sc.tau:.4g}, albedo = {albedos}; "
                           f"scattering in {lp.orders} order(s), unscattered beam (with the "
                           "truncated forward peak) in all")
         else:
-            lp.detail += (f": scattering in {lp.orders} order(s) (the whole series fits the "
-                          "grid), unscattered beam in all")
+            lp.detail += f": scattering in {lp.orders} order(s), unscattered beam in all"
         survey.media_orders = max(survey.media_orders, lp.orders)
     return survey.media_orders
 
