@@ -498,7 +498,7 @@ def build_parser() -> argparse.ArgumentParser:
                                  "(--blocks) into a PNG", [quiet])
     sp.add_argument("source", help=src_help)
     sp.add_argument("--wi", help="THETA,PHI of the light in degrees (theta from the normal)")
-    sp.add_argument("--blocks", action="store_true", help="draw Tbt | Rt over Rb | Ttb")
+    sp.add_argument("--blocks", action="store_true", help="draw the blocks Rb | Ttb over Tbt | Rt (Rt only when opaque)")
     sp.add_argument("--order", type=int, help="with --blocks: Fourier order l to show "
                                               "(default: the BSDF at --phi-d)")
     sp.add_argument("--phi-d", type=float, default=0.0,

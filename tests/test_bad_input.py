@@ -446,3 +446,19 @@ def test_a_separate_process_prints_one_line_and_no_traceback(files, args, env):
     res = _run([a.format(d=files) for a in args], env, cwd=files)
     assert res.returncode == 2
     _one_line(res.stderr)
+
+
+# ---- pictures ---------------------------------------------------------------------------------
+
+def test_block_plots_show_only_the_blocks_that_exist(files, tmp_path):
+    """An opaque stack has Rt only: its picture is one panel (narrower than the four of a
+    transmissive stack), not three blank ones."""
+    import matplotlib.image
+    from layersim import plot
+    gold, glass = (layersim.BSDF.load(files / f"{n}.lsim") for n in ("gold", "glass"))
+    assert plot.present_blocks(gold) == ["Rt"]
+    assert sorted(plot.present_blocks(glass)) == ["Rb", "Rt", "Tbt", "Ttb"]
+    one = matplotlib.image.imread(plot.plot_blocks(gold, tmp_path / "gold.png", samples=20))
+    four = matplotlib.image.imread(plot.plot_blocks(glass, tmp_path / "glass.png", samples=20))
+    assert one.shape[1] < 0.75 * four.shape[1]
+    assert one[..., :3].std() > 0.05
