@@ -249,6 +249,9 @@ class BSDF:
     def save(self, path) -> Path:
         """Write the solved operators and metadata to ``path`` (numpy ``.npz`` container;
         reload with :meth:`BSDF.load`)."""
+        if not isinstance(path, (str, os.PathLike)):
+            raise TypeError("BSDF.save takes a path (str or pathlib.Path), got "
+                            f"{type(path).__name__}")
         path = Path(path)
         version = FORMAT_VERSION_ANISO if self.anisotropic else FORMAT_VERSION
         arrays = {"format": np.array("layersim-bsdf"), "version": np.array(version),

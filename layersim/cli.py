@@ -306,6 +306,8 @@ def cmd_plot(args) -> int:
     if args.blocks:
         if args.order is not None and args.order < 0:
             raise ValueError(f"--order must be >= 0, got {args.order}")
+        if not math.isfinite(args.phi_d):
+            raise ValueError(f"--phi-d must be a finite angle in degrees, got {args.phi_d}")
         out = _output(args.output if args.output else name + "_blocks.png", "output file")
         bsdf = _load(args.source, args)
         if args.order is not None:
@@ -356,9 +358,31 @@ def cmd_subtract(args) -> int:
     print("albedo of the recovered layer (energy fractions):")
     print(_albedo_table(result, TABLE_ANGLES))
     _warn_energy(result, infos if isinstance(infos, list) else [infos])
+    _warn_hidden(known, args.side)
     result.save(out)
     print(f"wrote {out} (reload with layersim.BSDF.load)")
     return 0
+
+
+def _warn_hidden(known: BSDF, side: str) -> None:
+    """Warn on stderr when the known layer hides directions of the recovered one: seen through
+    an interface into a denser medium, directions beyond its critical angle in that medium are
+    reached by no light of the stack (total internal reflection), so the stack says nothing
+    about the recovered layer there and its values at those angles are not recovered."""
+    op = known.operators[0]
+    if op.eta_bottom is None:
+        return
+    shared, outer = ((op.eta_bottom, op.eta_top) if side == "top"
+                     else (op.eta_top, op.eta_bottom))
+    if shared <= outer:
+        return
+    critical = math.degrees(math.asin(outer / shared))
+    where = "from above" if side == "top" else "from below"
+    print(f"warning: the recovered layer is seen through the known one from a medium of index "
+          f"{outer:g}: in its medium of index {shared:g}, directions beyond the critical angle "
+          f"{critical:.1f} deg (lit {where}) receive no light of the stack, so the result there "
+          "is not recovered (its albedos at those angles are not measurements)",
+          file=sys.stderr)
 
 
 #: R + T above 1 by more than this (rounding and quadrature) makes subtract warn.

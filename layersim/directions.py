@@ -51,7 +51,11 @@ def azimuth(v: np.ndarray) -> np.ndarray:
 def bin_edges(name: str, edges, lo: float, hi: float) -> np.ndarray:
     """``edges`` as a strictly increasing float array within ``[lo, hi]``; ValueError naming
     ``name`` otherwise."""
-    e = np.asarray(edges, float)
+    try:
+        e = np.asarray(edges, float)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a 1-D array of increasing numbers (bin edges), got "
+                        f"{type(edges).__name__} {edges!r:.40}") from None
     if e.ndim != 1 or e.size < 2:
         raise ValueError(f"{name} must be a 1-D array of at least two edges")
     if not np.all(np.isfinite(e)) or np.any(np.diff(e) <= 0):

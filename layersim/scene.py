@@ -28,7 +28,7 @@ from .errors import SceneError
 
 __all__ = [
     "Layer", "Dielectric", "Conductor", "Medium", "Diffuse", "Discretization", "Scene",
-    "QUADRATURES", "DISTRIBUTIONS",
+    "QUADRATURES", "DISTRIBUTIONS", "as_scene",
 ]
 
 #: Microfacet normal distributions understood by the solver and the random walk.
@@ -279,6 +279,27 @@ class Scene:
         for i, layers in enumerate(zip(*self.stacks)):
             lines.append(f"  [{i}] " + _describe_layer(layers))
         return "\n".join(lines)
+
+
+def as_scene(value, caller: str = "solve()") -> Scene:
+    """``value`` as a :class:`Scene`: a Scene itself, a path read with :meth:`Scene.from_toml`
+    or a dict validated with :meth:`Scene.from_dict`, as the functions that take a scene
+    (``caller``) accept.
+
+    Raises
+    ------
+    TypeError
+        For anything else, saying what to pass.
+    """
+    if isinstance(value, Scene):
+        return value
+    if isinstance(value, (str, os.PathLike)):
+        return Scene.from_toml(value)
+    if isinstance(value, Mapping):
+        return Scene.from_dict(value)
+    raise TypeError(f"{caller} takes a Scene (layersim.Scene.from_toml or from_dict), the path "
+                    f"of a TOML scene file or a dict of the same content, got "
+                    f"{type(value).__name__}")
 
 
 def _describe_layer(per_channel: tuple[Layer, ...]) -> str:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Mapping
 from dataclasses import replace
 
 from threadpoolctl import threadpool_limits
@@ -22,7 +21,7 @@ from .operator import IsoOperator, Operator, common_representation
 from .outofcore import memory
 from .outofcore.workspace import Workspace
 from .plan import Plan, make_plan
-from .scene import Conductor, Dielectric, Diffuse, Medium, Scene
+from .scene import Conductor, Dielectric, Diffuse, Medium, Scene, as_scene
 
 
 #: Discrete energy excess (R + T - 1) beyond which an interface operator is refused as
@@ -141,10 +140,13 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
         For an invalid scene, an unreadable ``like`` file, an unusable device, or a plan over
         the limits; all before the layers are projected.
     """
-    scene = _scene_argument(scene)
+    scene = as_scene(scene, "solve()")
     like = _like_argument(like)
     if device is not None or settings().device != "cpu":
         device_for(device)          # an unusable device is refused before the plan
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int)
+                                or threads < 1):
+        raise ValueError(f"threads must be an integer >= 1 or None, got {threads!r}")
     if projection not in PROJECTIONS:
         raise ValueError(f"unknown projection {projection!r}; expected one of "
                          + ", ".join(PROJECTIONS))
@@ -158,19 +160,6 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
 
 def _no_progress(phase: str, done: int, total: int, what: str) -> None:
     """The default ``progress`` of :func:`solve`: reports nothing."""
-
-
-def _scene_argument(scene) -> Scene:
-    """``scene`` of :func:`solve` as a Scene: a path is read with :meth:`Scene.from_toml`, a
-    dict validated with :meth:`Scene.from_dict`; TypeError for anything else."""
-    if isinstance(scene, Scene):
-        return scene
-    if isinstance(scene, (str, os.PathLike)):
-        return Scene.from_toml(scene)
-    if isinstance(scene, Mapping):
-        return Scene.from_dict(scene)
-    raise TypeError("solve() takes a Scene (layersim.Scene.from_toml or from_dict), the path of "
-                    f"a TOML scene file or a dict of the same content, got {type(scene).__name__}")
 
 
 def _like_argument(like) -> BSDF | None:

@@ -184,6 +184,8 @@ def test_plot_of_an_order_the_bsdf_does_not_have(files, capsys, monkeypatch):
     monkeypatch.chdir(files)
     _refused(["plot", files / "glass.lsim", "--blocks", "--order", "100000"], capsys,
              "--order 100000", "0 to 47", "md = 48", cwd=files)
+    _refused(["plot", files / "glass.lsim", "--blocks", "--phi-d", "nan"], capsys,
+             "--phi-d", "finite", cwd=files)
 
 
 def test_eval_with_huge_components_normalises_without_warnings(files, capsys):
@@ -306,6 +308,11 @@ def test_solve_takes_a_scene_a_path_or_a_dict(files):
     (lambda d: layersim.BSDF.load(d / "glass.lsim").albedo("up"), ("wi", "[0, 0, 1]", "str")),
     (lambda d: layersim.BSDF.load(d / "glass.lsim").eval([0, 0, 1], None), ("wo", "None")),
     (lambda d: layersim.BSDF.load(d / "glass.lsim").albedo({"z": 1}), ("wi", "dict")),
+    (lambda d: layersim.BSDF.load(d / "glass.lsim").bin_energies([0, 0, 1], "a", [0, 1]),
+     ("mu_edges", "bin edges")),
+    (lambda d: layersim.BSDF.load(d / "glass.lsim").save(None), ("BSDF.save", "NoneType")),
+    (lambda d: layersim.make_plan(None), ("make_plan() takes a Scene", "NoneType")),
+    (lambda d: layersim.export(None, d / "x.bsdf"), ("export() takes a solved BSDF",)),
 ])
 def test_the_api_says_what_to_pass(files, call, words):
     with pytest.raises(TypeError) as exc:
@@ -331,6 +338,14 @@ def test_the_api_names_the_file_or_the_value(files, call, error, words):
     assert "pickle" not in str(exc.value)
     for w in words:
         assert w in str(exc.value)
+
+
+def test_make_plan_takes_a_path_or_a_dict_as_solve_does(files):
+    plan = layersim.make_plan(files / "glass.toml")
+    assert (plan.n, plan.md) == (32, 48)
+    assert layersim.make_plan({"layer": [{"kind": "diffuse", "albedo": 0.5}]}).md == 1
+    with pytest.raises(ValueError, match="threads must be an integer"):
+        layersim.solve(files / "glass.toml", threads="x")
 
 
 def test_solve_like_a_saved_file(files):
@@ -398,6 +413,20 @@ def test_subtract_warns_when_the_recovered_layer_creates_energy(files, capsys):
     assert err.startswith("warning: the recovered layer creates energy")
     assert "from above at 0-" in err and "from below" in err and "--eps" in err
     _warn_energy(glass, [{"energy_max": 1.0}])
+    assert capsys.readouterr().err == ""
+
+
+def test_subtract_warns_about_directions_hidden_by_total_internal_reflection(files, capsys):
+    """Through glass (index 1 above, 1.5 below) a layer below is reached only within the
+    critical angle asin(1 / 1.5) = 41.8 deg; a layer above the glass is not hidden."""
+    from layersim.cli import _warn_hidden
+    glass = layersim.BSDF.load(files / "glass.lsim")
+    _warn_hidden(glass, "top")
+    err = capsys.readouterr().err
+    assert err.startswith("warning:") and "critical angle 41.8 deg" in err
+    assert "index 1.5" in err and "not recovered" in err
+    _warn_hidden(glass, "bottom")
+    _warn_hidden(layersim.BSDF.load(files / "gold.lsim"), "top")
     assert capsys.readouterr().err == ""
 
 

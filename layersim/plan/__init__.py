@@ -31,7 +31,7 @@ from __future__ import annotations
 
 from ..errors import InfeasibleError
 from ..operator import Grid
-from ..scene import Scene
+from ..scene import Scene, as_scene
 from .budget import (MD_LOWER_PER_INV_ALPHA, PROJECTION_BYTES, estimate_bytes, lower_bound,
                      memory_limit, refuse_below_lower_bound, refuse_over_limit)
 from .coupling import choose_ms, needed_ms
@@ -50,7 +50,8 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
 
     Parameters
     ----------
-    scene : Scene
+    scene : Scene, path or dict
+        As :func:`layersim.solve` takes it.
     refuse : bool
         If False, a plan over the memory limit is returned with the reason in
         :attr:`Plan.refused` instead of raising (``layersim plan`` prints it). A plan refused
@@ -63,6 +64,7 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
         exceeds the limits (ordinates, orders, and with ``refuse`` memory). The message names
         the layer, the limit and what to change.
     """
+    scene = as_scene(scene, "make_plan()")
     disc = scene.discretization
     rule = disc.quadrature or DEFAULT_RULE
     notes: list[str] = []
