@@ -210,6 +210,9 @@ def _load(path, args=None):
     path = Path(path)
     with open(path, "rb") as fh:
         head = fh.read(8)
+    if not head:
+        raise ValueError(f"{path}: the file is empty (expected a scene, a saved BSDF or a "
+                         ".bsdf file)")
     if head[:7] == b"SCATFUN":
         table = read(path)
         try:

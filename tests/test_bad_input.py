@@ -125,6 +125,19 @@ def test_a_truncated_bsdf_file_is_refused_by_every_command(files, capsys, comman
     _refused(argv, capsys, "truncated.lsim", "damaged or truncated", cwd=files)
 
 
+@pytest.mark.parametrize("make, words", [
+    (lambda data: data[:200], ("size mismatch", "truncated")),
+    (lambda data: data[:7], ("truncated header",)),
+    (lambda data: b"", ("empty",)),
+    (lambda data: data + b"extra", ("size mismatch",)),
+])
+def test_a_damaged_bsdf_table_is_one_line(files, capsys, tmp_path, make, words):
+    bad = tmp_path / "bad.bsdf"
+    bad.write_bytes(make((files / "glass.bsdf").read_bytes()))
+    _refused(["eval", bad, "--wi", "0,0,1", "--wo", "0,0,1"], capsys, "bad.bsdf", *words,
+             cwd=tmp_path)
+
+
 def test_load_never_needs_pickle(files):
     """A saved BSDF holds plain arrays only: it loads with allow_pickle=False and every array
     in it has a numeric or string dtype."""
