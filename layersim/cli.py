@@ -29,6 +29,7 @@ import argparse
 import math
 import os
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -50,11 +51,17 @@ TABLE_ANGLES = [0.0, 30.0, 60.0, 80.0, 89.0]
 
 class ProgressBars:
     """The ``progress`` callback of :func:`layersim.solve` drawn as tqdm bars on stderr, one
-    per phase (projection of the layers, adding), when ``enabled``; otherwise silent."""
+    per phase (projection of the layers, adding), when ``enabled``; otherwise silent. A step
+    can take minutes (the coupled adding of a large stack), so a timer thread redraws the
+    open bars every :attr:`interval` seconds: their elapsed time keeps counting."""
+
+    interval = 0.5
 
     def __init__(self, enabled: bool):
         self.enabled = enabled
         self.bars: dict = {}
+        self._stop = threading.Event()
+        self._timer = None
 
     def __call__(self, phase: str, done: int, total: int, what: str) -> None:
         if not self.enabled or total <= 0:
@@ -64,12 +71,24 @@ class ProgressBars:
         if bar is None:
             bar = self.bars[phase] = tqdm(total=total, desc=phase, unit="step", leave=False,
                                           file=sys.stderr, position=len(self.bars))
+            if self._timer is None:
+                self._timer = threading.Thread(target=self._redraw, daemon=True)
+                self._timer.start()
         bar.set_postfix_str(what, refresh=False)
         bar.update(done - bar.n)
         if done >= total:
             bar.close()
 
+    def _redraw(self) -> None:
+        while not self._stop.wait(self.interval):
+            for bar in list(self.bars.values()):
+                if not bar.disable:
+                    bar.refresh()
+
     def close(self) -> None:
+        self._stop.set()
+        if self._timer is not None:
+            self._timer.join()
         for bar in self.bars.values():
             bar.close()
         self.bars.clear()

@@ -464,9 +464,20 @@ def test_progress_reports_each_layer_and_the_adding():
 
 
 def test_progress_bars_only_on_a_terminal(files, capsys, tmp_path):
-    """Under pytest stderr is not a terminal: no bar is drawn."""
+    """Under pytest stderr is not a terminal: no bar is drawn. Enabled, the bars name the
+    phase and the step under way, and keep redrawing while a step runs."""
     assert cli_main(["solve", str(files / "glass.toml"), "-o", str(tmp_path / "g.lsim")]) == 0
     assert capsys.readouterr().err == ""
+    from layersim.cli import ProgressBars
+    bars = ProgressBars(True)
+    bars.interval = 0.05
+    bars("projection", 0, 2, "layer 1 (conductor)")
+    time.sleep(0.3)
+    bars("projection", 1, 2, "layer 0 (dielectric)")
+    bars.close()
+    err = capsys.readouterr().err
+    assert "projection" in err and "0/2" in err and "1/2" in err
+    assert "layer 1 (conductor)" in err and err.count("0/2") >= 3   # redrawn while waiting
 
 
 # ---- the same as separate processes -----------------------------------------------------------
