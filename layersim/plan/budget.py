@@ -56,12 +56,16 @@ def lower_bound(disc: Discretization, mono: Scene, layers: list, grid: Grid,
     projected = [lp for lp in layers if lp.action.startswith("project")]
     if not projected:
         return None
+    # rough interfaces only: a smooth one has no lobe whose orders the bound could count
+    alphas = [min(mono.layers[lp.index].alpha_u, mono.layers[lp.index].alpha_v)
+              for lp in projected]
+    alphas = [a for a in alphas if a > 0]
     if disc.md is not None:
         md_lower = disc.md
+    elif alphas:
+        md_lower = max(media_orders, math.ceil(MD_LOWER_PER_INV_ALPHA / min(alphas)))
     else:
-        alpha_min = min(min(mono.layers[lp.index].alpha_u, mono.layers[lp.index].alpha_v)
-                        for lp in projected)
-        md_lower = max(media_orders, math.ceil(MD_LOWER_PER_INV_ALPHA / alpha_min))
+        md_lower = media_orders
     if ms_needed:
         return md_lower, aplan.factor_bytes(grid.h, md_lower, 2 * (disc.ms or ms_needed))
     return md_lower, PROJECTION_BYTES * md_lower * grid.h * grid.h
