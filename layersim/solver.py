@@ -10,10 +10,12 @@ from threadpoolctl import threadpool_limits
 
 from . import adding
 from .aniso import adding as aniso_adding
+from .aniso.plan import COUPLED_RELERR, STACK_RELERR, STACK_RELERR_INTERMEDIATE
 from .bsdf import BSDF, channel_pairs
 from .config import settings
 from .errors import InfeasibleError
 from .ingredients import diffuse_operator, interface_operator, medium_operator
+from .ingredients.aniso_microfacet import AnisoProjectionStats, aniso_interface_operator
 from .ingredients.microfacet import ProjectionStats
 from .ingredients.numeric import numeric_interface_operator
 from .kernels.runtime import device_for
@@ -34,7 +36,7 @@ ENERGY_REFUSE = 1e-2
 #: Projection methods for interfaces: "numeric" samples the BSDF per pair at a rate set by the
 #: analytically known length of its series, then an FFT (default: more accurate at equal or
 #: lower cost on the CPU, and much faster on a GPU; benchmarks/projection_paths.py);
-#: "semi-analytic" multiplies exact peak series by fitted smooth factors (seed 000 sec. 4.1).
+#: "semi-analytic" multiplies exact peak series by fitted smooth factors (Zeltner & Jakob 2018, sec. 4.1).
 PROJECTIONS = ("numeric", "semi-analytic")
 
 
@@ -46,10 +48,7 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     layer = scene.layers[i]
     eta_above = scene.ior_above(i)
     if isinstance(layer, (Dielectric, Conductor)) and layer.anisotropic:
-        # --- anisotropic interfaces (layersim.ingredients.aniso_microfacet) ---
-        from .ingredients.aniso_microfacet import aniso_interface_operator
         lp = next(lp for lp in plan.layers if lp.index == i)
-        from .aniso.plan import COUPLED_RELERR
         op = aniso_interface_operator(grid, plan.md, lp.ms, layer, eta_above, stats,
                                       relerr=COUPLED_RELERR, workspace=workspace)
         notes += _check_energy(op, i, layer, plan)
@@ -151,8 +150,8 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
         raise ValueError(f"unknown projection {projection!r}; expected one of "
                          + ", ".join(PROJECTIONS))
     # Single-threaded BLAS: the projection's batched small QRs and the adding's small dense
-    # products run several times slower with OpenBLAS threads on small matrices (2-core CI
-    # machine: 13-24 s instead of 2.8 s for coated gold 0.1 over 0.3).
+    # products run several times slower with OpenBLAS threads on matrices of this size, where
+    # the threads' synchronisation outweighs the arithmetic.
     with threadpool_limits(1, user_api="blas"):
         return _solve(scene, like, threads, verbose, projection, device,
                       progress or _no_progress)
@@ -185,7 +184,6 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
     grid = plan.grid
     t_plan = time.perf_counter() - t_start
     if plan.representation == "anisotropic":
-        from .ingredients.aniso_microfacet import AnisoProjectionStats
         stats = AnisoProjectionStats()
     else:
         stats = ProjectionStats()
@@ -211,7 +209,7 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
             if plan.representation == "anisotropic" and len(keys[c]) > 1 else Workspace()
         # projected bottom up: the base of a coated stack is the smaller operator (one block
         # below an opaque interface), so the coating's projection, the larger transient, runs
-        # beside it rather than the other way round (Table 2 row 6 of seed 000: 300 MiB less)
+        # beside it rather than the base's projection beside the larger coating
         for lp, key, own in reversed(list(zip(used, keys[c], owned))):
             if key not in cache:
                 t0 = time.perf_counter()
@@ -267,7 +265,6 @@ def _add_mixed(ops, owned, threads, workspace=None):
     operators flagged in ``owned`` (referenced nowhere else) and the intermediate stacks are
     consumed by the adding steps, which release their blocks as soon as they are used and
     keep idle blocks and intermediate pieces in ``workspace``."""
-    from .aniso.plan import STACK_RELERR, STACK_RELERR_INTERMEDIATE
     reduced = _reduce_isotropic_runs(ops, owned, threads)
     stack, own_stack = reduced.pop()
     while reduced:
