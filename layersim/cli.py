@@ -4,7 +4,7 @@
                                      over the limits is printed with its refusal (status 2)
     layersim solve SCENE [-o FILE] [--like STACK.lsim]
                                      solve, print plan, timings and albedos; save the BSDF
-    layersim info FILE               reload a saved BSDF and print its summary and albedos
+    layersim info FILE               summary and albedos of a saved BSDF (.lsim) or .bsdf file
     layersim bench [--quick] [--stability] [--backend B ...] --out DIR
                                      solver vs Monte Carlo report and stability suite
     layersim export SRC [-o F.bsdf] [--version 1|2]
@@ -175,7 +175,29 @@ def cmd_solve(args) -> int:
     return 0
 
 
+def _table_summary(table) -> str:
+    """One line describing a ``.bsdf`` table (:class:`FourierTable`)."""
+    return (f"SCATFUN v{table.version}, {table.n_nodes} nodes, max order {table.max_order}"
+            f"{' (complex)' if table.is_complex else ''}, {table.channels} channel(s) "
+            f"({'Y, R, B' if table.channels == 3 else 'mono'}), {table.coef.size} coefficients, "
+            f"eta = {table.eta:g}")
+
+
 def cmd_info(args) -> int:
+    with open(args.file, "rb") as fh:
+        head = fh.read(8)
+    if head[:7] == b"SCATFUN":
+        # a .bsdf table: its header, and the albedos where it converts to operators
+        table = read(args.file)
+        print(f"{args.file}: {_table_summary(table)}")
+        try:
+            bsdf = table.to_bsdf()
+        except (FileFormatError, InfeasibleError) as exc:
+            print(f"note: no albedos: {exc}")
+            return 0
+        print("albedo (energy fractions):")
+        print(_albedo_table(bsdf, TABLE_ANGLES))
+        return 0
     bsdf = BSDF.load(args.file)
     info = bsdf.info
     op = bsdf.operators[0]
@@ -293,11 +315,7 @@ def cmd_export(args) -> int:
     else:
         table = export(bsdf, out, version=args.version, alpha=alpha, relerr=args.relerr)
     size = out.stat().st_size
-    print(f"wrote {out}: SCATFUN v{table.version}, {table.n_nodes} nodes, max order "
-          f"{table.max_order}{' (complex)' if table.is_complex else ''}, {table.channels} "
-          f"channel(s) "
-          f"({'Y, R, B' if table.channels == 3 else 'mono'}), {table.coef.size} coefficients, "
-          f"eta = {table.eta:g}, {size} bytes ({size / 2**20:.2f} MiB)")
+    print(f"wrote {out}: {_table_summary(table)}, {size} bytes ({size / 2**20:.2f} MiB)")
     return 0
 
 
@@ -449,7 +467,8 @@ command exits with status 2, as 'layersim solve' would refuse it.""",
   layersim solve lacquer.toml --like coated_gold.lsim      # on coated_gold's discretisation,
                                                            # ready for 'layersim subtract'""",
     "info": """examples:
-  layersim info coated_gold.lsim""",
+  layersim info coated_gold.lsim
+  layersim info coated_gold.bsdf""",
     "bench": """examples:
   layersim bench --out bench-quick --quick
   layersim bench --out bench --stability --backend warp-cuda --backend opencl
@@ -503,8 +522,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="solve on the discretisation (n, md, rule) of this saved BSDF, so "
                          "that the two can be added or subtracted")
     sp.set_defaults(func=cmd_solve)
-    sp = _subparser(sub, "info", "reload a saved BSDF (.lsim) and print its summary")
-    sp.add_argument("file", help="file written by 'layersim solve'")
+    sp = _subparser(sub, "info", "print the summary and albedos of a saved BSDF (.lsim) or a "
+                                 ".bsdf file")
+    sp.add_argument("file", help="file written by 'layersim solve' or 'layersim export'")
     sp.set_defaults(func=cmd_info)
     sp = _subparser(sub, "bench", "benchmark report: solver vs Monte Carlo, stability suite")
     sp.add_argument("--out", required=True, help="output folder")
