@@ -113,6 +113,17 @@ def _output(path, what: str) -> Path:
     return path
 
 
+def _image(path) -> Path:
+    """An image file to write (:func:`_output`) in a format that matplotlib writes."""
+    from matplotlib.backend_bases import FigureCanvasBase
+    path = _output(path, "output file")
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if path.suffix.lower().lstrip(".") not in formats:
+        raise ValueError(f"output file {path}: unknown image format {path.suffix or '(none)'}; "
+                         f"use one of {', '.join('.' + f for f in sorted(formats))}")
+    return path
+
+
 def _scene(path):
     return Scene.from_toml(path)
 
@@ -348,7 +359,7 @@ def cmd_plot(args) -> int:
             raise ValueError(f"--order must be >= 0, got {args.order}")
         if not math.isfinite(args.phi_d):
             raise ValueError(f"--phi-d must be a finite angle in degrees, got {args.phi_d}")
-        out = _output(args.output if args.output else name + "_blocks.png", "output file")
+        out = _image(args.output if args.output else name + "_blocks.png")
         bsdf = _load(args.source, args)
         if args.order is not None:
             if not isinstance(bsdf, BSDF):
@@ -369,7 +380,7 @@ def cmd_plot(args) -> int:
                              f"got {theta:g}")
         t, p = math.radians(theta), math.radians(phi)
         wi = np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
-        out = _output(args.output if args.output else name + "_slices.png", "output file")
+        out = _image(args.output if args.output else name + "_slices.png")
         bsdf = _load(args.source, args)
         if getattr(bsdf, "opaque", False) and wi[2] < 0:
             raise ValueError(f"{args.source} is opaque from below: --wi THETA > 90 lights it "
@@ -490,6 +501,13 @@ command exits with status 2, as 'layersim solve' would refuse it.""",
 }
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line, as every other input error of the command."""
+
+    def error(self, message):
+        self.exit(EXIT_INPUT, f"layersim: error: {message} (see '{self.prog} --help')\n")
+
+
 def _subparser(sub, name: str, help: str, parents=()) -> argparse.ArgumentParser:
     return sub.add_parser(name, help=help, description=help[:1].upper() + help[1:] + ".",
                           epilog=EXAMPLES[name], parents=list(parents),
@@ -498,7 +516,7 @@ def _subparser(sub, name: str, help: str, parents=()) -> argparse.ArgumentParser
 
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="layersim", description="Reflectance of layered materials: solve a stack of "
         "layers into a BSDF, evaluate, plot, export, subtract; compare with Monte Carlo.",
         epilog="examples:\n  layersim solve examples/coated_gold.toml\n"
@@ -507,7 +525,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--version", action="version", version=f"layersim {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    quiet = argparse.ArgumentParser(add_help=False)
+    quiet = _Parser(add_help=False)
     quiet.add_argument("-q", "--quiet", action="store_true",
                        help="no progress bars (they are drawn only on a terminal anyway)")
 

@@ -205,6 +205,27 @@ def test_an_unknown_or_absent_backend_is_refused_before_the_bench(capsys, tmp_pa
     assert not out.exists()
 
 
+@pytest.mark.parametrize("argv, words", [
+    (["eval", "x.lsim", "--wi", "0,0,1"], ("the following arguments are required: --wo",
+                                            "layersim eval --help")),
+    (["solve", "x.toml", "--bogus"], ("unrecognized arguments: --bogus",)),
+    (["frobnicate"], ("invalid choice: 'frobnicate'",)),
+    (["subtract", "a.lsim", "b.lsim", "--side", "left"], ("invalid choice: 'left'",)),
+])
+def test_option_errors_are_one_line_too(capsys, argv, words):
+    with pytest.raises(SystemExit) as exc:
+        cli_main(argv)
+    assert exc.value.code == 2
+    _one_line(capsys.readouterr().err, *words)
+
+
+def test_an_unknown_image_format_is_refused_before_the_solve(files, capsys, monkeypatch,
+                                                            tmp_path):
+    monkeypatch.setattr("layersim.cli.solve", _no_solve)
+    _refused(["plot", files / "glass.toml", "--wi", "30,0", "-o", tmp_path / "x.xyz"], capsys,
+             "unknown image format .xyz", ".png", cwd=tmp_path)
+
+
 def test_plot_of_an_order_the_bsdf_does_not_have(files, capsys, monkeypatch):
     monkeypatch.chdir(files)
     _refused(["plot", files / "glass.lsim", "--blocks", "--order", "100000"], capsys,
