@@ -239,9 +239,12 @@ def cmd_bench(args) -> int:
         raise ValueError(f"--backend {missing[0]}: not available on this machine (available: "
                          f"{', '.join(here)})")
     out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"--out {out}: a file, not a folder")
-    _output(out / "results.json", "--out") if out.is_dir() else _output(out, "--out")
+    # the report creates the folder and its parents: the nearest existing one must take them
+    base = next(p for p in [out, *out.absolute().parents] if p.exists())
+    if not base.is_dir():
+        raise ValueError(f"--out {out}: {base} is a file, not a folder")
+    if not os.access(base, os.W_OK):
+        raise ValueError(f"--out {out}: the folder {base} is not writable")
     results = bench.run(args.out, quick=args.quick, stability=args.stability,
                         backends=backends, scene_dir=args.scenes,
                         scenes=args.scene, command="layersim " + " ".join(args.argv))

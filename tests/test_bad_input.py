@@ -201,7 +201,8 @@ def test_an_unknown_or_absent_backend_is_refused_before_the_bench(capsys, tmp_pa
         _refused(["bench", "--out", out, "--backend", absent[0]], capsys, absent[0],
                  "not available")
     (tmp_path / "file").write_text("")
-    _refused(["bench", "--out", tmp_path / "file"], capsys, "not a folder")
+    _refused(["bench", "--out", tmp_path / "file"], capsys, "is a file, not a folder")
+    _refused(["bench", "--out", tmp_path / "file" / "sub"], capsys, "is a file, not a folder")
     assert not out.exists()
 
 
