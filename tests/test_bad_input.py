@@ -220,6 +220,13 @@ def test_option_errors_are_one_line_too(capsys, argv, words):
     _one_line(capsys.readouterr().err, *words)
 
 
+def test_subtract_on_two_discretisations_says_how_to_solve_the_known_layer(files, capsys,
+                                                                           tmp_path):
+    _refused(["subtract", files / "gold.lsim", files / "glass.lsim", "--side", "top", "-o",
+              tmp_path / "x.lsim"], capsys, "different grids", "--like STACK.lsim",
+             cwd=tmp_path)
+
+
 def test_an_unknown_image_format_is_refused_before_the_solve(files, capsys, monkeypatch,
                                                             tmp_path):
     monkeypatch.setattr("layersim.cli.solve", _no_solve)
