@@ -521,7 +521,8 @@ def build_parser() -> argparse.ArgumentParser:
     from . import __version__
     p = _Parser(
         prog="layersim", description="Reflectance of layered materials: solve a stack of "
-        "layers into a BSDF, evaluate, plot, export, subtract; compare with Monte Carlo.",
+        "layers into a BSDF;\nevaluate, plot, export and subtract it; compare it with "
+        "Monte Carlo.",
         epilog="examples:\n  layersim solve examples/coated_gold.toml\n"
                "  layersim plot coated_gold.lsim --wi 30,0 -o slices.png\n"
                "  layersim COMMAND --help      (examples of each command)",
