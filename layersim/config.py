@@ -33,10 +33,15 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
+import re
 import tempfile
 from dataclasses import dataclass
 
 from .errors import LayersimError
+
+
+#: Warp device names layersim runs kernels on.
+DEVICE_NAME = re.compile(r"cpu|cuda(:[0-9]+)?")
 
 
 class ConfigError(LayersimError, ValueError):
@@ -87,8 +92,9 @@ class Settings:
                                             or self.max_memory <= 0):
             raise ConfigError(f"max_memory must be a positive number of bytes, got "
                               f"{self.max_memory!r}")
-        if not isinstance(self.device, str) or not self.device:
-            raise ConfigError(f"device must be a Warp device name, got {self.device!r}")
+        if not isinstance(self.device, str) or not DEVICE_NAME.fullmatch(self.device):
+            raise ConfigError(f"device must be a Warp device name ('cpu', 'cuda' or "
+                              f"'cuda:N'), got {self.device!r}")
 
     @classmethod
     def from_env(cls, environ=None) -> "Settings":
@@ -134,7 +140,7 @@ _VARIABLES = {
     "warp_verbose": ("LAYERSIM_WARP_VERBOSE", _flag),
 }
 _EXPECTED = {
-    "device": "expected a Warp device name",
+    "device": "expected a Warp device name ('cpu', 'cuda' or 'cuda:N')",
     "max_memory": "expected a number of bytes (e.g. 4e9)",
     "park_dir": "expected a directory or 'off'",
     "malloc_arenas": "expected an integer >= 0",

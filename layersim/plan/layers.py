@@ -103,13 +103,16 @@ def _medium(scene: Scene, i: int, layer, survey: Survey) -> None:
         survey.left_out.append(f"layer {i} (medium): tau = 0 is an exact no-op")
         survey.layers.append(LayerPlan(i, kind, "left out", "tau = 0"))
         return
-    scatters = max(s.layers[i].albedo for s in _channels(scene)) > 0
-    orders = hg_orders(layer.g) if scatters else 1
+    # a per-channel g: the most forward-peaked channel sets the orders and the lobe width
+    channels = [s.layers[i] for s in _channels(scene)]
+    scatters = max(x.albedo for x in channels) > 0
+    g = max((x.g for x in channels), key=abs)
+    orders = hg_orders(g) if scatters else 1
     survey.media_orders = max(survey.media_orders, orders)
-    if layer.g != 0.0:
-        survey.widths.append((math.sqrt(1.0 - abs(layer.g)), i, kind, "phase-function lobe"))
+    if g != 0.0:
+        survey.widths.append((math.sqrt(1.0 - abs(g)), i, kind, "phase-function lobe"))
     survey.layers.append(LayerPlan(i, kind, "adding-doubling",
-                                   f"tau={layer.tau:g}, g={layer.g:g}: scattering in {orders} "
+                                   f"tau={layer.tau:g}, g={g:g}: scattering in {orders} "
                                    "order(s), unscattered beam in all", orders=orders))
 
 

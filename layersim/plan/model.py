@@ -53,6 +53,9 @@ class Plan:
     notes: list = field(default_factory=list)
     memory_bytes: int = 0
     overridden: dict = field(default_factory=dict)
+    #: Why the solve refuses this plan (over the memory limit), or None; set only by
+    #: ``make_plan(scene, refuse=False)``.
+    refused: str | None = None
 
     @property
     def grid(self) -> Grid:
@@ -80,4 +83,6 @@ class Plan:
             lines.append(f"  left out: {item}")
         for note in self.notes:
             lines.append(f"  note: {note}")
+        if self.refused:
+            lines.append(f"refused: {self.refused}")
         return "\n".join(lines)
