@@ -43,6 +43,7 @@ Example::
 from __future__ import annotations
 
 import ast
+import builtins
 import functools
 import inspect
 import math
@@ -367,13 +368,16 @@ class Program:
         return inst
 
 
-def _warp_builtins() -> dict:
-    """Warp's table of kernel builtins (module path differs between Warp versions)."""
-    try:
-        from warp._src.context import builtin_functions
-    except ImportError:                                     # Warp < 1.10
-        from warp.context import builtin_functions
-    return builtin_functions
+@dataclass(frozen=True)
+class _KernelOnlyBuiltin:
+    """A Warp builtin that exists only inside kernels (``wp.vector``, ...): it is not an
+    attribute of the ``warp`` module, so it is known here by its name alone, and
+    :meth:`_Translator.builtin` decides whether it has an OpenCL translation."""
+
+    key: str
+
+    def is_builtin(self) -> bool:
+        return True
 
 
 def _python_function(func):
@@ -592,17 +596,13 @@ class _FunctionTranslator:
         if isinstance(node, ast.Name):
             if node.id in self.globals:
                 return self.globals[node.id]
-            import builtins
             if hasattr(builtins, node.id):
                 return getattr(builtins, node.id)
             self.fail(f"unknown name '{node.id}'")
         if isinstance(node, ast.Attribute):
             base = self.resolve(node.value)
             if base is wp and not hasattr(wp, node.attr):
-                # kernel-only builtins (wp.vector, ...) live in Warp's builtin table
-                builtins_table = _warp_builtins()
-                if node.attr in builtins_table:
-                    return builtins_table[node.attr]
+                return _KernelOnlyBuiltin(node.attr)
             return getattr(base, node.attr)
         self.fail(f"cannot resolve {ast.unparse(node)}")
 

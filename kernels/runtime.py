@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import warp as wp
 
-from ..config import settings
+from ..config import DEVICE_NAME, ConfigError, settings
 
 _initialised = False
 
@@ -20,7 +20,12 @@ def ensure_init() -> None:
     global _initialised
     if _initialised:
         return
-    verbose = settings().warp_verbose
+    try:
+        verbose = settings().warp_verbose
+    except ConfigError:
+        # initialised at import: a bad LAYERSIM_* variable is reported, as one line naming
+        # it, where the settings are used rather than as an import traceback
+        verbose = False
     if not verbose:
         # Warp >= 1.18 uses log_level; older versions the quiet flag.
         if hasattr(wp.config, "log_level") and hasattr(wp, "LOG_WARNING"):
@@ -47,9 +52,27 @@ def device_for(device=None):
 
     Projection and evaluation kernels are light and run on the CPU by default; pass ``"cuda"``
     (or set ``LAYERSIM_DEVICE=cuda``) to run them on a GPU.
+
+    Raises
+    ------
+    ConfigError
+        For a device that is not ``cpu``, ``cuda`` or ``cuda:N``, or a CUDA device that this
+        machine does not have; the message names the argument or ``LAYERSIM_DEVICE``. CUDA is
+        checked by counting devices first, so that Warp's native error lines are not printed.
     """
     ensure_init()
     name = device or settings().device
+    where = f"device={name!r}" if device else f"LAYERSIM_DEVICE={name!r}"
+    if not isinstance(name, str) or not DEVICE_NAME.fullmatch(name):
+        raise ConfigError(f"{where}: not a Warp device; use 'cpu', 'cuda' or 'cuda:N'")
+    if name.startswith("cuda"):
+        count = wp.get_cuda_device_count()
+        index = int(name[5:]) if ":" in name else 0
+        if index >= count:
+            have = (f"{count} CUDA device(s)" if count else
+                    "no CUDA device (no GPU, or no driver)")
+            raise ConfigError(f"{where}: this machine has {have}; use 'cpu'"
+                              + (" or unset LAYERSIM_DEVICE" if not device else ""))
     return wp.get_device(name)
 
 

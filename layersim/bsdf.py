@@ -24,6 +24,9 @@ through media is not part of ``eval``; ``albedo`` and ``bin_energies`` include i
 from __future__ import annotations
 
 import json
+import os
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +39,8 @@ from .operator import from_arrays
 from .sampling import sampler_for
 
 FORMAT_VERSION = 1
+#: First bytes of a saved BSDF: a zip archive (numpy ``.npz``) of plain arrays.
+ZIP_MAGIC = b"PK\x03\x04"
 #: Files holding anisotropic (coupled-mode) operators are written as version 2; isotropic ones
 #: stay version 1, readable by older layersim versions.
 FORMAT_VERSION_ANISO = 2
@@ -54,6 +59,21 @@ def channel_pairs(a: "BSDF", b: "BSDF", mismatch: str) -> list:
         raise OperatorError(mismatch.format(a=a.channels, b=b.channels))
     pick = lambda x, c: x.operators[0 if x.channels == 1 else c]
     return [(pick(a, c), pick(b, c)) for c in range(max(a.channels, b.channels))]
+
+
+def foreign_file(head: bytes, path) -> str:
+    """What a file that does not start with :data:`ZIP_MAGIC` is, as far as its first bytes
+    (``head``) and name tell, for the message that refuses it as a saved BSDF."""
+    path = Path(path)
+    if not head:
+        return "the file is empty (not a saved layersim BSDF)"
+    if head.startswith(b"SCATFUN"):
+        return ("a tabulated Fourier .bsdf file, not a saved layersim BSDF (.lsim); read it "
+                "with layersim.bsdffile.read, or give it to 'layersim eval', 'plot' or 'export'")
+    if path.suffix.lower() == ".toml":
+        return ("a scene file, not a saved layersim BSDF (.lsim); solve it first "
+                "('layersim solve' writes the .lsim file)")
+    return "not a saved layersim BSDF (.lsim files are written by BSDF.save and 'layersim solve')"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -229,6 +249,9 @@ class BSDF:
     def save(self, path) -> Path:
         """Write the solved operators and metadata to ``path`` (numpy ``.npz`` container;
         reload with :meth:`BSDF.load`)."""
+        if not isinstance(path, (str, os.PathLike)):
+            raise TypeError("BSDF.save takes a path (str or pathlib.Path), got "
+                            f"{type(path).__name__}")
         path = Path(path)
         version = FORMAT_VERSION_ANISO if self.anisotropic else FORMAT_VERSION
         arrays = {"format": np.array("layersim-bsdf"), "version": np.array(version),
@@ -242,12 +265,41 @@ class BSDF:
 
     @classmethod
     def load(cls, path) -> "BSDF":
-        """Read a BSDF written by :meth:`save`."""
+        """Read a BSDF written by :meth:`save`.
+
+        The file is a zip archive of plain numeric and text arrays, read without pickle
+        (``allow_pickle=False``): a saved BSDF never holds Python objects.
+
+        Raises
+        ------
+        TypeError
+            If ``path`` is not a path (str or os.PathLike).
+        FileFormatError
+            If the file is empty, truncated, damaged, of another kind (a ``.bsdf`` table, a
+            scene, other data) or written by a newer layersim; the message names the file and
+            what it is instead.
+        OSError
+            If the file cannot be opened.
+        """
+        if not isinstance(path, (str, os.PathLike)):
+            raise TypeError("BSDF.load takes the path (str or pathlib.Path) of a file written "
+                            f"by BSDF.save or 'layersim solve', got {type(path).__name__}")
         path = Path(path)
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+            if head[:len(ZIP_MAGIC)] != ZIP_MAGIC:
+                raise FileFormatError(f"{path}: {foreign_file(head, path)}")
+            fh.seek(0)
+            return cls._read(fh, path)
+
+    @classmethod
+    def _read(cls, fh, path) -> "BSDF":
+        """The BSDF in the open zip archive ``fh`` (the file at ``path``; see :meth:`load`)."""
         try:
-            with np.load(path, allow_pickle=False) as d:
-                if str(d.get("format", "")) != "layersim-bsdf":
-                    raise FileFormatError(f"{path}: not a layersim BSDF file")
+            with np.load(fh, allow_pickle=False) as d:
+                if "format" not in d.files or str(d["format"]) != "layersim-bsdf":
+                    raise FileFormatError(f"{path}: a zip archive, but not a saved layersim "
+                                          "BSDF (BSDF.save / 'layersim solve' write those)")
                 version = int(d["version"])
                 if version > FORMAT_VERSION_ANISO:
                     raise FileFormatError(f"{path}: format version {version} is newer than "
@@ -258,8 +310,11 @@ class BSDF:
                 info = json.loads(str(d["info"]))
         except FileFormatError:
             raise
-        except (OSError, ValueError, KeyError) as exc:
-            raise FileFormatError(f"{path}: cannot read BSDF file ({exc})") from None
+        except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile,
+                zlib.error) as exc:
+            raise FileFormatError(f"{path}: a damaged or truncated layersim BSDF file "
+                                  f"({type(exc).__name__}: {exc}); save or solve it again"
+                                  ) from None
         return cls(ops, None, info)
 
     def __repr__(self) -> str:

@@ -1,8 +1,10 @@
 """The ``layersim`` command line.
 
-    layersim plan SCENE              print the discretisation plan (no heavy work)
-    layersim solve SCENE [-o FILE]   solve, print plan, timings and albedos; save the BSDF
-    layersim info FILE               reload a saved BSDF and print its summary and albedos
+    layersim plan SCENE              print the discretisation plan (no heavy work); a plan
+                                     over the limits is printed with its refusal (status 2)
+    layersim solve SCENE [-o FILE] [--like STACK.lsim]
+                                     solve, print plan, timings and albedos; save the BSDF
+    layersim info FILE               summary and albedos of a saved BSDF (.lsim) or .bsdf file
     layersim bench [--quick] [--stability] [--backend B ...] --out DIR
                                      solver vs Monte Carlo report and stability suite
     layersim export SRC [-o F.bsdf] [--version 1|2]
@@ -16,14 +18,18 @@
 SRC is a scene (``.toml``, solved on the fly), a saved BSDF (``.lsim`` from ``solve -o``) or a
 ``.bsdf`` file.
 
-Errors in the input print one line (``layersim: error: ...``) and exit with status 2.
+Errors in the input print one line (``layersim: error: ...``) and exit with status 2, before
+any heavy work: options, output paths and the environment are checked first. Solves show a
+progress bar per phase on a terminal (``--quiet`` or a redirected stderr: none).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +45,83 @@ from .solver import solve
 from .subtract import subtract
 
 EXIT_INPUT = 2
+#: Incident angles (degrees) of the albedo tables that solve, info and subtract print.
+TABLE_ANGLES = [0.0, 30.0, 60.0, 80.0, 89.0]
+
+
+class ProgressBars:
+    """The ``progress`` callback of :func:`layersim.solve` drawn as tqdm bars on stderr, one
+    per phase (projection of the layers, adding), when ``enabled``; otherwise silent. A step
+    can take minutes (the coupled adding of a large stack), so a timer thread redraws the
+    open bars every :attr:`interval` seconds: their elapsed time keeps counting."""
+
+    interval = 0.5
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+        self.bars: dict = {}
+        self._stop = threading.Event()
+        self._timer = None
+
+    def __call__(self, phase: str, done: int, total: int, what: str) -> None:
+        if not self.enabled or total <= 0:
+            return
+        from tqdm import tqdm
+        bar = self.bars.get(phase)
+        if bar is None:
+            bar = self.bars[phase] = tqdm(total=total, desc=phase, unit="step", leave=False,
+                                          file=sys.stderr, position=len(self.bars))
+            if self._timer is None:
+                self._timer = threading.Thread(target=self._redraw, daemon=True)
+                self._timer.start()
+        bar.set_postfix_str(what, refresh=False)
+        bar.update(done - bar.n)
+        if done >= total:
+            bar.close()
+
+    def _redraw(self) -> None:
+        while not self._stop.wait(self.interval):
+            for bar in list(self.bars.values()):
+                if not bar.disable:
+                    bar.refresh()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._timer is not None:
+            self._timer.join()
+        for bar in self.bars.values():
+            bar.close()
+        self.bars.clear()
+
+
+def _progress(args) -> ProgressBars:
+    """Progress bars for the command's solves: on a terminal, unless ``--quiet``."""
+    return ProgressBars(not getattr(args, "quiet", False) and sys.stderr.isatty())
+
+
+def _output(path, what: str) -> Path:
+    """``path`` of an output file, checked before the work that produces it: its folder
+    exists and is writable, and it is not a folder itself."""
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise ValueError(f"{what} {path} is a folder; give a file name")
+    if not folder.is_dir():
+        raise ValueError(f"{what} {path}: the folder {folder} does not exist")
+    if not os.access(folder, os.W_OK):
+        raise ValueError(f"{what} {path}: the folder {folder} is not writable")
+    return path
+
+
+def _image(path) -> Path:
+    """An image file to write (:func:`_output`) in a format that matplotlib writes."""
+    from matplotlib.backend_bases import FigureCanvasBase
+    path = _output(path, "output file")
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if path.suffix.lower().lstrip(".") not in formats:
+        raise ValueError(f"output file {path}: unknown image format {path.suffix or '(none)'}; "
+                         f"use one of {', '.join('.' + f for f in sorted(formats))}")
+    return path
 
 
 def _scene(path):
@@ -48,7 +131,12 @@ def _scene(path):
 def cmd_plan(args) -> int:
     scene = _scene(args.scene)
     print(scene.describe())
-    print(make_plan(scene).report())
+    plan = make_plan(scene, refuse=False)
+    print(plan.report())
+    if plan.refused:
+        # the solve would refuse this plan: a script can test the status before solving
+        print(f"layersim: error: {plan.refused}", file=sys.stderr)
+        return EXIT_INPUT
     return 0
 
 
@@ -75,21 +163,52 @@ def _print_notes(info: dict) -> None:
 
 
 def cmd_solve(args) -> int:
+    out = _output(args.output if args.output else Path(args.scene).stem + ".lsim",
+                  "output file")
     scene = _scene(args.scene)
+    like = BSDF.load(args.like) if args.like else None
     print(scene.describe())
-    bsdf = solve(scene, verbose=True)
+    if like is not None:
+        print(f"discretisation of {args.like}: n = {like.grid.n} ({like.grid.rule}), "
+              f"md = {like.operators[0].m}")
+    bars = _progress(args)
+    try:
+        bsdf = solve(scene, like=like, verbose=True, progress=bars)
+    finally:
+        bars.close()
     info = bsdf.info
     _print_notes(info)
     print(f"stack: {info['nnz']} nonzero coefficients, {info['memory_bytes'] / 2**20:.1f} MiB")
     print("albedo (energy fractions):")
-    print(_albedo_table(bsdf, [0.0, 30.0, 60.0, 80.0, 89.0]))
-    out = Path(args.output) if args.output else Path(Path(args.scene).stem + ".lsim")
+    print(_albedo_table(bsdf, TABLE_ANGLES))
     bsdf.save(out)
     print(f"wrote {out} (reload with layersim.BSDF.load)")
     return 0
 
 
+def _table_summary(table) -> str:
+    """One line describing a ``.bsdf`` table (:class:`FourierTable`)."""
+    return (f"SCATFUN v{table.version}, {table.n_nodes} nodes, max order {table.max_order}"
+            f"{' (complex)' if table.is_complex else ''}, {table.channels} channel(s) "
+            f"({'Y, R, B' if table.channels == 3 else 'mono'}), {table.coef.size} coefficients, "
+            f"eta = {table.eta:g}")
+
+
 def cmd_info(args) -> int:
+    with open(args.file, "rb") as fh:
+        head = fh.read(8)
+    if head[:7] == b"SCATFUN":
+        # a .bsdf table: its header, and the albedos where it converts to operators
+        table = read(args.file)
+        print(f"{args.file}: {_table_summary(table)}")
+        try:
+            bsdf = table.to_bsdf()
+        except (FileFormatError, InfeasibleError) as exc:
+            print(f"note: no albedos: {exc}")
+            return 0
+        print("albedo (energy fractions):")
+        print(_albedo_table(bsdf, TABLE_ANGLES))
+        return 0
     bsdf = BSDF.load(args.file)
     info = bsdf.info
     op = bsdf.operators[0]
@@ -102,14 +221,32 @@ def cmd_info(args) -> int:
         print(f"solved in {info['seconds']['total']:.2f} s")
     _print_notes(info)
     print("albedo (energy fractions):")
-    print(_albedo_table(bsdf, [0.0, 30.0, 60.0, 80.0, 89.0]))
+    print(_albedo_table(bsdf, TABLE_ANGLES))
     return 0
 
 
 def cmd_bench(args) -> int:
     from . import bench      # imported when used: the benchmark report needs matplotlib
+    from .montecarlo import BACKENDS, available_backends
+    backends = args.backend or ["auto"]
+    unknown = [b for b in backends if b not in BACKENDS]
+    if unknown:
+        raise ValueError(f"--backend {unknown[0]}: unknown Monte Carlo backend; expected one "
+                         f"of {', '.join(BACKENDS)}")
+    here = available_backends()
+    missing = [b for b in backends if b != "auto" and b not in here]
+    if missing:
+        raise ValueError(f"--backend {missing[0]}: not available on this machine (available: "
+                         f"{', '.join(here)})")
+    out = Path(args.out)
+    # the report creates the folder and its parents: the nearest existing one must take them
+    base = next(p for p in [out, *out.absolute().parents] if p.exists())
+    if not base.is_dir():
+        raise ValueError(f"--out {out}: {base} is a file, not a folder")
+    if not os.access(base, os.W_OK):
+        raise ValueError(f"--out {out}: the folder {base} is not writable")
     results = bench.run(args.out, quick=args.quick, stability=args.stability,
-                        backends=args.backend or ("auto",), scene_dir=args.scenes,
+                        backends=backends, scene_dir=args.scenes,
                         scenes=args.scene, command="layersim " + " ".join(args.argv))
     fails = [c["name"] for c in results["stability"] if c["outcome"] == "fail"]
     print(f"wrote {args.out}/results.json, report.md and plots")
@@ -121,13 +258,16 @@ def cmd_bench(args) -> int:
 
 # ---- export / eval / plot ---------------------------------------------------------------
 
-def _load(path):
+def _load(path, args=None):
     """A BSDF from a scene, a saved ``.lsim`` BSDF or a ``.bsdf`` file (a ``.bsdf`` file that
     layersim cannot convert, e.g. one on foreign nodes, stays a FourierTable, which evaluates
     as pbrt-v3 and the Layer Laboratory's plugin do)."""
     path = Path(path)
     with open(path, "rb") as fh:
         head = fh.read(8)
+    if not head:
+        raise ValueError(f"{path}: the file is empty (expected a scene, a saved BSDF or a "
+                         ".bsdf file)")
     if head[:7] == b"SCATFUN":
         table = read(path)
         try:
@@ -136,11 +276,15 @@ def _load(path):
             print(f"note: {path}: {exc}; evaluating the table as renderers do",
                   file=sys.stderr)
             return table
-    if head[:2] == b"PK":                    # numpy .npz container of BSDF.save
+    if head[:2] == b"PK" or path.suffix.lower() == ".lsim":   # numpy .npz of BSDF.save
         return BSDF.load(path)
     if path.suffix.lower() not in ("", ".toml"):
         raise ValueError(f"{path}: not a scene (.toml), a saved BSDF (.lsim) or a .bsdf file")
-    return solve(_scene(path))
+    bars = _progress(args)
+    try:
+        return solve(_scene(path), progress=bars)
+    finally:
+        bars.close()
 
 
 def _vector(text: str, name: str, n: int) -> np.ndarray:
@@ -157,10 +301,11 @@ def _vector(text: str, name: str, n: int) -> np.ndarray:
 
 def _unit(text: str, name: str) -> np.ndarray:
     v = _vector(text, name, 3)
-    norm = float(np.linalg.norm(v))
-    if norm == 0.0:
+    scale = float(np.max(np.abs(v)))
+    if scale == 0.0:
         raise ValueError(f"{name} must be a nonzero direction")
-    return v / norm
+    v = v / scale                        # no overflow in the norm of huge components
+    return v / np.linalg.norm(v)
 
 
 def _format(f) -> str:
@@ -171,9 +316,10 @@ def _format(f) -> str:
 def cmd_export(args) -> int:
     if not 0.0 <= args.relerr < 1.0:          # before solving the scene
         raise ValueError(f"--relerr {args.relerr:g}: the relative truncation must be in [0, 1)")
-    bsdf = _load(args.source)
-    out = Path(args.output) if args.output else Path(Path(args.source).stem + ".bsdf")
+    out = _output(args.output if args.output else Path(args.source).stem + ".bsdf",
+                  "output file")
     alpha = _vector(args.alpha, "--alpha", 2) if args.alpha else (0.0, 0.0)
+    bsdf = _load(args.source, args)
     if isinstance(bsdf, FourierTable):
         if args.version not in (None, bsdf.version) or args.relerr:
             raise ValueError(f"{args.source}: layersim cannot convert this file, so it can only "
@@ -183,17 +329,21 @@ def cmd_export(args) -> int:
     else:
         table = export(bsdf, out, version=args.version, alpha=alpha, relerr=args.relerr)
     size = out.stat().st_size
-    print(f"wrote {out}: SCATFUN v{table.version}, {table.n_nodes} nodes, max order "
-          f"{table.max_order}{' (complex)' if table.is_complex else ''}, {table.channels} "
-          f"channel(s) "
-          f"({'Y, R, B' if table.channels == 3 else 'mono'}), {table.coef.size} coefficients, "
-          f"eta = {table.eta:g}, {size} bytes ({size / 2**20:.2f} MiB)")
+    print(f"wrote {out}: {_table_summary(table)}, {size} bytes ({size / 2**20:.2f} MiB)")
     return 0
 
 
 def cmd_eval(args) -> int:
     wi, wo = _unit(args.wi, "--wi"), _unit(args.wo, "--wo")
-    bsdf = _load(args.source)
+    if wi[2] == 0.0 or wo[2] == 0.0:
+        raise ValueError(f"{'--wi' if wi[2] == 0.0 else '--wo'} lies on the horizon (z = 0), "
+                         "where f is not defined; tilt it above or below")
+    bsdf = _load(args.source, args)
+    if getattr(bsdf, "opaque", False) and (wi[2] < 0 or wo[2] < 0):
+        side = "--wi" if wi[2] < 0 else "--wo"
+        raise ValueError(f"{args.source} is opaque from below: {side} points below the "
+                         "surface (z < 0), where no light arrives or leaves (f = 0); give "
+                         f"{side} with z > 0")
     f = bsdf.eval(wi, wo)
     print(f"wi = ({wi[0]:.6g}, {wi[1]:.6g}, {wi[2]:.6g}), wo = ({wo[0]:.6g}, {wo[1]:.6g}, "
           f"{wo[2]:.6g})")
@@ -203,7 +353,6 @@ def cmd_eval(args) -> int:
 
 
 def cmd_plot(args) -> int:
-    from . import plot       # imported when used: matplotlib is slow to import
     if (args.wi is None) == (not args.blocks):
         raise ValueError("plot needs exactly one of --wi THETA,PHI (hemispherical slices) and "
                          "--blocks (the operator's four blocks)")
@@ -211,9 +360,22 @@ def cmd_plot(args) -> int:
     if args.blocks:
         if args.order is not None and args.order < 0:
             raise ValueError(f"--order must be >= 0, got {args.order}")
-        out = Path(args.output) if args.output else Path(name + "_blocks.png")
-        plot.plot_blocks(_load(args.source), out, order=args.order,
-                         phi_d=math.radians(args.phi_d), title=name)
+        if not math.isfinite(args.phi_d):
+            raise ValueError(f"--phi-d must be a finite angle in degrees, got {args.phi_d}")
+        out = _image(args.output if args.output else name + "_blocks.png")
+        bsdf = _load(args.source, args)
+        if args.order is not None:
+            if not isinstance(bsdf, BSDF):
+                raise ValueError(f"--order: {args.source} cannot be converted to layersim "
+                                 "operators, so its Fourier orders are not available; "
+                                 "leave out --order")
+            md = bsdf.operators[0].m
+            if args.order >= md:
+                raise ValueError(f"--order {args.order}: {args.source} has Fourier orders "
+                                 f"0 to {md - 1} (md = {md})")
+        from . import plot   # imported when used: matplotlib is slow to import
+        plot.plot_blocks(bsdf, out, order=args.order, phi_d=math.radians(args.phi_d),
+                         title=name)
     else:
         theta, phi = _vector(args.wi, "--wi", 2)
         if not 0.0 <= theta <= 180.0 or theta == 90.0:
@@ -221,8 +383,13 @@ def cmd_plot(args) -> int:
                              f"got {theta:g}")
         t, p = math.radians(theta), math.radians(phi)
         wi = np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
-        out = Path(args.output) if args.output else Path(name + "_slices.png")
-        plot.plot_slices(_load(args.source), wi, out, log=args.log, title=name)
+        out = _image(args.output if args.output else name + "_slices.png")
+        bsdf = _load(args.source, args)
+        if getattr(bsdf, "opaque", False) and wi[2] < 0:
+            raise ValueError(f"{args.source} is opaque from below: --wi THETA > 90 lights it "
+                             "from below, where no light enters; give THETA < 90")
+        from . import plot   # imported when used: matplotlib is slow to import
+        plot.plot_slices(bsdf, wi, out, log=args.log, title=name)
     print(f"wrote {out}")
     return 0
 
@@ -230,6 +397,8 @@ def cmd_plot(args) -> int:
 # --- subtracting equations (layersim.subtract) ---------------------------------------------
 
 def cmd_subtract(args) -> int:
+    out = _output(args.output if args.output else
+                  f"{Path(args.stack).stem}-minus-{Path(args.known).stem}.lsim", "output file")
     stack = BSDF.load(args.stack)
     known = BSDF.load(args.known)
     result = subtract(stack, known, side=args.side, eps=args.eps, noise=args.noise)
@@ -241,29 +410,145 @@ def cmd_subtract(args) -> int:
               f"{info['residual']:.3g}; visible {100 * info['visible']:.0f} % of the angular "
               f"components; largest R + T {info['energy_max']:.4f}")
     print("albedo of the recovered layer (energy fractions):")
-    print(_albedo_table(result, [0.0, 30.0, 60.0, 80.0, 89.0]))
-    out = Path(args.output) if args.output else Path(
-        f"{Path(args.stack).stem}-minus-{Path(args.known).stem}.lsim")
+    print(_albedo_table(result, TABLE_ANGLES))
+    _warn_energy(result, infos if isinstance(infos, list) else [infos])
+    _warn_hidden(known, args.side)
     result.save(out)
     print(f"wrote {out} (reload with layersim.BSDF.load)")
     return 0
 
 
+def _warn_hidden(known: BSDF, side: str) -> None:
+    """Warn on stderr when the known layer hides directions of the recovered one: seen through
+    an interface into a denser medium, directions beyond its critical angle in that medium are
+    reached by no light of the stack (total internal reflection), so the stack says nothing
+    about the recovered layer there and its values at those angles are not recovered."""
+    op = known.operators[0]
+    if op.eta_bottom is None:
+        return
+    shared, outer = ((op.eta_bottom, op.eta_top) if side == "top"
+                     else (op.eta_top, op.eta_bottom))
+    if shared <= outer:
+        return
+    critical = math.degrees(math.asin(outer / shared))
+    where = "from above" if side == "top" else "from below"
+    print(f"warning: the recovered layer is seen through the known one from a medium of index "
+          f"{outer:g}: in its medium of index {shared:g}, directions beyond the critical angle "
+          f"{critical:.1f} deg (lit {where}) receive no light of the stack, so the result there "
+          "is not recovered (its albedos at those angles are not measurements)",
+          file=sys.stderr)
+
+
+#: R + T above 1 by more than this (rounding and quadrature) makes subtract warn.
+ENERGY_WARN = 1e-3
+
+
+def _warn_energy(result: BSDF, infos: list) -> None:
+    """Warn on stderr where the recovered layer reflects and transmits more than it receives:
+    no passive layer does, so there the subtraction has amplified errors of the stack (noise,
+    discretisation) beyond the regularisation, and the result is not to be trusted."""
+    worst = max(info["energy_max"] for info in infos)
+    if worst <= 1.0 + ENERGY_WARN:
+        return
+    theta = np.arange(0.0, 90.0, 1.0)
+    wi = np.stack([np.sin(np.radians(theta)), 0 * theta, np.cos(np.radians(theta))], axis=-1)
+    sides = [("from above", wi)] + ([] if result.opaque else [("from below", wi * [1, 1, -1])])
+    where = []
+    for label, w in sides:
+        R, T = result.albedo(w)
+        total = np.asarray(R + T).reshape(theta.size, -1).max(axis=1)
+        bad = theta[total > 1.0 + ENERGY_WARN]
+        if bad.size:
+            where.append(f"{label} at {bad.min():g}-{bad.max():g} deg")
+    print(f"warning: the recovered layer creates energy (R + T up to {worst:.4f} > 1"
+          + (f"; {', '.join(where)}" if where else "") + "). No physical layer does: the "
+          "subtraction has amplified errors of the stack there, and those angles of the "
+          "result are unreliable; a larger --eps smooths them, a stack solved with more "
+          "ordinates (n) or with less noise reduces them", file=sys.stderr)
+
+
+EXAMPLES = {
+    "plan": """examples:
+  layersim plan examples/coated_gold.toml
+  LAYERSIM_MAX_MEMORY=4e9 layersim plan examples/brushed_metal.toml
+
+Prints the scene, the ordinates, Fourier orders and memory the solve would use and what it
+leaves out. A plan over the memory limit is printed with the reason ("refused: ...") and the
+command exits with status 2, as 'layersim solve' would refuse it.""",
+    "solve": """examples:
+  layersim solve examples/coated_gold.toml                 # writes coated_gold.lsim
+  layersim solve examples/coated_gold.toml -o gold.lsim --quiet
+  layersim solve lacquer.toml --like coated_gold.lsim      # on coated_gold's discretisation,
+                                                           # ready for 'layersim subtract'""",
+    "info": """examples:
+  layersim info coated_gold.lsim
+  layersim info coated_gold.bsdf""",
+    "bench": """examples:
+  layersim bench --out bench-quick --quick
+  layersim bench --out bench --stability --backend warp-cuda --backend opencl
+  layersim bench --out bench --scene coated_gold""",
+    "export": """examples:
+  layersim export examples/coated_gold.toml -o coated_gold.bsdf
+  layersim export brushed.lsim -o brushed.bsdf --version 2 --relerr 1e-3""",
+    "eval": """examples:
+  layersim eval coated_gold.lsim --wi 0.5,0,0.866 --wo -0.5,0,0.866     # specular
+  layersim eval examples/coated_gold.toml --wi 0,0,1 --wo 0.3,0.2,0.93""",
+    "plot": """examples:
+  layersim plot coated_gold.lsim --wi 30,0 -o slices.png --log
+  layersim plot coated_gold.lsim --blocks -o blocks.png
+  layersim plot coated_gold.lsim --blocks --order 2 -o order2.png""",
+    "subtract": """examples:
+  layersim solve stack.toml                                # stack.lsim
+  layersim solve lacquer.toml --like stack.lsim            # lacquer.lsim, same discretisation
+  layersim subtract stack.lsim lacquer.lsim --side top -o base.lsim""",
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line, as every other input error of the command."""
+
+    def error(self, message):
+        self.exit(EXIT_INPUT, f"layersim: error: {message} (see '{self.prog} --help')\n")
+
+
+def _subparser(sub, name: str, help: str, parents=()) -> argparse.ArgumentParser:
+    return sub.add_parser(name, help=help, description=help[:1].upper() + help[1:] + ".",
+                          epilog=EXAMPLES[name], parents=list(parents),
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="layersim", description="Reflectance of layered materials")
-    sub = p.add_subparsers(dest="command", required=True)
-    sp = sub.add_parser("plan", help="print the discretisation plan of a scene")
+    from . import __version__
+    p = _Parser(
+        prog="layersim", description="Reflectance of layered materials: solve a stack of "
+        "layers into a BSDF;\nevaluate, plot, export and subtract it; compare it with "
+        "Monte Carlo.",
+        epilog="examples:\n  layersim solve examples/coated_gold.toml\n"
+               "  layersim plot coated_gold.lsim --wi 30,0 -o slices.png\n"
+               "  layersim COMMAND --help      (examples of each command)",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--version", action="version", version=f"layersim {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    quiet = _Parser(add_help=False)
+    quiet.add_argument("-q", "--quiet", action="store_true",
+                       help="no progress bars (they are drawn only on a terminal anyway)")
+
+    sp = _subparser(sub, "plan", "print the discretisation plan of a scene (no heavy work)")
     sp.add_argument("scene", help="scene file (TOML)")
     sp.set_defaults(func=cmd_plan)
-    sp = sub.add_parser("solve", help="solve a scene with the adding equations")
+    sp = _subparser(sub, "solve", "solve a scene with the adding equations", [quiet])
     sp.add_argument("scene", help="scene file (TOML)")
     sp.add_argument("-o", "--output", help="where to save the solved BSDF (default: "
                                            "SCENE_STEM.lsim in the current directory)")
+    sp.add_argument("--like", metavar="STACK.lsim",
+                    help="solve on the discretisation (n, md, rule) of this saved BSDF, so "
+                         "that the two can be added or subtracted")
     sp.set_defaults(func=cmd_solve)
-    sp = sub.add_parser("info", help="reload a saved BSDF (.lsim) and print its summary")
-    sp.add_argument("file", help="file written by 'layersim solve'")
+    sp = _subparser(sub, "info", "print the summary and albedos of a saved BSDF (.lsim) or a "
+                                 ".bsdf file")
+    sp.add_argument("file", help="file written by 'layersim solve' or 'layersim export'")
     sp.set_defaults(func=cmd_info)
-    sp = sub.add_parser("bench", help="benchmark report: solver vs Monte Carlo, stability suite")
+    sp = _subparser(sub, "bench", "benchmark report: solver vs Monte Carlo, stability suite")
     sp.add_argument("--out", required=True, help="output folder")
     sp.add_argument("--quick", action="store_true", help="small version (< 2 min on 2 cores)")
     sp.add_argument("--stability", action="store_true", help="also run the stability suite")
@@ -274,9 +559,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "repeatable")
     sp.set_defaults(func=cmd_bench)
 
-    src_help = "scene (.toml), saved BSDF (.lsim) or .bsdf file"
-    sp = sub.add_parser("export", help="write a tabulated Fourier BSDF file (.bsdf) for "
-                                       "layerlab, Mitsuba 0.6 and pbrt-v3")
+    src_help = "scene (.toml, solved on the fly), saved BSDF (.lsim) or .bsdf file"
+    sp = _subparser(sub, "export", "write a tabulated Fourier BSDF file (.bsdf) for "
+                                   "layerlab, Mitsuba 0.6, pbrt-v3 or the Layer Laboratory",
+                    [quiet])
     sp.add_argument("source", help=src_help)
     sp.add_argument("-o", "--output", help="output file (default: SOURCE_STEM.bsdf)")
     sp.add_argument("--version", type=int, choices=(1, 2), default=None,
@@ -289,18 +575,18 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--alpha", help="A_TOP,A_BOTTOM: Beckmann-equivalent roughness hints for "
                                     "the header (default 0,0)")
     sp.set_defaults(func=cmd_export)
-    sp = sub.add_parser("eval", help="print f(wi, wo) in 1/sr (per channel for RGB)")
+    sp = _subparser(sub, "eval", "print f(wi, wo) in 1/sr (per channel for RGB)", [quiet])
     sp.add_argument("source", help=src_help)
-    sp.add_argument("--wi", required=True, help="X,Y,Z toward the light (local frame; "
-                                                "normalised)")
+    sp.add_argument("--wi", required=True, help="X,Y,Z toward the light (local frame, z = "
+                                                "normal; normalised)")
     sp.add_argument("--wo", required=True, help="X,Y,Z toward the viewer (local frame; "
                                                 "normalised)")
     sp.set_defaults(func=cmd_eval)
-    sp = sub.add_parser("plot", help="draw hemispherical slices (--wi) or the operator's "
-                                     "blocks (--blocks) into a PNG")
+    sp = _subparser(sub, "plot", "draw hemispherical slices (--wi) or the operator's blocks "
+                                 "(--blocks) into a PNG", [quiet])
     sp.add_argument("source", help=src_help)
     sp.add_argument("--wi", help="THETA,PHI of the light in degrees (theta from the normal)")
-    sp.add_argument("--blocks", action="store_true", help="draw Tbt | Rt over Rb | Ttb")
+    sp.add_argument("--blocks", action="store_true", help="draw the blocks Rb | Ttb over Tbt | Rt (Rt only when opaque)")
     sp.add_argument("--order", type=int, help="with --blocks: Fourier order l to show "
                                               "(default: the BSDF at --phi-d)")
     sp.add_argument("--phi-d", type=float, default=0.0,
@@ -309,11 +595,11 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-o", "--output", help="PNG file (default: SOURCE_STEM_slices.png or "
                                            "_blocks.png)")
     sp.set_defaults(func=cmd_plot)
-    sp = sub.add_parser("subtract", help="recover the unknown layer of a solved stack "
-                                         "(subtracting equations)")
+    sp = _subparser(sub, "subtract", "recover the unknown layer of a solved stack "
+                                     "(subtracting equations)")
     sp.add_argument("stack", help="solved stack (.lsim written by 'layersim solve')")
-    sp.add_argument("known", help="solved known layer, same discretisation (solve it with "
-                                  "layersim.solve(scene, like=stack))")
+    sp.add_argument("known", help="solved known layer on the stack's discretisation "
+                                  "('layersim solve KNOWN.toml --like STACK.lsim')")
     sp.add_argument("--side", choices=("top", "bottom"), required=True,
                     help="where the known layer sits in the stack")
     sp.add_argument("-o", "--output", help="where to save the recovered layer (default: "
@@ -351,7 +637,10 @@ def main(argv=None) -> int:
         memory.cap_arenas(settings().malloc_arenas)     # the command owns its process
         return args.func(args)
     except (LayersimError, ValueError, OSError) as exc:
-        msg = str(exc).replace("\n", " ")
+        if isinstance(exc, OSError) and exc.strerror and exc.filename:
+            msg = f"{exc.filename}: {exc.strerror}"
+        else:
+            msg = str(exc).replace("\n", " ")
         print(f"layersim: error: {msg}", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt:

@@ -35,10 +35,15 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
+import re
 import tempfile
 from dataclasses import dataclass
 
 from .errors import LayersimError
+
+
+#: Warp device names layersim runs kernels on.
+DEVICE_NAME = re.compile(r"cpu|cuda(:[0-9]+)?")
 
 
 class ConfigError(LayersimError, ValueError):
@@ -97,8 +102,9 @@ class Settings:
                                              or not self.max_seconds > 0):
             raise ConfigError(f"max_seconds must be a positive number of seconds, got "
                               f"{self.max_seconds!r}")
-        if not isinstance(self.device, str) or not self.device:
-            raise ConfigError(f"device must be a Warp device name, got {self.device!r}")
+        if not isinstance(self.device, str) or not DEVICE_NAME.fullmatch(self.device):
+            raise ConfigError(f"device must be a Warp device name ('cpu', 'cuda' or "
+                              f"'cuda:N'), got {self.device!r}")
 
     @classmethod
     def from_env(cls, environ=None) -> "Settings":
@@ -149,7 +155,7 @@ _VARIABLES = {
     "warp_verbose": ("LAYERSIM_WARP_VERBOSE", _flag),
 }
 _EXPECTED = {
-    "device": "expected a Warp device name",
+    "device": "expected a Warp device name ('cpu', 'cuda' or 'cuda:N')",
     "max_memory": "expected a number of bytes (e.g. 4e9)",
     "max_seconds": "expected a number of seconds (e.g. 600) or 'off'",
     "park_dir": "expected a directory or 'off'",

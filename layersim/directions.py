@@ -10,17 +10,36 @@ import numpy as np
 
 
 def unit_directions(name: str, v) -> np.ndarray:
-    """``v`` as a float array of unit vectors (..., 3); ValueError naming ``name`` otherwise."""
-    v = np.asarray(v, dtype=float)
+    """``v`` as a float array of unit vectors (..., 3).
+
+    Raises
+    ------
+    TypeError
+        If ``v`` is not numeric (a string, None, a dict, ...), naming ``name``.
+    ValueError
+        If it has the wrong shape, non-finite entries or is not of unit length.
+    """
+    if isinstance(v, (str, bytes)) or v is None:
+        raise TypeError(f"{name} must be unit vectors in the local frame, an array of shape "
+                        f"(..., 3) such as [0, 0, 1] (z = normal), got {type(v).__name__} "
+                        f"{v!r:.40}")
+    try:
+        v = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be unit vectors in the local frame, an array of shape "
+                        f"(..., 3) such as [0, 0, 1] (z = normal), got {type(v).__name__}"
+                        ) from None
     if v.ndim == 0 or v.shape[-1] != 3:
         raise ValueError(f"{name} must have shape (..., 3) (unit vectors in the local frame), "
                          f"got shape {v.shape}")
     if not np.all(np.isfinite(v)):
         raise ValueError(f"{name} contains non-finite values")
-    norm = np.linalg.norm(v, axis=-1)
+    with np.errstate(over="ignore"):           # |v| of huge entries is inf: reported below
+        norm = np.linalg.norm(v, axis=-1)
     if np.any(np.abs(norm - 1.0) > 1e-5):
+        worst = norm.ravel()[np.argmax(np.abs(norm - 1.0).ravel())]
         raise ValueError(f"{name} must be unit vectors (|v| = 1 within 1e-5); normalise them "
-                         f"first (found |v| = {norm.ravel()[np.argmax(np.abs(norm - 1.0).ravel())]:.6g})")
+                         f"first (found |v| = {worst:.6g})")
     return v
 
 
@@ -32,7 +51,11 @@ def azimuth(v: np.ndarray) -> np.ndarray:
 def bin_edges(name: str, edges, lo: float, hi: float) -> np.ndarray:
     """``edges`` as a strictly increasing float array within ``[lo, hi]``; ValueError naming
     ``name`` otherwise."""
-    e = np.asarray(edges, float)
+    try:
+        e = np.asarray(edges, float)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a 1-D array of increasing numbers (bin edges), got "
+                        f"{type(edges).__name__} {edges!r:.40}") from None
     if e.ndim != 1 or e.size < 2:
         raise ValueError(f"{name} must be a 1-D array of at least two edges")
     if not np.all(np.isfinite(e)) or np.any(np.diff(e) <= 0):

@@ -3,16 +3,18 @@ and hemispherical slices for one incident direction.
 
 :func:`plot_blocks`
     Like layerlab's ``plot_layer`` (Jakob's layerlab tutorial sec. 4.2): the BSDF of each block
-    as an image over ``(mu_i, mu_o)`` in the discrete-ordinates convention (``mu > 0`` propagates down), arranged
-    ``Tbt | Rt`` over ``Rb | Ttb``, for one Fourier order ``l`` (the coefficient ``f_l``) or at
-    one azimuth difference ``phi_d`` (the series summed), multiplied by ``|mu_i mu_o|`` to keep
-    grazing values in range; each panel has its own colour scale (0 to its 99th percentile).
+    as an image over ``(mu_i, mu_o)`` in the discrete-ordinates convention (``mu > 0``
+    propagates down), arranged ``Rb | Ttb`` over ``Tbt | Rt`` (``mu_o`` upward), for one Fourier
+    order ``l`` (the coefficient ``f_l``) or at one azimuth difference ``phi_d`` (the series
+    summed), multiplied by ``|mu_i mu_o|`` to keep grazing values in range; each panel has its
+    own labelled colour scale (0 to its 99th percentile). Opaque stacks show ``Rt`` only.
 :func:`plot_slices`
     ``f(wi, wo)`` over the outgoing hemispheres, on the projected unit disk (``wo.x, wo.y``,
     viewed from above; the transmission disk shows ``wo.z < 0``). On that disk the area element
     is ``|cos theta_o| d omega``, so the picture is the scattered energy density: integrated over
     a disk it gives the albedo of that side. Markers: the incident direction (x) and the
-    specular / straight-through directions (+).
+    specular / straight-through directions (+). RGB slices are colour images with a luminance
+    scale beside them.
 
 Both accept anything with ``eval(wi, wo)``, ``channels`` and ``opaque`` (a
 :class:`layersim.BSDF` or a :class:`layersim.bsdffile.FourierTable`); Fourier orders need a
@@ -28,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.cm import ScalarMappable
+from matplotlib.colors import ListedColormap, Normalize
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
 
@@ -112,9 +116,20 @@ def _save(fig: Figure, path) -> Path:
     return path
 
 
+def present_blocks(bsdf) -> list[str]:
+    """The blocks that ``bsdf`` has: all four, or ``Rt`` only for an opaque stack (the others
+    are left out of its operator: nothing arrives from below or leaves through the base)."""
+    if getattr(bsdf, "opaque", False):
+        return ["Rt"]
+    return [name for name, _, _ in PANELS]
+
+
 def plot_blocks(bsdf, path, order: int | None = None, phi_d: float = 0.0, samples: int = 200,
                 channel=None, title: str | None = None) -> Path:
-    """Draw the four blocks (``Tbt | Rt`` over ``Rb | Ttb``) into a PNG at ``path``.
+    """Draw the blocks of the operator into a PNG at ``path``: ``Rb | Ttb`` over ``Tbt | Rt``,
+    so that together they cover the ``(mu_i, mu_o)`` square with ``mu_i`` to the right and
+    ``mu_o`` upward (layerlab's ``plot_layer`` stacks the rows the other way round); an opaque
+    stack has ``Rt`` only, drawn alone.
 
     Parameters
     ----------
@@ -133,29 +148,35 @@ def plot_blocks(bsdf, path, order: int | None = None, phi_d: float = 0.0, sample
         RGB: what to show (default luminance).
     """
     images = block_images(bsdf, order, phi_d, samples, channel)
+    names = present_blocks(bsdf)
     signed = order is not None and order > 0
-    fig = Figure(figsize=(8.4, 7.4), dpi=100, layout="constrained")
-    axes = fig.subplots(2, 2)
-    for ax, (name, (i0, i1), (o0, o1)) in zip(axes.ravel(), PANELS):
+    quantity = (rf"$f_{{{order}}}\,|\mu_i\,\mu_o|$" if order is not None
+                else r"$f\,|\mu_i\,\mu_o|$")
+    single = len(names) == 1
+    fig = Figure(figsize=(5.6, 4.8) if single else (8.8, 7.6), dpi=100, layout="constrained")
+    axes = np.atleast_2d(fig.subplots(1, 1) if single else fig.subplots(2, 2))
+    for name, (i0, i1), (o0, o1) in PANELS:
+        if name not in names:
+            continue
+        ax = axes[0, 0] if single else axes[0 if o0 >= 0 else 1, 0 if i0 < 0 else 1]
         vals = images[name]
         # each panel scaled to its own 99th percentile, as layerlab's plot_layer
         vmax = float(np.percentile(np.abs(vals) if signed else vals, 99))
         vmax = vmax if vmax > 0 else float(np.abs(vals).max() or 1.0)
-        im = ax.imshow(images[name], extent=[i0, i1, o0, o1], origin="lower", aspect="equal",
+        im = ax.imshow(vals, extent=[i0, i1, o0, o1], origin="lower", aspect="equal",
                        cmap="RdBu_r" if signed else "viridis",
                        vmin=-vmax if signed else 0.0, vmax=vmax, interpolation="nearest")
-        ax.invert_yaxis()
-        missing = getattr(bsdf, "opaque", False) and name != "Rt"
-        ax.set_title(_TITLES[name] + (" (left out: opaque)" if missing else ""))
-        ax.set_xlabel(r"$\mu_i$")
-        ax.set_ylabel(r"$\mu_o$")
-        if not missing:
-            fig.colorbar(im, ax=ax, shrink=0.85)
-    what = (f"Fourier order l = {order}: f_l |mu_i mu_o|" if order is not None else
-            f"f |mu_i mu_o| at phi_d = {math.degrees(phi_d):g} deg")
+        ax.set_title(_TITLES[name])
+        ax.set_xlabel(r"$\mu_i$ (incident)")
+        ax.set_ylabel(r"$\mu_o$ (outgoing)")
+        fig.colorbar(im, ax=ax, shrink=0.85, label=quantity + " [1/sr]")
+    what = (f"Fourier order $l = {order}$: " + quantity if order is not None else
+            quantity + rf" at $\phi_d = {math.degrees(phi_d):g}^\circ$")
     if bsdf.channels == 3:
         what += (" (luminance)" if channel in (None, "luminance", "Y")
                  else f" (channel {'RGB'[int(channel)]})")
+    if single:
+        what += "\nopaque: only $R^{t}$ exists"
     fig.suptitle((title + ": " if title else "") + what)
     return _save(fig, path)
 
@@ -185,6 +206,11 @@ def slice_images(bsdf, wi, resolution: int = 256):
         img[inside] = vals
         out[side] = img
     return out
+
+
+def _srgb(lin: np.ndarray) -> np.ndarray:
+    """sRGB encoding of linear values in [0, 1]."""
+    return np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
 
 
 def plot_slices(bsdf, wi, path, resolution: int = 256, log: bool = False,
@@ -223,10 +249,14 @@ def plot_slices(bsdf, wi, path, resolution: int = 256, log: bool = False,
             lum = img[np.isfinite(img[..., 0])] @ LUMINANCE
             norm = float(lum.max()) if lum.size and lum.max() > 0 else 1.0
             lin = np.clip(np.nan_to_num(img, nan=0.0) / norm, 0.0, 1.0)
-            srgb = np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
             alpha = np.isfinite(img[..., 0]).astype(float)[..., None]
-            ax.imshow(np.concatenate([srgb, alpha], axis=-1), extent=[-1, 1, -1, 1],
+            ax.imshow(np.concatenate([_srgb(lin), alpha], axis=-1), extent=[-1, 1, -1, 1],
                       origin="lower", interpolation="nearest")
+            # the scale of the image: grey levels encoded as the image is, 0 to the largest
+            # luminance (which is white)
+            grey = ListedColormap(np.repeat(_srgb(np.linspace(0, 1, 256))[:, None], 3, 1))
+            fig.colorbar(ScalarMappable(Normalize(0.0, norm), grey), ax=ax, shrink=0.8,
+                         label=r"luminance of $f$ [1/sr]")
         elif log:
             im = ax.imshow(np.log10(np.maximum(img, floor)), extent=[-1, 1, -1, 1],
                            origin="lower", cmap="inferno", interpolation="nearest",
@@ -243,14 +273,15 @@ def plot_slices(bsdf, wi, path, resolution: int = 256, log: bool = False,
         ax.set_xlim(-1.05, 1.05)
         ax.set_ylim(-1.05, 1.05)
         ax.set_aspect("equal")
-        ax.set_xlabel(r"$\omega_o.x$")
-        ax.set_ylabel(r"$\omega_o.y$")
+        ax.set_xlabel(r"$\omega_{o,x}$")
+        ax.set_ylabel(r"$\omega_{o,y}$")
         below = (wi[2] > 0) == (side == "transmission")
-        ax.set_title(f"{side} (wo.z {'<' if below else '>'} 0)")
+        ax.set_title(f"{side} " + (r"($\omega_{o,z} < 0$)" if below else
+                                   r"($\omega_{o,z} > 0$)"))
         ax.legend(loc="lower left", fontsize=7, framealpha=0.6)
     theta = math.degrees(math.acos(max(-1.0, min(1.0, wi[2]))))
     phi = math.degrees(math.atan2(wi[1], wi[0]))
     fig.suptitle((title + "\n" if title else "")
-                 + f"f(wi, wo) on the projected disk; wi: theta = {theta:.1f} deg, "
-                   f"phi = {phi:.1f} deg")
+                 + r"$f(\omega_i, \omega_o)$ on the projected disk; $\omega_i$: "
+                 + rf"$\theta = {theta:.1f}^\circ$, $\phi = {phi:.1f}^\circ$")
     return _save(fig, path)

@@ -5,9 +5,10 @@ the Monte Carlo reference consume the validated :class:`Scene`; neither re-parse
 physics parameters.
 
 Per-channel (RGB) values: any physical value may be given as a list of three (R, G, B) values
-(a conductor's ``ior`` as three ``[eta, k]`` pairs). Such a scene has ``channels == 3``;
-:meth:`Scene.channel` returns the monochromatic scene of one channel. Roughness, ``g`` and
-``tau`` are shared by all channels (they set the geometry of the discretisation).
+(a conductor's ``ior`` as three ``[eta, k]`` pairs; a medium's ``albedo`` and ``g``). Such a
+scene has ``channels == 3``; :meth:`Scene.channel` returns the monochromatic scene of one
+channel. Roughness, rotation and ``tau`` are shared by all channels; the plan takes the most
+demanding channel of a per-channel ``g`` (:mod:`layersim.plan.layers`).
 
 Units: angles in degrees in files, radians in the dataclasses; indices of refraction are absolute
 (the medium above the stack has ``top_ior``, 1 by default); ``tau`` is optical thickness along the
@@ -17,6 +18,7 @@ normal (dimensionless).
 from __future__ import annotations
 
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -26,7 +28,7 @@ from .errors import SceneError
 
 __all__ = [
     "Layer", "Dielectric", "Conductor", "Medium", "Diffuse", "Discretization", "Scene",
-    "QUADRATURES", "DISTRIBUTIONS",
+    "QUADRATURES", "DISTRIBUTIONS", "as_scene",
 ]
 
 #: Microfacet normal distributions understood by the solver and the random walk.
@@ -39,7 +41,9 @@ _MAX_IOR = 100.0          # absolute index (real part), dielectric or conductor 
 _MAX_K = 100.0            # conductor extinction coefficient
 _MAX_ROUGHNESS = 10.0     # Beckmann/GGX alpha; alpha > 1 is already very rough
 _MAX_N = 4096             # ordinates
-_MAX_ORDERS = 100_000     # Fourier orders
+#: Fourier orders a scene may ask for (``[discretization] md``): the planner's limit
+#: (:data:`layersim.plan.MD_MAX`), so that the validator and the solver refuse the same values.
+MAX_ORDERS = 20_000
 
 
 # --------------------------------------------------------------------------------------------
@@ -179,12 +183,29 @@ class Scene:
 
     @classmethod
     def from_toml(cls, path: str | Path) -> "Scene":
-        """Read and validate a TOML scene file (see ``docs/conventions.md`` for the format)."""
+        """Read and validate a TOML scene file (see ``docs/conventions.md`` for the format).
+
+        Raises
+        ------
+        TypeError
+            If ``path`` is not a path (str or os.PathLike); a dict goes to :meth:`from_dict`.
+        SceneError
+            If the file cannot be read, is not UTF-8 TOML text, or describes an invalid scene
+            (the message names the file, the layer, its kind and the field).
+        """
+        if not isinstance(path, (str, os.PathLike)):
+            hint = "; for a dict use Scene.from_dict" if isinstance(path, Mapping) else ""
+            raise TypeError("Scene.from_toml takes the path (str or pathlib.Path) of a TOML "
+                            f"scene file, got {type(path).__name__}{hint}")
         path = Path(path)
         try:
             text = path.read_text(encoding="utf-8")
         except OSError as exc:
             raise SceneError(f"cannot read scene file: {exc.strerror or exc}", source=str(path))
+        except UnicodeDecodeError:
+            raise SceneError("not a scene: the file is not UTF-8 text (a scene is a TOML "
+                             "file; saved BSDFs and .bsdf files go to 'layersim info', 'eval', "
+                             "'plot')", source=str(path)) from None
         try:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
@@ -260,6 +281,27 @@ class Scene:
         return "\n".join(lines)
 
 
+def as_scene(value, caller: str = "solve()") -> Scene:
+    """``value`` as a :class:`Scene`: a Scene itself, a path read with :meth:`Scene.from_toml`
+    or a dict validated with :meth:`Scene.from_dict`, as the functions that take a scene
+    (``caller``) accept.
+
+    Raises
+    ------
+    TypeError
+        For anything else, saying what to pass.
+    """
+    if isinstance(value, Scene):
+        return value
+    if isinstance(value, (str, os.PathLike)):
+        return Scene.from_toml(value)
+    if isinstance(value, Mapping):
+        return Scene.from_dict(value)
+    raise TypeError(f"{caller} takes a Scene (layersim.Scene.from_toml or from_dict), the path "
+                    f"of a TOML scene file or a dict of the same content, got "
+                    f"{type(value).__name__}")
+
+
 def _describe_layer(per_channel: tuple[Layer, ...]) -> str:
     layer = per_channel[0]
 
@@ -281,7 +323,7 @@ def _describe_layer(per_channel: tuple[Layer, ...]) -> str:
         return f"{layer.kind} ior={ior}, {rough}{extra}"
     if isinstance(layer, Medium):
         return (f"medium tau={layer.tau:g}, albedo={vals(lambda x: f'{x.albedo:g}')}, "
-                f"g={layer.g:g}")
+                f"g={vals(lambda x: f'{x.g:g}')}")
     if isinstance(layer, Diffuse):
         return f"diffuse albedo={vals(lambda x: f'{x.albedo:g}')}"
     return layer.kind
@@ -416,9 +458,13 @@ def _parse_layer(ctx: _Ctx, raw: Any) -> list[Layer]:
     if kind == "medium":
         albedos = _per_channel(ctx, "albedo", raw["albedo"],
                                lambda c, f, v: _real(c, f, v, lo=0.0, hi=1.0))
-        g = _real(ctx, "g", raw.get("g", 0.0), lo=-1.0, hi=1.0, lo_open=True, hi_open=True)
+        gs = _per_channel(ctx, "g", raw.get("g", 0.0), lambda c, f, v: _real(
+            c, f, v, lo=-1.0, hi=1.0, lo_open=True, hi_open=True))
         tau = _real(ctx, "tau", raw["tau"], lo=0.0)
-        return [Medium(albedo=a, g=g, tau=tau) for a in albedos]
+        # a shared value pairs with every channel of the other
+        channels = max(len(albedos), len(gs))
+        return [Medium(albedo=albedos[c % len(albedos)], g=gs[c % len(gs)], tau=tau)
+                for c in range(channels)]
 
     albedos = _per_channel(ctx, "albedo", raw["albedo"],
                            lambda c, f, v: _real(c, f, v, lo=0.0, hi=1.0))
@@ -492,10 +538,10 @@ def _parse_scene(data: Mapping[str, Any], source: str | None, default_name: str)
                                                  f"got {n}")
     md = disc_raw.get("md")
     if md is not None:
-        md = _parse_int(dctx, "discretization.md", md, 1, _MAX_ORDERS)
+        md = _parse_int(dctx, "discretization.md", md, 1, MAX_ORDERS)
     ms = disc_raw.get("ms")
     if ms is not None:
-        ms = _parse_int(dctx, "discretization.ms", ms, 0, _MAX_ORDERS)
+        ms = _parse_int(dctx, "discretization.ms", ms, 0, MAX_ORDERS)
     quad = disc_raw.get("quadrature")
     if quad is not None and quad not in QUADRATURES:
         raise dctx.error("discretization.quadrature", f"unknown rule {quad!r}; expected one of "

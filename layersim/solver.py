@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 from dataclasses import replace
 
@@ -11,16 +12,20 @@ from threadpoolctl import threadpool_limits
 
 from . import adding
 from .aniso import adding as aniso_adding
+from .aniso.plan import COUPLED_RELERR, STACK_RELERR, STACK_RELERR_INTERMEDIATE
 from .bsdf import BSDF, channel_pairs
+from .config import settings
 from .errors import InfeasibleError
 from .ingredients import diffuse_operator, interface_operator, medium_operator
+from .ingredients.aniso_microfacet import AnisoProjectionStats, aniso_interface_operator
 from .ingredients.microfacet import ProjectionStats
 from .ingredients.numeric import numeric_interface_operator
+from .kernels.runtime import device_for
 from .operator import IsoOperator, Operator, common_representation
 from .outofcore import memory
 from .outofcore.workspace import Workspace
 from .plan import Plan, make_plan
-from .scene import Conductor, Dielectric, Diffuse, Medium, Scene
+from .scene import Conductor, Dielectric, Diffuse, Medium, Scene, as_scene
 
 
 #: Discrete energy excess (R + T - 1) beyond which an interface operator is refused as
@@ -33,7 +38,7 @@ ENERGY_REFUSE = 1e-2
 #: Projection methods for interfaces: "numeric" samples the BSDF per pair at a rate set by the
 #: analytically known length of its series, then an FFT (default: more accurate at equal or
 #: lower cost on the CPU, and much faster on a GPU; benchmarks/projection_paths.py);
-#: "semi-analytic" multiplies exact peak series by fitted smooth factors (seed 000 sec. 4.1).
+#: "semi-analytic" multiplies exact peak series by fitted smooth factors (Zeltner & Jakob 2018, sec. 4.1).
 PROJECTIONS = ("numeric", "semi-analytic")
 
 
@@ -45,10 +50,7 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     layer = scene.layers[i]
     eta_above = scene.ior_above(i)
     if isinstance(layer, (Dielectric, Conductor)) and layer.anisotropic:
-        # --- anisotropic interfaces (layersim.ingredients.aniso_microfacet) ---
-        from .ingredients.aniso_microfacet import aniso_interface_operator
         lp = next(lp for lp in plan.layers if lp.index == i)
-        from .aniso.plan import COUPLED_RELERR
         op = aniso_interface_operator(grid, plan.md, lp.ms, layer, eta_above, stats,
                                       relerr=COUPLED_RELERR, workspace=workspace)
         notes += _check_energy(op, i, layer, plan)
@@ -123,17 +125,20 @@ def _check_energy(op, i: int, layer, plan: Plan) -> list[str]:
 
 
 def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
-          verbose: bool = False, projection: str = "numeric", device=None) -> BSDF:
+          verbose: bool = False, projection: str = "numeric", device=None,
+          progress=None) -> BSDF:
     """Solve a scene with the adding equations in the Fourier basis.
 
     Parameters
     ----------
-    scene : Scene
-        Validated scene (``Scene.from_toml`` / ``Scene.from_dict``); RGB scenes are solved per
+    scene : Scene, path or dict
+        Validated scene (``Scene.from_toml`` / ``Scene.from_dict``), or what those read: the
+        path of a TOML scene file or a dict of the same content. RGB scenes are solved per
         channel on one shared plan.
-    like : BSDF, optional
-        Reuse the discretisation (rule, n, md) of another solved BSDF, so that the two can be
-        combined with :func:`add` or :func:`layersim.subtract`.
+    like : BSDF or path, optional
+        Reuse the discretisation (rule, n, md) of another solved BSDF (or of the saved BSDF at
+        this path), so that the two can be combined with :func:`add` or
+        :func:`layersim.subtract`.
     threads : int, optional
         Threads for the Fourier orders in the adding equations.
     verbose : bool
@@ -142,23 +147,58 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
         How interfaces are projected (see :data:`PROJECTIONS`).
     device : str, optional
         Warp device for the projection kernels (e.g. "cuda"; default: $LAYERSIM_DEVICE or cpu).
+    progress : callable, optional
+        ``progress(phase, done, total, what)``, called as each phase starts (``done = 0``) and
+        after each of its steps: phase ``"projection"`` (a step per layer operator built, all
+        channels) then ``"adding"`` (a step per channel); ``what`` names the step under way.
+        The solver prints nothing through it; the command line draws progress bars with it.
 
     Returns
     -------
     BSDF
+
+    Raises
+    ------
+    TypeError
+        For a ``scene`` or ``like`` of another type, saying what to pass.
+    SceneError, FileFormatError, ConfigError, InfeasibleError
+        For an invalid scene, an unreadable ``like`` file, an unusable device, or a plan over
+        the limits; all before the layers are projected.
     """
+    scene = as_scene(scene, "solve()")
+    like = _like_argument(like)
+    if device is not None or settings().device != "cpu":
+        device_for(device)          # an unusable device is refused before the plan
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int)
+                                or threads < 1):
+        raise ValueError(f"threads must be an integer >= 1 or None, got {threads!r}")
     if projection not in PROJECTIONS:
         raise ValueError(f"unknown projection {projection!r}; expected one of "
                          + ", ".join(PROJECTIONS))
     # Single-threaded BLAS: the projection's batched small QRs and the adding's small dense
-    # products run several times slower with OpenBLAS threads on small matrices (2-core CI
-    # machine: 13-24 s instead of 2.8 s for coated gold 0.1 over 0.3).
+    # products run several times slower with OpenBLAS threads on matrices of this size, where
+    # the threads' synchronisation outweighs the arithmetic.
     with threadpool_limits(1, user_api="blas"), _singular_as_infeasible(
             f"scene {scene.name!r}", "change n / md in [discretization] or the stiffest layer"):
-        return _solve(scene, like, threads, verbose, projection, device)
+        return _solve(scene, like, threads, verbose, projection, device,
+                      progress or _no_progress)
 
 
-def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
+def _no_progress(phase: str, done: int, total: int, what: str) -> None:
+    """The default ``progress`` of :func:`solve`: reports nothing."""
+
+
+def _like_argument(like) -> BSDF | None:
+    """``like`` of :func:`solve`: None, a BSDF, or the path of a saved one."""
+    if like is None or isinstance(like, BSDF):
+        return like
+    if isinstance(like, (str, os.PathLike)):
+        return BSDF.load(like)
+    raise TypeError("like= takes a solved BSDF (from layersim.solve or BSDF.load) or the path "
+                    f"of a saved one, whose discretisation to reuse, got {type(like).__name__}")
+
+
+def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
     t_start = time.perf_counter()
     if like is not None:
         op = like.operators[0]
@@ -171,7 +211,6 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
     grid = plan.grid
     t_plan = time.perf_counter() - t_start
     if plan.representation == "anisotropic":
-        from .ingredients.aniso_microfacet import AnisoProjectionStats
         stats = AnisoProjectionStats()
     else:
         stats = ProjectionStats()
@@ -186,6 +225,8 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
     keys = [[(mono.layers[lp.index], mono.ior_above(lp.index)) for lp in used]
             for mono in monos]
     memory.release()                # the plan's temporaries
+    n_ops, built = len({k for ks in keys for k in ks}), 0
+    progress("projection", 0, n_ops, "")
     for c, mono in enumerate(monos):
         later = {k for ks in keys[c + 1:] for k in ks}
         owned = [key not in later and keys[c].count(key) == 1 for key in keys[c]]
@@ -195,21 +236,25 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
             if plan.representation == "anisotropic" and len(keys[c]) > 1 else Workspace()
         # projected bottom up: the base of a coated stack is the smaller operator (one block
         # below an opaque interface), so the coating's projection, the larger transient, runs
-        # beside it rather than the other way round (Table 2 row 6 of seed 000: 300 MiB less)
+        # beside it rather than the base's projection beside the larger coating
         for lp, key, own in reversed(list(zip(used, keys[c], owned))):
             if key not in cache:
                 t0 = time.perf_counter()
+                progress("projection", built, n_ops, f"layer {lp.index} ({lp.kind})")
                 with _singular_as_infeasible(f"layer {lp.index} ({lp.kind})",
                                              "change its parameters or n / md in "
                                              "[discretization]"):
                     cache[key] = _layer_operator(plan, grid, mono, lp.index, stats, projection,
                                                  device, workspace if own else None, notes)
                 memory.release()
+                built += 1
+                progress("projection", built, n_ops, f"layer {lp.index} ({lp.kind})")
                 t_layers += time.perf_counter() - t0
         ops = [cache[key] for key in keys[c]]
         for key in set(keys[c]) - later:
             del cache[key]
         t0 = time.perf_counter()
+        progress("adding", c, len(monos), f"channel {c}" if len(monos) > 1 else "")
         if not ops:
             stack = IsoOperator.identity(grid, plan.md, scene.top_ior)
         elif plan.representation == "anisotropic":
@@ -223,6 +268,7 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
                     stack = adding.add(op, stack, threads)
         del ops
         t_adding += time.perf_counter() - t0
+        progress("adding", c + 1, len(monos), f"channel {c}" if len(monos) > 1 else "")
         stacks.append(stack)
     info = {
         "scene": scene.name, "source": scene.source, "channels": scene.channels,
@@ -252,7 +298,6 @@ def _add_mixed(ops, owned, threads, workspace=None):
     operators flagged in ``owned`` (referenced nowhere else) and the intermediate stacks are
     consumed by the adding steps, which release their blocks as soon as they are used and
     keep idle blocks and intermediate pieces in ``workspace``."""
-    from .aniso.plan import STACK_RELERR, STACK_RELERR_INTERMEDIATE
     reduced = _reduce_isotropic_runs(ops, owned, threads)
     stack, own_stack = reduced.pop()
     while reduced:

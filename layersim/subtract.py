@@ -168,7 +168,8 @@ def _subtract_op(stack, known, side, eps, noise):
     if stack.grid != known.grid:
         raise OperatorError(f"stack and known layer are on different grids ({stack.grid.rule} "
                             f"n={stack.grid.n} vs {known.grid.rule} n={known.grid.n}); solve "
-                            "the known layer with layersim.solve(scene, like=stack)")
+                            "the known layer with layersim.solve(scene, like=stack) "
+                            "('layersim solve KNOWN.toml --like STACK.lsim')")
     if known.opaque and side == "top":
         raise InfeasibleError("the known top layer is opaque: it hides the layer below it "
                               "(ill-posed); nothing can be recovered")

@@ -1,4 +1,4 @@
-"""Anisotropic layer calculus: the real slot basis against the complex basis of seed 000, the
+"""Anisotropic layer calculus: the real slot basis against the complex basis of Zeltner & Jakob 2018, the
 projection of anisotropic microfacet interfaces against direct evaluation of the physics, its
 symmetries (isotropic limit, axis swap = 90 degree rotation, reciprocity, conservation), the
 coupled adding equations against isotropic adding and a dense solve, and the plan/solve/BSDF
@@ -760,7 +760,7 @@ def test_plan_chooses_the_representation_and_the_coupling_width():
         {"kind": "dielectric", "ior": 1.5, "roughness": 0.2},
         {"kind": "conductor", "ior": [0.2, 3.0], "roughness": [0.1, 0.3]}]}))
     assert aniso.representation == "anisotropic"
-    assert aniso.ms == int(np.ceil(2.58 * 3 - 1.82))          # seed 000 eq. (25), ratio 3
+    assert aniso.ms == int(np.ceil(2.58 * 3 - 1.82))          # Zeltner & Jakob 2018, eq. (25), ratio 3
     assert [lp.ms for lp in aniso.layers] == [0, aniso.ms]
     text = aniso.report()
     assert "coupled modes" in text and "ratio 3" in text and f"ms = {aniso.ms}" in text
@@ -898,7 +898,7 @@ def test_eval_of_a_rotated_anisotropic_interface_matches_the_physics():
     """BSDF.eval (cubic interpolation between ordinates) of a single rotated anisotropic
     conductor at the planner's discretisation, against physics.microfacet_eval evaluated in the
     interface's frame: median relative error < 3e-4, 99 % < 1e-2 where the lobe exceeds 5 % of
-    its peak (elevations within 75 degrees). The planner's ms (seed 000 eq. (25): 1 % L2)
+    its peak (elevations within 75 degrees). The planner's ms (Zeltner & Jakob 2018, eq. (25): 1 % L2)
     leaves ~1e-2 errors at a few percent of the points; raising ms removes them."""
     rot = np.radians(35.0)
     scene_dict = {"layer": [

@@ -155,3 +155,22 @@ def test_importing_layersim_changes_nothing_in_the_process():
     calls = [ast.unparse(n) for n in tree.body
              if isinstance(n, ast.Expr) and isinstance(n.value, ast.Call)]
     assert calls == []
+
+
+def test_no_private_api_of_other_packages():
+    """Only public modules and names of numpy, scipy, Warp and the rest are used: a private
+    one can change or vanish in any release."""
+    found = []
+    for module, path in MODULES.items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                if node.module == "__future__" or node.module.split(".")[0] == "layersim":
+                    continue
+                names = node.module.split(".") + [a.name for a in node.names]
+            elif isinstance(node, ast.Import):
+                names = [part for a in node.names for part in a.name.split(".")]
+            else:
+                continue
+            if any(n.startswith("_") and not n.startswith("__") for n in names):
+                found.append(f"{module}:{node.lineno}: {ast.unparse(node)}")
+    assert found == []

@@ -47,7 +47,7 @@ def reciprocity_error(op):
 # ---- published reference: van de Hulst (1980), Vol. 1, Table 12 ------------------------------
 
 def test_van_de_hulst_table_12_isotropic_slab():
-    """tau = 2, albedo 0.9, mu_i = 0.9: reflected intensity pi f (seed 004 sec. 6.1)."""
+    """tau = 2, albedo 0.9, mu_i = 0.9: reflected intensity pi f (Jakob's layerlab tutorial, sec. 6.1)."""
     scene = layersim.Scene.from_dict({"layer": [{"kind": "medium", "albedo": 0.9, "tau": 2.0}],
                                       "discretization": {"n": 200}})
     bsdf = layersim.solve(scene)
@@ -99,7 +99,7 @@ def _diffuser(grid, r, t, eta=1.0):
 
 
 def test_adding_two_scalar_diffusers_gives_the_stokes_sums():
-    """Stokes (1860) / seed 004 eq. (1): R = r1 + t1^2 r2 / (1 - r1 r2), T = t1 t2 / (1 - r1 r2)."""
+    """Stokes (1860) / Jakob's layerlab tutorial, eq. (1): R = r1 + t1^2 r2 / (1 - r1 r2), T = t1 t2 / (1 - r1 r2)."""
     r1, t1, r2, t2 = 0.3, 0.6, 0.5, 0.25
     stack = adding.add(_diffuser(GRID, r1, t1), _diffuser(GRID, r2, t2))
     alb = stack.albedo_nodes()

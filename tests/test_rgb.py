@@ -1,6 +1,6 @@
 """RGB scenes: every output carries the same three channels, each channel is the monochromatic
 solve of that channel (gold's complex index per channel; the blue Henyey-Greenstein medium of
-seed 000 Fig. 7d), and per-channel physics oracles (Fresnel of gold at normal incidence; a
+Zeltner & Jakob 2018, Fig. 7d), and per-channel physics oracles (Fresnel of gold at normal incidence; a
 higher single-scattering albedo reflects and transmits more)."""
 
 import numpy as np

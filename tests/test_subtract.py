@@ -1,4 +1,4 @@
-"""The subtracting equations (seed 000 eq. (13)-(16)): exact recovery without noise
+"""The subtracting equations (Zeltner & Jakob 2018, eq. (13)-(16)): exact recovery without noise
 (isotropic and anisotropic, known layer on top or at the bottom, all four blocks), automatic
 regularisation with 1 % noise, refusal of ill-posed problems, BSDF-level use and the CLI."""
 

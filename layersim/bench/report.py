@@ -133,26 +133,37 @@ def _plots(out: Path, s: dict, settings) -> list[str]:
     return names
 
 
+#: Outgoing elevations (degrees) of the labelled rings of the polar slices.
+RINGS = (30.0, 60.0, 80.0)
+
+
 def _slices(out: Path, name: str, panels, settings) -> str:
     """Hemispherical slices on the projected unit disk: the BSDF averaged over each bin
     (E_b / integral of cos over the bin), for the first incidence angle, top side, first
-    channel; solver and Monte Carlo side by side with a shared colour scale."""
+    channel; solver and Monte Carlo side by side with a shared colour scale. Rings mark the
+    outgoing elevations :data:`RINGS` (radius sin theta_o), spokes the outgoing azimuth."""
     plt = _plt()
     mu, phi = settings.mu_edges, settings.phi_edges
     proj = 0.5 * np.outer(np.diff(mu ** 2), np.diff(phi))
     fig, axes = plt.subplots(1, len(panels), subplot_kw={"projection": "polar"},
-                             figsize=(4.2 * len(panels), 4))
+                             figsize=(4.6 * len(panels) + 1.0, 4.6), layout="constrained")
     axes = np.atleast_1d(axes)
     values = [np.asarray(b)[0, 0, 0] / proj for _, b in panels]
     vmax = max(float(np.percentile(v, 99.5)) for v in values) or 1.0
     r = np.sqrt(1.0 - mu ** 2)
     for ax, (title, _), v in zip(axes, panels, values):
         mesh = ax.pcolormesh(phi, r, v, vmin=0, vmax=vmax, shading="flat", cmap="inferno")
-        ax.set_title(title, fontsize=9)
-        ax.set_yticklabels([])
-    fig.colorbar(mesh, ax=list(axes), shrink=0.8, label="f (1/sr), bin average")
-    fig.suptitle(f"{name}: reflection, incidence at {settings.angles[0]:g} deg\n"
-                 "(projected unit disk, azimuth of the outgoing direction)", fontsize=9)
+        ax.set_title(title, fontsize=9, pad=14)
+        ax.set_rgrids(np.sin(np.radians(RINGS)), [rf"${t:g}^\circ$" for t in RINGS],
+                      angle=112.5, fontsize=7, color="0.85")
+        ax.set_thetagrids([0, 90, 180, 270], [r"$\phi_o = 0^\circ$", r"$90^\circ$",
+                                              r"$180^\circ$", r"$270^\circ$"], fontsize=7)
+        ax.tick_params(axis="x", pad=2)
+        ax.set_ylim(0, 1)
+        ax.grid(color="0.6", lw=0.5, alpha=0.6)
+    fig.colorbar(mesh, ax=list(axes), shrink=0.8, label=r"$f$ [1/sr], bin average")
+    fig.suptitle(f"{name}: reflection at incidence {settings.angles[0]:g} deg; projected unit "
+                 "disk, rings: outgoing elevation $\\theta_o$", fontsize=9)
     file = f"{name}_slices.png"
     fig.savefig(out / file, dpi=110)
     plt.close(fig)
@@ -168,13 +179,21 @@ def _throughput_plot(out: Path, scenes: list):
     for scene, backend, pps in rows:
         best[(scene, backend)] = max(best.get((scene, backend), 0.0), pps)
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    labels = [f"{s}\n{b}" for s, b in best]
-    ax.barh(range(len(best)), list(best.values()))
-    ax.set_yticks(range(len(best)), labels, fontsize=7)
-    ax.set_xscale("log")
-    ax.set_xlabel("paths per second")
-    fig.tight_layout()
+    fig, ax = plt.subplots(figsize=(6.4, 0.9 + 0.45 * len(best)), layout="constrained")
+    labels = [f"{s} ({b})" for s, b in best]
+    values = np.array(list(best.values()))
+    y = np.arange(len(best))[::-1]                # the first scene on top
+    ax.hlines(y, 0, values, color="0.75", lw=1)
+    ax.plot(values, y, "o", color="C0")
+    for yy, v in zip(y, values):
+        ax.annotate(f"{v:.3g}", (v, yy), textcoords="offset points", xytext=(5, -3),
+                    fontsize=7)
+    ax.set_yticks(y, labels, fontsize=7)
+    ax.set_xlim(0, 1.18 * values.max())
+    ax.set_ylim(-0.6, len(best) - 0.4)
+    ax.set_xlabel("paths per second (best of the ladder)")
+    ax.set_title("Monte Carlo throughput per scene and backend", fontsize=10)
+    ax.grid(axis="x", alpha=0.3)
     fig.savefig(out / "throughput.png", dpi=110)
     plt.close(fig)
     return {"file": "throughput.png", "rows": best}

@@ -497,6 +497,9 @@ def export(bsdf: BSDF, path, version: int | None = None, alpha=(0.0, 0.0),
     (isotropic BSDFs), version 2 in the Layer Laboratory's anisotropic layout (default: 1 for
     isotropic, 2 for anisotropic BSDFs); ``relerr``: see :meth:`FourierTable.from_bsdf`.
     Returns the table written."""
+    if not isinstance(bsdf, BSDF):
+        raise TypeError("export() takes a solved BSDF (from layersim.solve or BSDF.load), got "
+                        f"{type(bsdf).__name__}")
     table = FourierTable.from_bsdf(bsdf, version=version, alpha=alpha, relerr=relerr)
     table.write(path)
     return table

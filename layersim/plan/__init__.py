@@ -35,10 +35,11 @@ rule.
 
 from __future__ import annotations
 
+from ..errors import InfeasibleError
 from ..operator import Grid
-from ..scene import Scene
+from ..scene import Scene, as_scene
 from .budget import (MD_LOWER_PER_INV_ALPHA, PROJECTION_BYTES, estimate_bytes, estimate_seconds,
-                     memory_limit, refuse_below_lower_bound, refuse_over_limit,
+                     lower_bound, memory_limit, refuse_below_lower_bound, refuse_over_limit,
                      refuse_over_time, work_units)
 from .coupling import choose_ms, needed_ms
 from .layers import scale_media, survey_layers
@@ -51,16 +52,26 @@ __all__ = ["Plan", "LayerPlan", "make_plan", "memory_limit", "THETA_FULL", "N_PE
            "DEFAULT_RULE"]
 
 
-def make_plan(scene: Scene) -> Plan:
+def make_plan(scene: Scene, refuse: bool = True) -> Plan:
     """Plan the solve of a monochromatic or RGB scene (RGB channels share one plan).
+
+    Parameters
+    ----------
+    scene : Scene, path or dict
+        As :func:`layersim.solve` takes it.
+    refuse : bool
+        If False, a plan over the memory limit is returned with the reason in
+        :attr:`Plan.refused` instead of raising (``layersim plan`` prints it). A plan refused
+        at the lower bound, before the pre-pass, then holds that bound's ``md`` and memory.
 
     Raises
     ------
     InfeasibleError
         If a layer cannot be represented (smooth interface) or the discretisation it needs
-        exceeds the limits (ordinates, orders, memory). The message names the layer, the limit
-        and what to change.
+        exceeds the limits (ordinates, orders, and with ``refuse`` memory). The message names
+        the layer, the limit and what to change.
     """
+    scene = as_scene(scene, "make_plan()")
     disc = scene.discretization
     rule = disc.quadrature or DEFAULT_RULE
     notes: list[str] = []
@@ -69,10 +80,26 @@ def make_plan(scene: Scene) -> Plan:
     layers = survey.layers
     ms_needed = needed_ms(layers, survey.left_out, notes)
     anisotropic = ms_needed > 0
+    representation = "anisotropic" if anisotropic else "isotropic"
     grid = Grid.make(rule, choose_n(disc, rule, survey.widths, notes, overridden))
     scale_media(scene, survey, grid)
     mono = scene.channel(0)
-    refuse_below_lower_bound(disc, mono, layers, grid, survey.media_orders, ms_needed)
+    try:
+        refuse_below_lower_bound(disc, mono, layers, grid, survey.media_orders, ms_needed)
+    except InfeasibleError as exc:
+        if refuse:
+            raise
+        md, memory = lower_bound(disc, mono, layers, grid, survey.media_orders, ms_needed)
+        if disc.md is None:
+            notes.append(f"md = {md} is a lower bound: the pre-pass that finds the orders the "
+                         "lobes need is not run for a plan refused already at this bound")
+        for k in ("md", "ms"):
+            if getattr(disc, k) is not None:
+                overridden[k] = getattr(disc, k)
+        return Plan(rule=rule, n=grid.n, md=md, ms=(disc.ms or ms_needed) if anisotropic
+                    else 0, layers=layers, left_out=survey.left_out, notes=notes,
+                    memory_bytes=memory, overridden=overridden,
+                    representation=representation, refused=str(exc))
     lengths = interface_lengths(grid, mono, layers)
     md_needed = max([survey.media_orders] + [lp.orders for lp, _ in lengths])
     md = choose_md(disc, md_needed, notes, overridden)
@@ -80,7 +107,6 @@ def make_plan(scene: Scene) -> Plan:
     truncation_notes(lengths, md, notes)
     memory = estimate_bytes(layers, lengths, grid, md, survey.media_orders, scene.channels,
                             anisotropic)
-    refuse_over_limit(memory, grid.n, md, ms, anisotropic)
     seconds = work = None
     if not anisotropic:
         solved = [lp for lp in layers if lp.action != "left out"]
@@ -88,7 +114,15 @@ def make_plan(scene: Scene) -> Plan:
                  if lp.action == "adding-doubling"]
         work = work_units(lengths, media, grid, md, len(solved) - 1, scene.channels)
         seconds = estimate_seconds(work)
-        refuse_over_time(seconds, grid.n, md)
+    refused = None
+    try:
+        refuse_over_limit(memory, grid.n, md, ms, anisotropic)
+        if seconds is not None:
+            refuse_over_time(seconds, grid.n, md)
+    except InfeasibleError as exc:
+        if refuse:
+            raise
+        refused = str(exc)
     return Plan(rule=rule, n=grid.n, md=md, ms=ms, layers=layers, left_out=survey.left_out,
-                notes=notes, memory_bytes=memory, seconds=seconds, work=work, overridden=overridden,
-                representation="anisotropic" if anisotropic else "isotropic")
+                notes=notes, memory_bytes=memory, seconds=seconds, work=work,
+                overridden=overridden, representation=representation, refused=refused)

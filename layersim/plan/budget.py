@@ -40,36 +40,59 @@ def memory_limit() -> int:
     return available_memory() // 2 if limit is None else limit
 
 
+def lower_bound(disc: Discretization, mono: Scene, layers: list, grid: Grid,
+                media_orders: int, ms_needed: int) -> tuple[int, int] | None:
+    """``(md, bytes)``: a lower bound on the memory of a plan, known before the pre-pass that
+    itself grows like ``n^2`` (``n^2 ms`` for coupled modes), and the ``md`` it assumes; None
+    for stacks without a projected interface (media cost no pre-pass).
+
+    ``md`` is the scene's ``[discretization] md`` where it gives one; otherwise a lower bound:
+    a Beckmann lobe at 80 deg needs ~22.8 / alpha orders (``K ~ sqrt(2 B ln(1/eps))``,
+    ``B = tan^2(theta) / (2 alpha^2)``), and half of that is safe. At that ``md`` the memory is
+    bounded from below by the projection of one isotropic interface (:data:`PROJECTION_BYTES`
+    per order and ordinate pair), or by the block-LU factors of the coupled adding equations
+    (:func:`layersim.aniso.plan.factor_bytes`).
+    """
+    projected = [lp for lp in layers if lp.action.startswith("project")]
+    if not projected:
+        return None
+    # rough interfaces only: a smooth one has no lobe whose orders the bound could count
+    alphas = [min(mono.layers[lp.index].alpha_u, mono.layers[lp.index].alpha_v)
+              for lp in projected]
+    alphas = [a for a in alphas if a > 0]
+    if disc.md is not None:
+        md_lower = disc.md
+    elif alphas:
+        md_lower = max(media_orders, math.ceil(MD_LOWER_PER_INV_ALPHA / min(alphas)))
+    else:
+        md_lower = media_orders
+    if ms_needed:
+        return md_lower, aplan.factor_bytes(grid.h, md_lower, 2 * (disc.ms or ms_needed))
+    return md_lower, PROJECTION_BYTES * md_lower * grid.h * grid.h
+
+
 def refuse_below_lower_bound(disc: Discretization, mono: Scene, layers: list, grid: Grid,
                              media_orders: int, ms_needed: int) -> None:
-    """Refuse a coupled plan whose memory is over the limit already at a lower bound of
-    ``md``, before paying for a pre-pass that would itself grow like ``n^2 ms``.
-
-    A Beckmann lobe at 80 deg needs ~22.8 / alpha orders (``K ~ sqrt(2 B ln(1/eps))``,
-    ``B = tan^2(theta) / (2 alpha^2)``); half of that is a safe lower bound on ``md``, at which
-    the block-LU factors of the adding equations (:func:`layersim.aniso.plan.factor_bytes`)
-    bound the memory from below. Isotropic plans and plans with ``md`` from the scene go on
-    to the pre-pass.
+    """Refuse a plan whose :func:`lower_bound` is over the limit, before the pre-pass.
 
     Raises
     ------
     InfeasibleError
         Naming the bound, the limit and what to change.
     """
-    if ms_needed == 0 or disc.md is not None:
-        return
-    alpha_min = min(min(mono.layers[lp.index].alpha_u, mono.layers[lp.index].alpha_v)
-                    for lp in layers if lp.action.startswith("project"))
-    md_lower = max(media_orders, math.ceil(MD_LOWER_PER_INV_ALPHA / alpha_min))
-    ms = disc.ms or ms_needed
-    lower = aplan.factor_bytes(grid.h, md_lower, 2 * ms)
+    bound = lower_bound(disc, mono, layers, grid, media_orders, ms_needed)
     limit = memory_limit()
-    if lower > limit:
-        raise InfeasibleError(
-            f"the plan (n = {grid.n}, md >= {md_lower}, ms = {ms}) needs at least "
-            f"{lower / 2**30:.1f} GiB, over the limit of {limit / 2**30:.2f} GiB "
-            "(LAYERSIM_MAX_MEMORY); increase the roughness of the smoothest interface, reduce "
-            "the anisotropy, or lower n, md or ms in [discretization]")
+    if bound is None or bound[1] <= limit:
+        return
+    md, lower = bound
+    what = f"n = {grid.n}, md {'=' if disc.md is not None else '>='} {md}" + (
+        f", ms = {disc.ms or ms_needed}" if ms_needed else "")
+    raise InfeasibleError(
+        f"the plan ({what}) needs at least {lower / 2**30:.1f} GiB, over the limit of "
+        f"{limit / 2**30:.2f} GiB (LAYERSIM_MAX_MEMORY); lower n or md"
+        + (" or ms" if ms_needed else "") + " in [discretization], or increase the "
+        "roughness of the smoothest interface" + (", or reduce the anisotropy"
+                                                 if ms_needed else ""))
 
 
 def estimate_bytes(layers: list, lengths: list, grid: Grid, md: int, media_orders: int,

@@ -117,18 +117,25 @@ def _medium(scene: Scene, i: int, layer, survey: Survey) -> None:
         survey.left_out.append(f"layer {i} (medium): tau = 0 is an exact no-op")
         survey.layers.append(LayerPlan(i, kind, "left out", "tau = 0"))
         return
-    lp = LayerPlan(i, kind, "adding-doubling", f"tau={layer.tau:g}, g={layer.g:g}")
+    # a per-channel g: every channel's representation is decided on the grid (scale_media);
+    # the most forward-peaked channel that keeps the whole series sets the lobe width
+    channels = [s.layers[i] for s in _channels(scene)]
+    gs = [x.g for x in channels]
+    g_text = "/".join(f"{g:g}" for g in dict.fromkeys(gs))
+    lp = LayerPlan(i, kind, "adding-doubling", f"tau={layer.tau:g}, g={g_text}")
     survey.layers.append(lp)
-    if max(s.layers[i].albedo for s in _channels(scene)) == 0:
+    if max(x.albedo for x in channels) == 0:
         lp.detail += ": no scattering, unscattered beam in all orders"
         return
-    if layer.g > G_EXACT_MAX:
+    if max(gs) > G_EXACT_MAX:
         # delta-M scaled: the scaled phase function needs DELTA_M_MOMENTS moments, i.e. a grid
         # of DELTA_M_MOMENTS + 1 Gauss-Lobatto ordinates
         survey.widths.append((N_PER_WIDTH / (DELTA_M_MOMENTS + 1), i, kind,
                               f"delta-M scaled phase function ({DELTA_M_MOMENTS} moments)"))
-    elif layer.g != 0.0:
-        survey.widths.append((math.sqrt(1.0 - abs(layer.g)), i, kind, "phase-function lobe"))
+    whole = [g for g in gs if g <= G_EXACT_MAX and g != 0.0]
+    if whole:
+        g = max(whole, key=abs)
+        survey.widths.append((math.sqrt(1.0 - abs(g)), i, kind, "phase-function lobe"))
     survey.scaled.append(lp)
 
 
@@ -149,14 +156,16 @@ def scale_media(scene: Scene, survey: Survey, grid: Grid) -> int:
                               s.layers[lp.index].tau) for s in _channels(scene)]
         except InfeasibleError as exc:
             raise InfeasibleError(f"layer {lp.index} (medium): field 'g': {exc}") from None
-        sc = scs[0]
         lp.orders = max(c.moments for c in scs)
-        if sc.scaled:
-            albedos = "/".join(f"{c.albedo:.4g}" for c in scs)
-            lp.detail += (f": delta-M scaled (Wiscombe 1977), N = {sc.moments} moments, "
-                          f"f = {sc.f:.4g}, scaled tau = {sc.tau:.4g}, albedo = {albedos}; "
-                          f"scattering in {lp.orders} order(s), unscattered beam (with the "
-                          "truncated forward peak) in all")
+        if any(c.scaled for c in scs):
+            per = lambda v: "/".join(dict.fromkeys(v))      # one value, or one per channel
+            lp.detail += (f": delta-M scaled (Wiscombe 1977), N = "
+                          f"{per(str(c.moments) for c in scs)} moments, f = "
+                          f"{per(f'{c.f:.4g}' for c in scs)}, scaled tau = "
+                          f"{per(f'{c.tau:.4g}' for c in scs)}, albedo = "
+                          f"{'/'.join(f'{c.albedo:.4g}' for c in scs)}; scattering in "
+                          f"{lp.orders} order(s), unscattered beam (with the truncated forward "
+                          "peak) in all")
         else:
             lp.detail += f": scattering in {lp.orders} order(s), unscattered beam in all"
         survey.media_orders = max(survey.media_orders, lp.orders)

@@ -59,6 +59,9 @@ class Plan:
     seconds: dict | None = None
     work: dict | None = None
     overridden: dict = field(default_factory=dict)
+    #: Why the solve refuses this plan (over the memory limit), or None; set only by
+    #: ``make_plan(scene, refuse=False)``.
+    refused: str | None = None
 
     @property
     def grid(self) -> Grid:
@@ -91,4 +94,6 @@ class Plan:
             lines.append(f"  left out: {item}")
         for note in self.notes:
             lines.append(f"  note: {note}")
+        if self.refused:
+            lines.append(f"refused: {self.refused}")
         return "\n".join(lines)

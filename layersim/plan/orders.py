@@ -21,12 +21,13 @@ from ..aniso import plan as aplan
 from ..errors import InfeasibleError
 from ..ingredients import aniso_microfacet, microfacet
 from ..operator import Grid
-from ..scene import Discretization, Scene
+from ..scene import MAX_ORDERS, Discretization, Scene
 
 #: Lobes with both elevations within this angle (degrees) of the normal keep all their
 #: Fourier orders.
 THETA_FULL = 80.0
-MD_MAX = 20_000
+#: Fourier orders a solve may use (the scene validator's limit on ``md``).
+MD_MAX = MAX_ORDERS
 
 
 def interface_lengths(grid: Grid, mono: Scene, layers: list) -> list:
