@@ -40,6 +40,7 @@ import scipy.sparse.linalg as spla
 from threadpoolctl import threadpool_limits
 
 from .config import settings
+from .deltas import add_deltas
 from .errors import OperatorError
 from .operator import IsoOperator, OrderStack, prune_order
 
@@ -123,13 +124,7 @@ def add(top: IsoOperator, bottom: IsoOperator, threads: int | None = None) -> Is
         blocks = {name: OrderStack.concatenate([r[name] for r in results]) for name in names}
     else:
         blocks = {name: [r[name] for r in results] for name in names}
-    # unscattered light crosses both layers only through both deltas (the multiply reflected
-    # terms involve the smooth reflection blocks)
-    delta = {}
-    if not opaque:
-        for name in ("Ttb", "Tbt"):
-            if name in top.delta and name in bottom.delta:
-                delta[name] = top.delta[name] * bottom.delta[name]
+    delta = add_deltas(top.delta, bottom.delta, opaque)      # diagonal algebra (deltas.py)
     return IsoOperator(top.grid, blocks, top.eta_top, None if opaque else bottom.eta_bottom,
                        delta)
 

@@ -55,8 +55,10 @@ Invalid queries
 ---------------
 ``wi`` on the horizon, light from below an opaque stack, or an incident direction from which no
 energy leaves give ``pdf = 0``, ``weight = 0`` and ``wo = (0, 0, 0)`` (a renderer drops such
-samples). The unscattered (delta) transmission of media is not part of ``eval`` and is not
-sampled.
+samples). Delta parts (the unscattered transmission of media, the mirror reflection of smooth
+interfaces) are not part of ``eval`` and are not sampled: :meth:`layersim.bsdf.BSDF.specular`
+gives their directions and energies. A BSDF with a smooth dielectric boundary raises
+NotImplementedError (its ordinates are the refracted images of the outside directions).
 """
 
 from __future__ import annotations
@@ -79,6 +81,11 @@ _SAMPLERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 def sampler_for(bsdf) -> "FourierSampler":
     """The (cached) sampler of a BSDF (anisotropic ones: see the module docstring)."""
     s = _SAMPLERS.get(bsdf)
+    if s is None and any(op.boundary for op in bsdf.operators):
+        raise NotImplementedError(
+            "importance sampling of a BSDF with a smooth dielectric boundary (roughness 0) is "
+            "not implemented: its ordinates are inside the boundary; use BSDF.specular for the "
+            "delta parts and BSDF.eval with your own proposal for the rest")
     if s is None:
         s = FourierSampler(bsdf.rotational_average(), target=bsdf)
         _SAMPLERS[bsdf] = s

@@ -14,6 +14,7 @@ from .errors import InfeasibleError
 from .ingredients import diffuse_operator, interface_operator, medium_operator
 from .ingredients.microfacet import ProjectionStats
 from .ingredients.numeric import numeric_interface_operator
+from .ingredients.smooth import boundary_reflector, smooth_conductor_operator
 from .operator import IsoOperator, Operator, common_representation
 from .outofcore import memory
 from .outofcore.workspace import Workspace
@@ -42,6 +43,12 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     notes = [] if notes is None else notes
     layer = scene.layers[i]
     eta_above = scene.ior_above(i)
+    if isinstance(layer, Conductor) and layer.smooth:
+        return smooth_conductor_operator(grid, plan.md, scene.relative_ior(i), eta_above)
+    if isinstance(layer, Dielectric) and layer.smooth:
+        side = "top" if i == 0 else "bottom"
+        inside = layer.ior.real if side == "top" else eta_above
+        return boundary_reflector(grid, plan.md, side, inside / plan.boundary[side], inside)
     if isinstance(layer, (Dielectric, Conductor)) and layer.anisotropic:
         # --- anisotropic interfaces (layersim.ingredients.aniso_microfacet) ---
         from .ingredients.aniso_microfacet import aniso_interface_operator
@@ -189,6 +196,9 @@ def _solve(scene, like, threads, verbose, projection, device) -> BSDF:
             for op in reversed(ops[:-1]):
                 stack = adding.add(op, stack, threads)
         del ops
+        if plan.boundary:
+            # the blocks hold the radiance inside the smooth boundaries (layersim.boundary)
+            stack.boundary = dict(plan.boundary)
         t_adding += time.perf_counter() - t0
         stacks.append(stack)
     info = {

@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 
+from ..deltas import specular
 from ..interpolation import (bin_quadrature, block_taps, closed_bin, hat_weights,
                              side_energies, spline_weights)
 from ..kernels import fourier_eval2d
@@ -177,6 +178,10 @@ class AnisoEvaluator:
                                                      phi_o[sel] - phi_i[sel],
                                                      phi_o[sel] + phi_i[sel])
         return out
+
+    def specular(self, wi: np.ndarray) -> dict:
+        """The delta parts for beams from ``wi`` (Q, 3) (:func:`layersim.deltas.specular`)."""
+        return specular(self.op, wi)
 
     def albedo(self, wi: np.ndarray):
         """(R, T), each (Q,), for azimuth-dependent incidence (module docstring)."""

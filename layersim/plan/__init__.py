@@ -29,7 +29,9 @@ rule.
 
 from __future__ import annotations
 
+from ..errors import InfeasibleError
 from ..operator import Grid
+from ..quadrature import SNELL, snell_rule
 from ..scene import Scene
 from .budget import (MD_LOWER_PER_INV_ALPHA, PROJECTION_BYTES, estimate_bytes, memory_limit,
                      refuse_below_lower_bound, refuse_over_limit)
@@ -62,6 +64,16 @@ def make_plan(scene: Scene) -> Plan:
     layers = survey.layers
     ms_needed = needed_ms(layers, survey.left_out, notes)
     anisotropic = ms_needed > 0
+    if survey.snell_eta is not None:
+        if anisotropic:
+            raise InfeasibleError(
+                "a smooth dielectric boundary over anisotropic layers is not supported (the "
+                "coupled-mode BSDF does not apply boundary transmission yet); give the smooth "
+                "interface a roughness > 0, or use layersim.montecarlo")
+        if disc.quadrature and not disc.quadrature.startswith(SNELL):
+            notes.append(f"quadrature {disc.quadrature} from the scene replaced by the "
+                         "Snell-matched grid of the smooth boundary")
+        rule = snell_rule(survey.snell_eta)
     grid = Grid.make(rule, choose_n(disc, rule, survey.widths, notes, overridden))
     mono = scene.channel(0)
     refuse_below_lower_bound(disc, mono, layers, grid, survey.media_orders, ms_needed)
@@ -75,4 +87,5 @@ def make_plan(scene: Scene) -> Plan:
     refuse_over_limit(memory, grid.n, md, ms, anisotropic)
     return Plan(rule=rule, n=grid.n, md=md, ms=ms, layers=layers, left_out=survey.left_out,
                 notes=notes, memory_bytes=memory, overridden=overridden,
-                representation="anisotropic" if anisotropic else "isotropic")
+                representation="anisotropic" if anisotropic else "isotropic",
+                boundary=survey.boundary)

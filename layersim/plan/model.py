@@ -53,6 +53,9 @@ class Plan:
     notes: list = field(default_factory=list)
     memory_bytes: int = 0
     overridden: dict = field(default_factory=dict)
+    #: Smooth dielectric boundaries of the stack, ``{"top" | "bottom": index outside}``
+    #: (:mod:`layersim.boundary`).
+    boundary: dict = field(default_factory=dict)
 
     @property
     def grid(self) -> Grid:

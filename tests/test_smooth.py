@@ -1,0 +1,111 @@
+"""Exact smooth interfaces (roughness 0): deltas in the adding equations, smooth conductors,
+smooth dielectric boundaries on the Snell-matched grid (layersim.deltas, layersim.boundary)."""
+
+import numpy as np
+import pytest
+
+import layersim
+from layersim.errors import InfeasibleError
+from layersim.kernels.fresnel import fresnel
+
+
+def _fext(eta):
+    x, v = np.polynomial.legendre.leggauss(400)
+    x, v = 0.5 * (x + 1), 0.5 * v
+    return float(np.sum(2 * x * fresnel(x, eta) * v))
+
+
+def _coated_lambert(rho, eta=1.5):
+    return layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": eta, "roughness": 0},
+        {"kind": "diffuse", "albedo": rho}]})
+
+
+def _dirs(deg, phi=0.0):
+    th = np.radians(np.asarray(deg, float))
+    return np.stack([np.sin(th) * np.cos(phi), np.sin(th) * np.sin(phi), np.cos(th)], -1)
+
+
+@pytest.mark.parametrize("rho", [0.5, 1.0])
+def test_smooth_coating_over_lambert_closed_form(rho):
+    """R(mu) = F + (1 - F) rho (1 - F_int) / (1 - rho F_int), F_int = 1 - (1 - F_ext) / eta^2,
+    to 1e-4 for incidence 0..85 deg; eval matches (1 - F_i)(1 - F_o)/eta^2 rho / (pi (1 - rho
+    F_int)); the specular part is F."""
+    eta = 1.5
+    bsdf = layersim.solve(_coated_lambert(rho, eta))
+    deg = np.linspace(0, 85, 35)
+    wi = _dirs(deg)
+    F = fresnel(np.cos(np.radians(deg)), eta)
+    fint = 1 - (1 - _fext(eta)) / eta**2
+    R, T = bsdf.albedo(wi)
+    assert np.abs(R - (F + (1 - F) * rho * (1 - fint) / (1 - rho * fint))).max() < 1e-4
+    assert np.all(T == 0)
+    spec = bsdf.specular(wi)
+    assert np.allclose(spec["top"][0], F, atol=1e-12)
+    assert np.allclose(spec["top"][1], wi * [-1, -1, 1])
+    wo = _dirs(deg[::-1] * 0.9, phi=1.0)
+    Fo = fresnel(wo[:, 2], eta)
+    f_ref = (1 - F) * (1 - Fo) / eta**2 * rho / (np.pi * (1 - rho * fint))
+    assert np.allclose(bsdf.eval(wi, wo), f_ref, rtol=1e-4, atol=1e-7)
+
+
+def test_smooth_coating_bins_sum_to_albedo():
+    bsdf = layersim.solve(_coated_lambert(0.7))
+    wi = _dirs(30.0)
+    E = bsdf.bin_energies(wi, np.linspace(0, 1, 9), np.linspace(0, 2 * np.pi, 13))
+    R, _ = bsdf.albedo(wi)
+    assert abs(E["top"].sum() - R) < 1e-9
+    spec = bsdf.specular(wi)["top"][0]
+    # the mirror direction (mu = cos 30 deg, phi = pi) holds the specular energy on top of the
+    # smooth part
+    k = np.searchsorted(np.linspace(0, 1, 9), np.cos(np.radians(30))) - 1
+    assert E["top"][k, 6] > spec
+
+
+def test_smooth_conductor_is_its_fresnel_delta():
+    eta, k = 0.2, 3.0
+    scene = layersim.Scene.from_dict({"layer": [
+        {"kind": "conductor", "ior": [eta, k], "roughness": 0}]})
+    bsdf = layersim.solve(scene)
+    wi = _dirs([0, 40, 80])
+    R, _ = bsdf.albedo(wi)
+    F = fresnel(wi[:, 2], eta, k)
+    # linear interpolation between the ordinates of the exact node values
+    assert np.allclose(R, F, atol=2e-4)
+    assert np.allclose(bsdf.specular(wi)["top"][0], R)
+    assert np.all(bsdf.eval(wi, wi * [-1, -1, 1]) == 0)     # no lobe: the delta is not smeared
+    with pytest.raises(InfeasibleError, match="delta"):
+        layersim.export(bsdf, "/tmp/never-written.bsdf")
+
+
+def test_interior_smooth_dielectric_refused():
+    scene = layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": 0.2},
+        {"kind": "dielectric", "ior": 1.3, "roughness": 0},
+        {"kind": "diffuse", "albedo": 0.5}]})
+    with pytest.raises(InfeasibleError, match="layer 1 .*inside the stack"):
+        layersim.solve(scene)
+
+
+def test_smooth_slab_energy_and_reciprocity():
+    """A slab (absorbing medium) between two smooth interfaces in air: R + T + A = 1 with the
+    closed form of the non-scattering slab, T a straight-through delta."""
+    tau, eta = 0.5, 1.5
+    scene = layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": eta, "roughness": 0},
+        {"kind": "medium", "albedo": 0.0, "g": 0.0, "tau": tau},
+        {"kind": "dielectric", "ior": 1.0, "roughness": 0}]})
+    bsdf = layersim.solve(scene)
+    deg = np.array([0.0, 20.0, 50.0, 75.0])
+    wi = _dirs(deg)
+    F = fresnel(wi[:, 2], eta)
+    mu_in = np.sqrt(1 - (1 - wi[:, 2] ** 2) / eta**2)
+    a = np.exp(-tau / mu_in)
+    T_ref = (1 - F) ** 2 * a / (1 - F**2 * a**2)
+    R_ref = F + (1 - F) ** 2 * F * a**2 / (1 - F**2 * a**2)
+    R, T = bsdf.albedo(wi)
+    spec = bsdf.specular(wi)
+    assert np.allclose(spec["bottom"][0], T_ref, atol=3e-3)
+    assert np.allclose(T, spec["bottom"][0])
+    assert np.allclose(R, R_ref, atol=3e-3)
+    assert np.allclose(spec["bottom"][1], -wi, atol=1e-9)
