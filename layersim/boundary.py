@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from .interpolation import bin_quadrature, closed_bin, side_energies
+from .interpolation import bin_quadrature, closed_bin, hat_weights, spline_weights
 from .kernels.fresnel import fresnel
 
 
@@ -112,55 +112,87 @@ class BoundaryEvaluator:
         return self.inner.eval(wi_in, wo_in) * ti * to * scale
 
     def _weight(self, name: str):
+        """Transmittance of the boundary that block ``name`` leaves through, per node (None:
+        no boundary on that side)."""
         side = "top" if name in ("Rt", "Tbt") else "bottom"
         ex = self.exits.get(side)
         return None if ex is None else ex.weight(self.op.grid.mu)
 
-    def _smooth_energy(self, name: str) -> np.ndarray:
-        """Node energies of block ``name`` that leave, without its delta part."""
-        w = self._weight(name)
-        e = self.inner.node_energy(name, w)
-        if name in self.op.delta:
-            e = e - self.op.delta[name] * (1.0 if w is None else w)
-        return e
+    def _taps(self, wi: np.ndarray):
+        """Interpolation taps (Q, 4) of the incident elevation into the nodes. On a side with
+        a boundary: cubic (:func:`~layersim.interpolation.spline_weights`) in the outside
+        cosine between the images of the escaping nodes, since what the stack does is smooth in
+        it (Fresnel factors and path lengths are) and linear interpolation there was the
+        largest error against Monte Carlo (2e-4 in R for coated gold at 55 deg, n = 128;
+        cubic: 2e-6). Elsewhere linear in ``mu``. Every energy (smooth part and delta) uses
+        the same taps, whose weights sum to 1, so that energy is conserved where the nodes
+        conserve it."""
+        mu = self.op.grid.mu
+        idx, w = hat_weights(mu, np.abs(wi[:, 2]))
+        for side, ex in self.exits.items():
+            sel = np.flatnonzero(self._side(wi) == side)
+            if sel.size:
+                escape = np.flatnonzero(mu > ex.mu_c)
+                k, ws = spline_weights(ex.x_nodes, np.abs(wi[sel, 2]))
+                idx[sel], w[sel] = escape[k], ws
+        return idx, w
+
+    def _energies(self, wi: np.ndarray, delta: bool):
+        """Per query, the energies that leave through the same side and the other side of the
+        inside blocks: all (``delta=False``) or the delta parts only, before the incident
+        boundary's transmittance."""
+        idx, w = self._taps(wi)
+        top = wi[:, 2] > 0
+        same, other = np.zeros(wi.shape[0]), np.zeros(wi.shape[0])
+        for sel, rname, tname in ((top, "Rt", "Ttb"), (~top, "Rb", "Tbt")):
+            for out, name in ((same, rname), (other, tname)):
+                if self.op.blocks[name] is None or not sel.any():
+                    continue
+                g = self._weight(name)
+                if delta:
+                    e = self.op.delta.get(name)
+                    if e is None:
+                        continue
+                    e = e if g is None else e * g
+                else:
+                    e = self.inner.node_energy(name, g)
+                out[sel] = np.sum(w[sel] * e[idx[sel]], axis=1)
+        return same, other
 
     def albedo(self, wi: np.ndarray):
-        """The smooth parts interpolated between the ordinates, the delta parts at the exact
-        refracted elevation (:meth:`specular`)."""
-        wi_in, ti = self._map(wi)
-        R, T = side_energies(wi_in[:, 2], self.op.grid.mu,
-                             lambda name, q: self._smooth_energy(name))
-        spec = self.specular(wi)
-        top = wi[:, 2] > 0
-        R = R * ti + np.where(top, spec["top"][0], spec["bottom"][0])
-        T = T * ti + np.where(top, spec["bottom"][0], spec["top"][0])
-        return R, T
+        _, ti = self._map(wi)
+        R, T = self._energies(wi, delta=False)
+        # cubic weights can undershoot where an energy vanishes: clipped there
+        return np.maximum(R * ti + (1.0 - ti), 0.0), np.maximum(T * ti, 0.0)
 
     def specular(self, wi: np.ndarray) -> dict:
         wi_in, ti = self._map(wi)
-        inner = self.inner.specular(wi_in)
+        same, other = (np.maximum(e, 0.0) for e in self._energies(wi, delta=True))
+        top = wi[:, 2] > 0
+        mirror = wi * np.array([-1.0, -1.0, 1.0])
         out = {}
-        for side, (energy, wo) in inner.items():
-            energy, wo = energy * ti, wo.copy()
+        for side, is_same in (("top", top), ("bottom", ~top)):
+            energy = np.where(is_same, same, other) * ti
+            # inside directions: mirror image, or straight on
+            wo = np.where(is_same[:, None], wi_in * np.array([-1.0, -1.0, 1.0]), -wi_in)
             ex = self.exits.get(side)
             if ex is not None:
-                energy = energy * ex.weight(np.abs(wo[:, 2]))
                 wo = ex.to_outside(wo)
+            wo = np.where(is_same[:, None] & (ti < 1.0)[:, None], mirror, wo)
+            energy = energy + np.where(is_same, 1.0 - ti, 0.0)    # the boundary's reflection
             out[side] = (energy, wo)
-        # the boundary's own mirror reflection
-        for side, ex in self.exits.items():
-            sel = self._side(wi) == side
-            out[side][0][sel] += 1.0 - ti[sel]
-            out[side][1][sel] = wi[sel] * np.array([-1.0, -1.0, 1.0])
         return out
 
     def bins(self, wi: np.ndarray, mu_edges: np.ndarray, phi_edges: np.ndarray) -> dict:
         wi_in, ti = self._map(wi[None, :])
-        out = self.inner.bins(wi_in[0], mu_edges, phi_edges, exits=self.exits, deltas=False)
+        out = self.inner.bins(wi_in[0], mu_edges, phi_edges, exits=self.exits, deltas=False,
+                              taps=self._taps(wi[None, :]))
         out = {side: E * ti[0] for side, E in out.items()}
         for side, (energy, wo) in self.specular(wi[None, :]).items():
             kmu = closed_bin(mu_edges, abs(wo[0, 2]))
-            kphi = closed_bin(phi_edges, math.atan2(wo[0, 1], wo[0, 0]) % (2 * np.pi))
+            # + 0.0 turns -0.0 into 0.0: along the normal the azimuth is a convention, 0 here
+            kphi = closed_bin(phi_edges,
+                              math.atan2(wo[0, 1] + 0.0, wo[0, 0] + 0.0) % (2 * np.pi))
             if kmu is not None and kphi is not None and energy[0] > 0:
                 out[side][kmu, kphi] += energy[0]
         return out

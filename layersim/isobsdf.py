@@ -123,7 +123,7 @@ class IsoEvaluator:
                              lambda name, q: self.node_energy(name))
 
     def bins(self, wi: np.ndarray, mu_edges: np.ndarray, phi_edges: np.ndarray,
-             exits: dict | None = None, deltas: bool = True) -> dict:
+             exits: dict | None = None, deltas: bool = True, taps=None) -> dict:
         """Bin energies for one incident direction ``wi`` (3,) (see
         :meth:`layersim.bsdf.BSDF.bin_energies`).
 
@@ -131,12 +131,13 @@ class IsoEvaluator:
         integral of a side by an object with ``points(edges) -> (mu, weight, bin)`` (points in
         the operator's cosines, weights including ``mu dmu``) and ``weight(mu)``, the fraction
         of the radiance at ``mu`` that leaves (:class:`layersim.boundary.Exit`). ``deltas=False``
-        leaves the delta parts out."""
+        leaves the delta parts out; ``taps`` (two arrays of 4) replaces the linear interpolation
+        weights of the incident elevation."""
         op = self.op
         grid = op.grid
         mu_in = wi[2]
         phi_in = math.atan2(wi[1], wi[0])
-        ii, wi_ = hat_weights(grid.mu, np.array([abs(mu_in)]))
+        ii, wi_ = hat_weights(grid.mu, np.array([abs(mu_in)])) if taps is None else taps
         ii, wi_ = ii[0], wi_[0]
         exits = exits or {}
         # phi integrals of cos(l (phi_o - phi_in - pi)) over each phi bin
