@@ -152,3 +152,41 @@ def test_smooth_stacks_agree_with_monte_carlo(name):
         z = np.concatenate(z)
         assert z.size > 50
         assert np.mean(z <= 3.0) >= 0.99, (theta, np.sort(z)[-5:])
+
+
+def test_boundary_survives_save_and_load_and_refuses_stack_algebra(tmp_path):
+    from layersim.errors import OperatorError
+    bsdf = layersim.solve(_coated_lambert(0.5))
+    path = bsdf.save(tmp_path / "coated.npz")
+    back = layersim.BSDF.load(path)
+    wi = _dirs([10.0, 70.0])
+    assert np.allclose(back.albedo(wi)[0], bsdf.albedo(wi)[0], atol=1e-15)
+    assert back.operators[0].boundary == {"top": 1.0}
+    glass = layersim.solve(layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": 0.3}]}), like=bsdf)
+    with pytest.raises(OperatorError, match="smooth dielectric boundary"):
+        layersim.add(glass, bsdf)
+    with pytest.raises(NotImplementedError, match="smooth dielectric boundary"):
+        bsdf.sample(wi[0], np.array([0.3, 0.6]))
+
+
+def test_mirror_delta_through_both_adding_functions():
+    """A non-scattering slab over a smooth conductor: the stack's mirror delta is
+    F(mu) exp(-2 tau / mu) in the isotropic and in the coupled adding (layersim.deltas), and
+    albedo and specular agree with it."""
+    from layersim.ingredients import medium_operator
+    from layersim.ingredients.smooth import smooth_conductor_operator
+    from layersim.operator import Grid
+    tau = 0.3
+    grid = Grid.make("gauss-lobatto", 32)
+    slab = medium_operator(grid, 4, 0.0, 0.0, tau, 1.0)
+    metal = smooth_conductor_operator(grid, 4, complex(*GOLD), 1.0)
+    expect = fresnel(grid.mu, *GOLD) * np.exp(-2 * tau / grid.mu)
+    for stack in (layersim.add(slab, metal),
+                  layersim.add(slab.as_coupled(), metal.as_coupled())):
+        assert np.allclose(stack.delta["Rt"], expect, rtol=1e-12)
+        assert np.allclose(stack.albedo()["Rt"], expect, rtol=1e-12)
+        bsdf = layersim.BSDF([stack])
+        wi = _dirs([0.0, 30.0])
+        assert np.allclose(bsdf.specular(wi)["top"][0], bsdf.albedo(wi)[0], rtol=1e-12)
+        assert np.allclose(bsdf.eval(wi, wi * [-1, -1, 1]), 0.0, atol=1e-9)
