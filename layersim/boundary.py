@@ -142,6 +142,7 @@ class BoundaryEvaluator:
         inside blocks: all (``delta=False``) or the delta parts only, before the incident
         boundary's transmittance."""
         idx, w = self._taps(wi)
+        wi_in, _ = self._map(wi)
         top = wi[:, 2] > 0
         same, other = np.zeros(wi.shape[0]), np.zeros(wi.shape[0])
         for sel, rname, tname in ((top, "Rt", "Ttb"), (~top, "Rb", "Tbt")):
@@ -154,9 +155,10 @@ class BoundaryEvaluator:
                     if e is None:
                         continue
                     e = e if g is None else e * g
-                else:
-                    e = self.inner.node_energy(name, g)
-                out[sel] = np.sum(w[sel] * e[idx[sel]], axis=1)
+                else:       # (h,), or (Q, h) where it depends on the incident azimuth
+                    e = self.inner.node_energy(name, g, wi_in[sel])
+                e = np.broadcast_to(e, (int(sel.sum()), e.shape[-1]))
+                out[sel] = np.sum(w[sel] * np.take_along_axis(e, idx[sel], axis=1), axis=1)
         return same, other
 
     def albedo(self, wi: np.ndarray):

@@ -102,10 +102,12 @@ class IsoEvaluator:
                                                 dphi[sel])
         return out
 
-    def node_energy(self, name: str, weight: np.ndarray | None = None) -> np.ndarray:
+    def node_energy(self, name: str, weight: np.ndarray | None = None,
+                    wi: np.ndarray | None = None) -> np.ndarray:
         """Energy fraction per incident node through block ``name`` (order 0 + delta), each
         outgoing node counted with ``weight`` (h,) (default 1; :mod:`layersim.boundary` passes
-        the transmittance of a smooth boundary)."""
+        the transmittance of a smooth boundary); the same for every incident azimuth, so
+        ``wi`` is not used. Shape (h,)."""
         op = self.op
         fw = op.grid.flux_weight
         blk = op.blocks[name]

@@ -29,7 +29,6 @@ rule.
 
 from __future__ import annotations
 
-from ..errors import InfeasibleError
 from ..operator import Grid
 from ..quadrature import SNELL, snell_rule
 from ..scene import Scene
@@ -71,11 +70,6 @@ def make_plan(scene: Scene) -> Plan:
     ms_needed = needed_ms(layers, survey.left_out, notes)
     anisotropic = ms_needed > 0
     if survey.snell_eta is not None:
-        if anisotropic:
-            raise InfeasibleError(
-                "a smooth dielectric boundary over anisotropic layers is not supported (the "
-                "coupled-mode BSDF does not apply boundary transmission yet); give the smooth "
-                "interface a roughness > 0, or use layersim.montecarlo")
         if disc.quadrature and not disc.quadrature.startswith(SNELL):
             notes.append(f"quadrature {disc.quadrature} from the scene replaced by the "
                          "Snell-matched grid of the smooth boundary")
