@@ -157,7 +157,9 @@ class BSDF:
         -------
         ndarray, shape (...) (or (..., 3) for RGB)
             Zero for configurations whose block is left out (opaque stack lit from below) and on
-            the horizon (z = 0). The unscattered delta transmission of media is not included.
+            the horizon (z = 0). Delta parts (unscattered transmission of media, mirror
+            reflection and refraction of smooth interfaces) are not included: see
+            :meth:`specular`.
         """
         wi = unit_directions("wi", wi)
         wo = unit_directions("wo", wo)
@@ -247,8 +249,8 @@ class BSDF:
             in elevation, Gauss-Legendre on each piece, and analytically in azimuth), scaled so
             that over the whole hemisphere it carries the energy of :meth:`albedo` (the
             quadrature's; the two differ by the discretisation error, ~1e-5 at n ~ 200): bins
-            covering a hemisphere sum exactly to R or T. The unscattered delta transmission is
-            added to the bin that holds the straight-through direction.
+            covering a hemisphere sum exactly to R or T. Each delta part (:meth:`specular`) is
+            added to the bin that holds its direction (mirror or straight-through).
         """
         wi = self._incident(wi)
         if wi.shape != (3,):

@@ -210,3 +210,22 @@ def test_smooth_coating_over_anisotropic_gold_albedo_agrees_with_monte_carlo():
         assert abs(float(R) - res.reflectance) <= 4 * res.reflectance_stderr
         E = bsdf.bin_energies(wi, np.linspace(0, 1, 5), np.linspace(0, 2 * np.pi, 7))
         assert abs(E["top"].sum() - float(R)) < 1e-9
+
+
+def test_smooth_coating_over_smooth_gold_closed_form():
+    """All deltas: R = F + (1 - F)^2 R_g / (1 - F R_g) with R_g the gold Fresnel reflectance
+    at the refracted angle (layersim.deltas with the boundary), 3e-5 to 80 deg, 2e-4 to 89."""
+    scene = layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": 0},
+        {"kind": "conductor", "ior": GOLD, "roughness": 0}]})
+    bsdf = layersim.solve(scene)
+    deg = np.linspace(0, 89, 90)
+    wi = _dirs(deg)
+    F = fresnel(wi[:, 2], 1.5)
+    mu = np.sqrt(1 - (1 - wi[:, 2] ** 2) / 1.5**2)
+    Rg = fresnel(mu, GOLD[0] / 1.5, GOLD[1] / 1.5)
+    ref = F + (1 - F) ** 2 * Rg / (1 - F * Rg)
+    R, _ = bsdf.albedo(wi)
+    err = np.abs(R - ref)
+    assert err[deg <= 80].max() < 3e-5 and err.max() < 2e-4
+    assert np.allclose(bsdf.specular(wi)["top"][0], R, atol=1e-14)
