@@ -166,8 +166,6 @@ def test_boundary_survives_save_and_load_and_refuses_stack_algebra(tmp_path):
         {"kind": "dielectric", "ior": 1.5, "roughness": 0.3}]}), like=bsdf)
     with pytest.raises(OperatorError, match="smooth dielectric boundary"):
         layersim.add(glass, bsdf)
-    with pytest.raises(NotImplementedError, match="smooth dielectric boundary"):
-        bsdf.sample(wi[0], np.array([0.3, 0.6]))
 
 
 def test_mirror_delta_through_both_adding_functions():
@@ -229,3 +227,24 @@ def test_smooth_coating_over_smooth_gold_closed_form():
     err = np.abs(R - ref)
     assert err[deg <= 80].max() < 3e-5 and err.max() < 2e-4
     assert np.allclose(bsdf.specular(wi)["top"][0], R, atol=1e-14)
+
+
+def test_sampling_through_a_smooth_boundary_is_unbiased():
+    """BoundarySampler: the mean weight estimates the smooth part of the albedo (R minus the
+    specular part) within 4 standard errors, and pdf() agrees with the density of sample()."""
+    scene = layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": 0},
+        {"kind": "medium", "albedo": 0.95, "g": 0.3, "tau": 1.0},
+        {"kind": "dielectric", "ior": 1.0, "roughness": 0}]})
+    bsdf = layersim.solve(scene)
+    u = np.random.default_rng(4).random((200_000, 2))
+    for theta in (20.0, 70.0):
+        wi = _dirs(theta, 0.4)
+        wo, weight, pdf = bsdf.sample(wi, u)
+        R, T = bsdf.albedo(wi)
+        spec = bsdf.specular(wi)
+        for sel, ref in ((wo[:, 2] > 0, R - spec["top"][0]), (wo[:, 2] < 0, T - spec["bottom"][0])):
+            w = np.where(sel, weight, 0.0)
+            assert abs(w.mean() - ref) <= 4 * w.std() / np.sqrt(w.size)
+        ok = np.flatnonzero(pdf > 0)[:500]
+        assert np.allclose(bsdf.pdf(wi, wo[ok]), pdf[ok], rtol=1e-10)
