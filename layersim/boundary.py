@@ -122,9 +122,9 @@ class BoundaryEvaluator:
         """Interpolation taps (Q, 4) of the incident elevation into the nodes. On a side with
         a boundary: cubic (:func:`~layersim.interpolation.spline_weights`) in the outside
         cosine between the images of the escaping nodes, since what the stack does is smooth in
-        it (Fresnel factors and path lengths are) and linear interpolation there was the
-        largest error against Monte Carlo (2e-4 in R for coated gold at 55 deg, n = 128;
-        cubic: 2e-6). Elsewhere linear in ``mu``. Every energy (smooth part and delta) uses
+        it (Fresnel factors and path lengths are), and linear interpolation there is the
+        largest error against Monte Carlo (docs/performance.md). Elsewhere linear in ``mu``.
+        Every energy (smooth part and delta) uses
         the same taps, whose weights sum to 1, so that energy is conserved where the nodes
         conserve it."""
         mu = self.op.grid.mu
@@ -180,8 +180,9 @@ class BoundaryEvaluator:
             ex = self.exits.get(side)
             if ex is not None:
                 wo = ex.to_outside(wo)
-            wo = np.where(is_same[:, None] & (ti < 1.0)[:, None], mirror, wo)
-            energy = energy + np.where(is_same, 1.0 - ti, 0.0)    # the boundary's reflection
+            if ex is not None:          # the boundary's own mirror reflection
+                wo = np.where(is_same[:, None], mirror, wo)
+                energy = energy + np.where(is_same, 1.0 - ti, 0.0)
             out[side] = (energy, wo)
         return out
 
