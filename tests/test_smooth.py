@@ -248,3 +248,16 @@ def test_sampling_through_a_smooth_boundary_is_unbiased():
             assert abs(w.mean() - ref) <= 4 * w.std() / np.sqrt(w.size)
         ok = np.flatnonzero(pdf > 0)[:500]
         assert np.allclose(bsdf.pdf(wi, wo[ok]), pdf[ok], rtol=1e-10)
+
+
+def test_bad_smooth_boundaries_are_refused_with_the_layer_and_field():
+    lam = {"kind": "diffuse", "albedo": 0.5}
+    with pytest.raises(InfeasibleError, match=r"\[discretization\] n = 8"):
+        layersim.make_plan(layersim.Scene.from_dict({
+            "layer": [{"kind": "dielectric", "ior": 1.5}, lam], "discretization": {"n": 8}}))
+    with pytest.raises(InfeasibleError, match="layer 0 .*denser medium inside"):
+        layersim.make_plan(layersim.Scene.from_dict({
+            "stack": {"top_ior": 1.6}, "layer": [{"kind": "dielectric", "ior": 1.5}, lam]}))
+    with pytest.raises(InfeasibleError, match="layer 0 .*same index in every channel"):
+        layersim.make_plan(layersim.Scene.from_dict({
+            "layer": [{"kind": "dielectric", "ior": [1.5, 1.52, 1.55]}, lam]}))

@@ -29,6 +29,7 @@ rule.
 
 from __future__ import annotations
 
+from ..errors import InfeasibleError
 from ..operator import Grid
 from ..quadrature import SNELL, snell_rule
 from ..scene import Scene
@@ -75,6 +76,10 @@ def make_plan(scene: Scene) -> Plan:
                          "Snell-matched grid of the smooth boundary")
         rule = snell_rule(survey.snell_eta)
     n = choose_n(disc, rule, survey.widths, notes, overridden)
+    if survey.snell_eta is not None and n < 16:
+        raise InfeasibleError(f"[discretization] n = {n}: a stack with a smooth dielectric "
+                              "boundary needs n >= 16 (4 or more ordinates on either side of its "
+                              "critical angle); raise n or remove the override")
     if survey.snell_eta is not None and disc.n is None:
         n *= SNELL_N_FACTOR
         notes.append(f"n doubled to {n} for the smooth boundary: the escape cone, which holds "
