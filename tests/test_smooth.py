@@ -180,6 +180,9 @@ def test_mirror_delta_through_both_adding_functions():
     slab = medium_operator(grid, 4, 0.0, 0.0, tau, 1.0)
     metal = smooth_conductor_operator(grid, 4, complex(*GOLD), 1.0)
     expect = fresnel(grid.mu, *GOLD) * np.exp(-2 * tau / grid.mu)
+    from layersim.errors import OperatorError
+    with pytest.raises(OperatorError, match="mirror"):
+        layersim.subtract(layersim.add(slab, metal), metal, side="bottom")
     for stack in (layersim.add(slab, metal),
                   layersim.add(slab.as_coupled(), metal.as_coupled())):
         assert np.allclose(stack.delta["Rt"], expect, rtol=1e-12)
