@@ -113,12 +113,6 @@ class BSDF:
             self._evaluators[c] = BoundaryEvaluator(op, ev) if op.boundary else ev
         return self._evaluators[c]
 
-    @property
-    def has_delta(self) -> bool:
-        """True if the BSDF has a delta (specular or straight-through) part, or smooth
-        boundaries (see :meth:`specular`)."""
-        return any(op.delta or op.boundary for op in self.operators)
-
     def series_table(self, c: int):
         """The per-pair series table of channel ``c``
         (:class:`layersim.isobsdf.SeriesTable` or
