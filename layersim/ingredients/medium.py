@@ -68,6 +68,9 @@ G_BACKWARD_MIN = -0.95
 #: matrices: g = 0.9 and -0.95 give contractions at n = 16 ... 196, g = 0.9 amplifies at n = 8
 #: (largest eigenvalue 1.46); scene overrides below this are checked (:func:`hg_scaling`).
 EXACT_MIN_N = 64
+#: Rules whose polynomial exactness makes the discrete phase matrices of the moments the grid
+#: represents contractions (other grids, e.g. Snell-matched ones, are checked).
+GAUSS_RULES = ("gauss-lobatto", "gauss-legendre")
 
 
 @dataclass(frozen=True)
@@ -121,10 +124,11 @@ def grid_moments(grid: Grid, tol: float = 1e-8) -> int:
 
 def hg_scaling(grid: Grid, g: float, albedo: float, tau: float) -> Scaling:
     """The representation of HG(g) on ``grid``: the whole series when it fits the grid, or for
-    ``G_BACKWARD_MIN <= g <=`` :data:`G_EXACT_MAX` on grids of at least :data:`EXACT_MIN_N`
-    ordinates (smaller grids: where its discrete phase matrices are contractions); else, for
-    forward peaks, delta-M scaled to ``N = grid_moments(grid)`` moments with ``f = g^N``
-    (Wiscombe 1977, eq. 13-15; HG's moments are ``g^k``).
+    ``G_BACKWARD_MIN <= g <=`` :data:`G_EXACT_MAX` on Gauss grids of at least
+    :data:`EXACT_MIN_N` ordinates (other grids: where its discrete phase matrices are checked
+    to be contractions); else, for forward peaks, delta-M scaled to ``N = grid_moments(grid)``
+    moments with ``f = g^N`` (Wiscombe 1977, eq. 13-15; HG's moments are ``g^k``), ``N``
+    lowered on non-Gauss grids until the scaled phase matrices are contractions.
 
     Raises
     ------
@@ -135,10 +139,13 @@ def hg_scaling(grid: Grid, g: float, albedo: float, tau: float) -> Scaling:
     """
     K = legendre_terms(g)
     N = grid_moments(grid)
+    gauss = grid.rule in GAUSS_RULES
+    hg = g ** np.arange(K, dtype=float)
     whole = Scaling(K, 0.0, tau, albedo)
-    if K <= N:
+    if K <= N and (gauss or _contracts(grid, hg)):
         return whole
-    if G_BACKWARD_MIN <= g <= G_EXACT_MAX and (grid.n >= EXACT_MIN_N or _contracts(grid, g, K)):
+    if G_BACKWARD_MIN <= g <= G_EXACT_MAX and ((gauss and grid.n >= EXACT_MIN_N)
+                                               or _contracts(grid, hg)):
         return whole
     if g < 0:
         raise InfeasibleError(
@@ -146,15 +153,20 @@ def hg_scaling(grid: Grid, g: float, albedo: float, tau: float) -> Scaling:
             f"and the grid (n = {grid.n}) represents {N}; delta-M scaling moves forward peaks "
             f"only; give g >= {G_BACKWARD_MIN:g} with n >= {EXACT_MIN_N}, or use "
             "layersim.montecarlo")
-    f = g ** N
-    return Scaling(N, f, (1.0 - albedo * f) * tau, albedo * (1.0 - f) / (1.0 - albedo * f))
+    while True:
+        f = g ** N
+        sc = Scaling(N, f, (1.0 - albedo * f) * tau, albedo * (1.0 - f) / (1.0 - albedo * f))
+        # Gauss grids integrate the products of the N moments exactly; others are checked
+        if gauss or N <= 1 or _contracts(grid, sc.chi(g)):
+            return sc
+        N = max(1, N * 3 // 4)
 
 
-def _contracts(grid: Grid, g: float, K: int) -> bool:
-    """Whether the discrete phase matrices of the whole series of HG(g) (every Fourier order,
-    both parities) have spectral radius <= 1 on ``grid`` (checked on small grids only: h
-    eigenvalue problems of size h per order)."""
-    same, opp = hg_components(grid.mu, g, K, K)
+def _contracts(grid: Grid, chi: np.ndarray) -> bool:
+    """Whether the discrete phase matrices of the phase function with Legendre moments ``chi``
+    (every Fourier order, both parities) have spectral radius <= 1 on ``grid``: checked where
+    the quadrature's exactness does not guarantee it (small or non-Gauss grids)."""
+    same, opp = hg_components(grid.mu, 0.0, chi.size, chi=chi)
     _normalize_order0(same[0], opp[0], grid.w)
     c = np.where(np.arange(same.shape[0]) == 0, 2 * np.pi, np.pi)[:, None, None]
     for sign in (1.0, -1.0):
