@@ -131,8 +131,11 @@ def test_time_estimate_refuses_before_work():
     plan = layersim.make_plan(scene)
     assert plan.seconds["media"] > 0 and plan.seconds["total"] >= plan.seconds["media"]
     with configure(max_seconds=plan.seconds["total"] / 10):
-        with pytest.raises(InfeasibleError, match=r"LAYERSIM_MAX_SECONDS.*media dominates.*n"):
+        with pytest.raises(InfeasibleError, match=r"LAYERSIM_MAX_SECONDS.*media part is the largest.*n"):
             layersim.solve(scene)
+        # `layersim plan` shows a refused plan with its estimate
+        shown = layersim.make_plan(scene, refuse=False)
+        assert "LAYERSIM_MAX_SECONDS" in shown.refused and shown.seconds == plan.seconds
     # a larger grid costs more: n^3 per order and more delta-M moments
     assert layersim.make_plan(_scene(0.99, 0.95, disc={"n": 200})).seconds["media"] \
         < plan.seconds["media"]
