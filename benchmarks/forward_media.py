@@ -1,4 +1,4 @@
-"""Strongly forward-scattering media: the solver (delta-M scaled, Wiscombe 1977) against Monte Carlo.
+"""Strongly forward-scattering media: the delta-M scaled solver (Wiscombe 1977) vs Monte Carlo.
 
 Part 1 solves HG media with g = 0.95 and 0.99 (tau 5, albedo 0.95 and 1), alone and between two
 rough dielectric interfaces (Beckmann alpha 0.1, eta 1.5 above, 1 below), with the planner's
@@ -63,7 +63,8 @@ def part1(particles: int) -> float:
                     wi = np.array([np.sin(th), 0.0, np.cos(th)])
                     R, T = (float(np.ravel(x)[0]) for x in bsdf.albedo(wi))
                     res = mc.simulate(sc, wi=wi, particles=particles, backend="warp-cpu", seed=1)
-                    Rm, Tm = float(np.ravel(res.reflectance)[0]), float(np.ravel(res.transmittance)[0])
+                    Rm = float(np.ravel(res.reflectance)[0])
+                    Tm = float(np.ravel(res.transmittance)[0])
                     sR = float(np.ravel(res.reflectance_stderr)[0])
                     sT = float(np.ravel(res.transmittance_stderr)[0])
                     worst = max(worst, abs(R - Rm), abs(T - Tm))

@@ -84,7 +84,8 @@ def main() -> None:
                 worst[p] = max(worst[p], ratio)
             row += f" {units:12.3e} {measured[p]:8.2f} {ratio:8.2e}"
         print(row + f" {plan.seconds['total']:7.1f} {total:7.1f}", flush=True)
-    print("\nlargest seconds per unit (parts >= 0.5 s): " + ", ".join(f"{p} {worst[p]:.2e}" for p in parts))
+    print("\nlargest seconds per unit (parts >= 0.5 s): "
+          + ", ".join(f"{p} {worst[p]:.2e}" for p in parts))
 
 
 if __name__ == "__main__":

@@ -131,7 +131,8 @@ def test_time_estimate_refuses_before_work():
     plan = layersim.make_plan(scene)
     assert plan.seconds["media"] > 0 and plan.seconds["total"] >= plan.seconds["media"]
     with configure(max_seconds=plan.seconds["total"] / 10):
-        with pytest.raises(InfeasibleError, match=r"LAYERSIM_MAX_SECONDS.*media part is the largest.*n"):
+        with pytest.raises(InfeasibleError,
+                           match=r"LAYERSIM_MAX_SECONDS.*media part is the largest.*n"):
             layersim.solve(scene)
         # `layersim plan` shows a refused plan with its estimate
         shown = layersim.make_plan(scene, refuse=False)

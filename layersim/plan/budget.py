@@ -247,5 +247,6 @@ def refuse_over_time(seconds: dict, n: int, md: int) -> None:
     raise InfeasibleError(
         f"the plan (n = {n}, md = {md}) needs about {seconds['total']:.0f} s ("
         + ", ".join(f"{k} {v:.0f} s" for k, v in parts.items())
-        + f"), over the limit of {limit:g} s (LAYERSIM_MAX_SECONDS); the {worst} part is the largest: "
+        + f"), over the limit of {limit:g} s (LAYERSIM_MAX_SECONDS); the {worst} part is the "
+        "largest: "
         + _TIME_ADVICE[worst])
