@@ -40,6 +40,7 @@ import scipy.sparse.linalg as spla
 from threadpoolctl import threadpool_limits
 
 from .config import settings
+from .deltas import add_deltas
 from .errors import OperatorError
 from .operator import IsoOperator, OrderStack, prune_order
 
@@ -61,9 +62,21 @@ ORDER_BATCH_ELEMENTS = 1 << 18
 BLAS_SINGLE_BELOW = 512
 
 
+def refuse_boundary(what: str, *ops) -> None:
+    """Refuse stack algebra on operators with smooth dielectric boundaries: their blocks hold
+    the radiance inside the boundary, which :mod:`layersim.boundary` applies only at
+    evaluation."""
+    if any(op.boundary for op in ops):
+        raise OperatorError(
+            f"cannot {what} an operator with a smooth dielectric boundary (roughness 0 at the "
+            "top or bottom of its stack): its blocks describe the light inside that boundary; "
+            "solve the whole stack as one scene instead")
+
+
 def check_pair(top, bottom) -> None:
     """Refuse to stack ``top`` on ``bottom`` unless they share a grid, ``top`` is transmissive
     and the index of the medium between them agrees (either representation)."""
+    refuse_boundary("add", top, bottom)
     if top.grid != bottom.grid:
         raise OperatorError(f"cannot add operators on different grids ({top.grid.rule} n="
                             f"{top.grid.n} over {bottom.grid.rule} n={bottom.grid.n}); "
@@ -123,13 +136,7 @@ def add(top: IsoOperator, bottom: IsoOperator, threads: int | None = None) -> Is
         blocks = {name: OrderStack.concatenate([r[name] for r in results]) for name in names}
     else:
         blocks = {name: [r[name] for r in results] for name in names}
-    # unscattered light crosses both layers only through both deltas (the multiply reflected
-    # terms involve the smooth reflection blocks)
-    delta = {}
-    if not opaque:
-        for name in ("Ttb", "Tbt"):
-            if name in top.delta and name in bottom.delta:
-                delta[name] = top.delta[name] * bottom.delta[name]
+    delta = add_deltas(top.delta, bottom.delta, opaque)      # diagonal algebra (deltas.py)
     return IsoOperator(top.grid, blocks, top.eta_top, None if opaque else bottom.eta_bottom,
                        delta)
 

@@ -17,8 +17,10 @@ series in ``dphi`` (a Warp kernel). Cubic weights are partly negative, so next t
 a lobe (the critical angle of total internal reflection) ``eval`` can undershoot slightly below
 zero; it is not clamped. ``albedo`` and ``bin_energies`` interpolate the incident elevation
 linearly instead: a convex combination of the energies at the ordinates, so that they are never
-negative and never exceed 1 where the ordinates do not. The unscattered (delta) transmission
-through media is not part of ``eval``; ``albedo`` and ``bin_energies`` include it.
+negative and never exceed 1 where the ordinates do not. Delta parts (the unscattered
+transmission through media, the mirror reflection of smooth interfaces; :mod:`layersim.deltas`)
+are not part of ``eval``; ``albedo`` and ``bin_energies`` include them and :meth:`BSDF.specular`
+reports them. Smooth dielectric boundaries are applied by :mod:`layersim.boundary`.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from .aniso.bsdf import AnisoEvaluator
+from .boundary import BoundaryEvaluator
 from .directions import bin_edges, unit_directions
 from .errors import FileFormatError, OperatorError
 from .isobsdf import IsoEvaluator
@@ -126,7 +129,8 @@ class BSDF:
         representation; built on first use)."""
         if c not in self._evaluators:
             op = self.operators[c]
-            self._evaluators[c] = EVALUATORS[op.representation](op)
+            ev = EVALUATORS[op.representation](op)
+            self._evaluators[c] = BoundaryEvaluator(op, ev) if op.boundary else ev
         return self._evaluators[c]
 
     def series_table(self, c: int):
@@ -167,7 +171,9 @@ class BSDF:
         -------
         ndarray, shape (...) (or (..., 3) for RGB)
             Zero for configurations whose block is left out (opaque stack lit from below) and on
-            the horizon (z = 0). The unscattered delta transmission of media is not included.
+            the horizon (z = 0). Delta parts (unscattered transmission of media, mirror
+            reflection and refraction of smooth interfaces) are not included: see
+            :meth:`specular`.
         """
         wi = unit_directions("wi", wi)
         wo = unit_directions("wo", wo)
@@ -175,6 +181,30 @@ class BSDF:
         shape = wi.shape[:-1]
         wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
         return self._per_channel(lambda c: self.evaluator(c).eval(wi, wo).reshape(shape))
+
+    def specular(self, wi) -> dict:
+        """The delta parts of the BSDF for beams from ``wi`` (..., 3): mirror reflection of
+        smooth interfaces and straight-through transmission, which :meth:`eval` leaves out.
+
+        Returns
+        -------
+        dict
+            ``{"top": (energy, wo), "bottom": (energy, wo)}``: the fraction of the incident
+            power that leaves through each side in the one direction ``wo`` (unit vectors,
+            shape ``wi.shape``; energy shape ``wi.shape[:-1]``, plus a channel axis for RGB).
+            Energies are interpolated linearly in the incident elevation between the
+            ordinates, like :meth:`albedo`, which includes them.
+        """
+        wi = self._incident(wi)
+        shape = wi.shape[:-1]
+        flat = wi.reshape(-1, 3)
+        per = [self.evaluator(c).specular(flat) for c in range(self.channels)]
+        out = {}
+        for side in ("top", "bottom"):
+            energy = np.stack([p[side][0].reshape(shape) for p in per], axis=-1)
+            out[side] = (energy[..., 0] if self.channels == 1 else energy,
+                         per[0][side][1].reshape(shape + (3,)))
+        return out
 
     # ---- importance sampling (layersim.sampling) ----------------------------------------
 
@@ -233,8 +263,8 @@ class BSDF:
             in elevation, Gauss-Legendre on each piece, and analytically in azimuth), scaled so
             that over the whole hemisphere it carries the energy of :meth:`albedo` (the
             quadrature's; the two differ by the discretisation error, ~1e-5 at n ~ 200): bins
-            covering a hemisphere sum exactly to R or T. The unscattered delta transmission is
-            added to the bin that holds the straight-through direction.
+            covering a hemisphere sum exactly to R or T. Each delta part (:meth:`specular`) is
+            added to the bin that holds its direction (mirror or straight-through).
         """
         wi = self._incident(wi)
         if wi.shape != (3,):

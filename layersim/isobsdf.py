@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 
+from .deltas import specular
 from .directions import azimuth
 from .interpolation import (bin_quadrature, block_taps, closed_bin, hat_weights,
                             side_energies, spline_weights)
@@ -101,33 +102,46 @@ class IsoEvaluator:
                                                 dphi[sel])
         return out
 
-    def node_energy(self, name: str) -> np.ndarray:
-        """Energy fraction per incident node through block ``name`` (order 0 + delta)."""
+    def node_energy(self, name: str, weight: np.ndarray | None = None,
+                    wi: np.ndarray | None = None) -> np.ndarray:
+        """Energy fraction per incident node through block ``name`` (order 0 + delta), each
+        outgoing node counted with ``weight`` (h,) (default 1; :mod:`layersim.boundary` passes
+        the transmittance of a smooth boundary); the same for every incident azimuth, so
+        ``wi`` is not used. Shape (h,)."""
         op = self.op
         fw = op.grid.flux_weight
         blk = op.blocks[name]
         if blk is None:
             return np.zeros(op.h)
-        return (blk[0].T @ fw) / fw
+        return (blk[0].T @ (fw if weight is None else weight * fw)) / fw
+
+    def specular(self, wi: np.ndarray) -> dict:
+        """The delta parts for beams from ``wi`` (Q, 3) (:func:`layersim.deltas.specular`)."""
+        return specular(self.op, wi)
 
     def albedo(self, wi: np.ndarray):
         """(R, T), each (Q,)."""
         return side_energies(wi[:, 2], self.op.grid.mu,
                              lambda name, q: self.node_energy(name))
 
-    def bins(self, wi: np.ndarray, mu_edges: np.ndarray, phi_edges: np.ndarray) -> dict:
+    def bins(self, wi: np.ndarray, mu_edges: np.ndarray, phi_edges: np.ndarray,
+             exits: dict | None = None, deltas: bool = True, taps=None) -> dict:
         """Bin energies for one incident direction ``wi`` (3,) (see
-        :meth:`layersim.bsdf.BSDF.bin_energies`)."""
+        :meth:`layersim.bsdf.BSDF.bin_energies`).
+
+        ``exits`` (optional, per side ``"top"`` / ``"bottom"``) replaces the elevation
+        integral of a side by an object with ``points(edges) -> (mu, weight, bin)`` (points in
+        the operator's cosines, weights including ``mu dmu``) and ``weight(mu)``, the fraction
+        of the radiance at ``mu`` that leaves (:class:`layersim.boundary.Exit`). ``deltas=False``
+        leaves the delta parts out; ``taps`` (two arrays of 4) replaces the linear interpolation
+        weights of the incident elevation."""
         op = self.op
         grid = op.grid
         mu_in = wi[2]
         phi_in = math.atan2(wi[1], wi[0])
-        ii, wi_ = hat_weights(grid.mu, np.array([abs(mu_in)]))
+        ii, wi_ = hat_weights(grid.mu, np.array([abs(mu_in)])) if taps is None else taps
         ii, wi_ = ii[0], wi_[0]
-        pts, gw, bin_of = bin_quadrature(grid.mu, mu_edges)
-        io, wo_ = spline_weights(grid.mu, pts)
-        full_pts, full_w, _ = bin_quadrature(grid.mu, np.array([0.0, 1.0]))
-        full_io, full_wo = spline_weights(grid.mu, full_pts)
+        exits = exits or {}
         # phi integrals of cos(l (phi_o - phi_in - pi)) over each phi bin
         m = op.m
         l = np.arange(m)[:, None]
@@ -141,6 +155,19 @@ class IsoEvaluator:
             E = np.zeros((mu_edges.size - 1, phi_edges.size - 1))
             blk = op.blocks[name]
             if blk is not None:
+                ex = exits.get(side)
+                if ex is None:
+                    pts, gw, bin_of = bin_quadrature(grid.mu, mu_edges)
+                    gw = gw * pts
+                    full_pts, full_w, _ = bin_quadrature(grid.mu, np.array([0.0, 1.0]))
+                    full_w = full_w * full_pts
+                    g = np.ones(grid.h)
+                else:
+                    pts, gw, bin_of = ex.points(mu_edges)
+                    full_pts, full_w, _ = ex.points(np.array([0.0, 1.0]))
+                    g = ex.weight(grid.mu)
+                io, wo_ = spline_weights(grid.mu, pts)
+                full_io, full_wo = spline_weights(grid.mu, full_pts)
                 fw = grid.flux_weight
                 delta = op.delta.get(name)
                 # F[l, a] = sum_b w_b f_l(a, b): incident interpolation, then elevation integral
@@ -152,14 +179,14 @@ class IsoEvaluator:
                     F[order] = col @ wi_
                 vals = np.einsum("pk,lpk->lp", wo_, F[:, io])            # (m, points)
                 M = np.zeros((m, mu_edges.size - 1))
-                np.add.at(M.T, bin_of, (vals * (gw * pts)[None, :]).T)
+                np.add.at(M.T, bin_of, (vals * gw[None, :]).T)
                 E = M.T @ phi_int
                 # scale to the quadrature's energy of the same (smooth) part
-                interp = np.sum(np.einsum("pk,pk->p", full_wo, F[0][full_io]) * full_w * full_pts)
-                quad = np.sum(F[0] * fw)
+                interp = np.sum(np.einsum("pk,pk->p", full_wo, F[0][full_io]) * full_w)
+                quad = np.sum(F[0] * g * fw)
                 if interp != 0.0:
                     E *= quad / interp
-                if delta is not None:
+                if delta is not None and deltas:
                     energy = float(np.dot(wi_, delta[ii]))
                     kmu = closed_bin(mu_edges, abs(mu_in))
                     kphi = closed_bin(phi_edges, (phi_in + np.pi) % (2 * np.pi))

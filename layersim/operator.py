@@ -28,10 +28,11 @@ block    incident                     outgoing
 An opaque operator (bottom layer is a conductor or a diffuse base) stores ``Rt`` only; the other
 blocks are ``None`` ("left out") and adding skips them.
 
-Unscattered transmission through media is a delta in direction: it sits on the diagonal of the
-transmission blocks with the same value in every order. It stays in the blocks (the adding
-equations need it), and is also recorded in ``delta[name]`` (per node), so that the BSDF can
-evaluate the smooth part without it and report the delta separately.
+A delta in direction (the unscattered transmission through media, the mirror reflection of a
+smooth interface) sits on the diagonal of its block with the same value in every order. It stays
+in the blocks (the adding equations need it), and is also recorded in ``delta[name]`` (per node,
+any of the four blocks; :mod:`layersim.deltas`), so that the BSDF can evaluate the smooth part
+without it and report it separately.
 
 Orders at or beyond ``m`` are exactly zero. Blocks are scipy CSR matrices (a list, or an
 :class:`OrderStack` holding the orders of a block in one array triple); entries whose magnitude is
@@ -126,10 +127,18 @@ class Operator(ABC):
     eta_top, eta_bottom : float
         Absolute indices of the media above and below (``eta_bottom`` None when opaque).
     delta : dict
-        Unscattered transmission per node, ``{"Ttb": (h,), "Tbt": (h,)}`` (media only).
+        The delta (specular or straight-through) part of each block per node, ``{block: (h,)}``
+        (:mod:`layersim.deltas`): the unscattered transmission of media, smooth interfaces.
+    boundary : dict
+        Smooth dielectric boundaries kept out of the blocks, ``{"top" | "bottom": index of the
+        medium outside}``: the blocks then hold the radiance just inside that boundary, on the
+        Snell-matched grid of :func:`layersim.quadrature.snell_matched`, and the BSDF applies
+        the boundary's Fresnel transmission and refraction when it evaluates
+        (:mod:`layersim.boundary`). Empty for ordinary operators.
     """
 
     representation: str = ""
+    boundary: dict = {}
     #: True once an adding step that consumes its operands took this operator's blocks
     #: (:meth:`layersim.aniso.operator.AnisoOperator.consume`).
     consumed: bool = False
@@ -253,7 +262,10 @@ def from_arrays(d, prefix: str = "") -> Operator:
     """An operator of the representation recorded in the saved arrays ``d`` (no
     ``representation`` entry: isotropic)."""
     representation = str(d.get(f"{prefix}representation", "isotropic"))
-    return representation_class(representation).from_arrays(d, prefix=prefix)
+    op = representation_class(representation).from_arrays(d, prefix=prefix)
+    op.boundary = {side: float(d[f"{prefix}boundary_{side}"]) for side in ("top", "bottom")
+                   if f"{prefix}boundary_{side}" in d}
+    return op
 
 
 @register
@@ -282,8 +294,8 @@ class IsoOperator(Operator):
         self.m = lengths.pop()
         self.eta_top = float(eta_top)
         self.eta_bottom = None if self.opaque else float(eta_bottom)
-        self.delta = {} if self.opaque or not delta else {
-            k: np.asarray(v, float) for k, v in delta.items() if v is not None}
+        self.delta = {k: np.asarray(v, float) for k, v in (delta or {}).items()
+                      if v is not None and self.blocks.get(k) is not None}
 
     representation = "isotropic"
     #: Isotropic operators couple no Fourier modes.
@@ -550,6 +562,8 @@ def header_arrays(op, prefix: str) -> dict:
          f"{prefix}eta_bottom": np.array(np.nan if op.eta_bottom is None else op.eta_bottom)}
     for name, vec in op.delta.items():
         d[f"{prefix}delta_{name}"] = vec
+    for side, eta in op.boundary.items():
+        d[f"{prefix}boundary_{side}"] = np.array(eta)
     return d
 
 
@@ -572,7 +586,7 @@ def read_blocks(d, prefix: str, shape: tuple) -> dict:
 
 
 def read_delta(d, prefix: str) -> dict:
-    return {name: np.asarray(d[f"{prefix}delta_{name}"]) for name in ("Ttb", "Tbt")
+    return {name: np.asarray(d[f"{prefix}delta_{name}"]) for name in BLOCKS
             if f"{prefix}delta_{name}" in d}
 
 

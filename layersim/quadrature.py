@@ -13,6 +13,12 @@ rule                 exact for polynomials of degree  notes
 ``simpson38``        3 (error O(h^4))                 n = 3k + 1 equispaced nodes, k odd
 ===================  ==============================  ==========================================
 
+``snell:<eta>`` (hemisphere only, :func:`snell_matched`) is the grid of a stack with a smooth
+dielectric boundary of relative index ``eta > 1``: its nodes inside the escape cone are the Snell
+images of a Gauss-Radau rule on the outside hemisphere, and the total-internal-reflection range
+has its own Gauss-Legendre rule (as adding-doubling codes for slabs with mismatched boundaries do:
+Prahl 1995, "The adding-doubling method", sec. 4, and iadpython).
+
 References: Abramowitz & Stegun (1964) 25.4.29-25.4.32; Chandrasekhar (1960), ch. II.
 """
 
@@ -96,11 +102,74 @@ def rule(name: str, n: int) -> tuple[np.ndarray, np.ndarray]:
                          + ", ".join(_RULES)) from None
 
 
+def gauss_radau(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Radau rule with ``n`` nodes on [-1, 1] including ``+1`` (exact to degree
+    2n - 2): the roots of ``(P_{n-1}(-x) + P_n(-x)) / (1 - x)`` and 1, weights
+    ``(1 + x) / (n^2 P_{n-1}(x)^2)`` and ``2 / n^2`` (A&S 25.4.31, reflected)."""
+    c = np.zeros(n + 1)
+    c[n - 1] = c[n] = 1.0
+    t = np.sort(np.polynomial.legendre.legroots(c).real)[1:]     # drop t = -1
+    p = np.polynomial.legendre.legval(t, np.eye(n)[n - 1])
+    w = (1.0 - t) / (n * n * p * p)
+    x = np.concatenate([np.sort(-t), [1.0]])
+    return x, np.concatenate([w[::-1], [2.0 / n**2]])
+
+
+SNELL = "snell:"
+
+
+def snell_rule(eta: float) -> str:
+    """The name of the Snell-matched rule for relative index ``eta`` (see :func:`snell_matched`)."""
+    return f"{SNELL}{float(eta)!r}"
+
+
+def snell_split(h: int, eta: float) -> int:
+    """Nodes of the Snell-matched hemisphere (``h`` in all) that lie in the escape cone: in
+    proportion to the cone's polar angle, at least 4 on either side."""
+    theta_c = np.arcsin(1.0 / eta)
+    return int(min(h - 4, max(4, round(h * theta_c / (np.pi / 2)))))
+
+
+def snell_matched(eta: float, h: int) -> tuple[np.ndarray, np.ndarray]:
+    """Hemisphere nodes and weights matched across a smooth boundary of relative index ``eta``.
+
+    ``h_e = snell_split(h, eta)`` outside nodes ``x_j`` and weights ``v_j`` of Gauss-Radau on
+    (0, 1] (normal incidence is a node, as in the default Gauss-Lobatto grids) map to the inside cosines ``mu_j = sqrt(1 - (1 - x_j^2) / eta^2)`` in (mu_c, 1) with
+    weights ``v_j x_j / (eta^2 mu_j)`` (``mu dmu = x dx / eta^2``), so that the flux weights
+    ``w mu`` of an outside node and its image differ by exactly ``eta^2`` and a sum over the
+    escape cone is the outside rule's sum. The total-internal-reflection range (0, mu_c),
+    ``mu_c = sqrt(1 - 1 / eta^2)``, gets Gauss-Legendre with the other ``h - h_e`` nodes.
+    Returns increasing nodes (h,) and weights (h,).
+    """
+    eta = float(eta)
+    if not eta > 1.0:
+        raise ValueError(f"a Snell-matched grid needs a relative index above 1, got {eta!r}")
+    if h < 8:
+        raise ValueError(f"a Snell-matched grid needs at least 8 nodes per hemisphere, got {h}")
+    h_e = snell_split(h, eta)
+    mu_c = np.sqrt(1.0 - 1.0 / eta**2)
+    x, v = gauss_radau(h_e)
+    x, v = 0.5 * (x + 1.0), 0.5 * v
+    mu_e = np.sqrt(1.0 - (1.0 - x * x) / eta**2)
+    w_e = v * x / (eta**2 * mu_e)
+    t, u = scipy.special.roots_legendre(h - h_e)
+    mu_t, w_t = 0.5 * mu_c * (t + 1.0), 0.5 * mu_c * u
+    return np.concatenate([mu_t, mu_e]), np.concatenate([w_t, w_e])
+
+
 def hemisphere(name: str, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Positive half of the named rule: ``n // 2`` nodes in (0, 1], increasing, with weights.
 
-    The solver uses these for both hemispheres (the rules are symmetric).
+    The solver uses these for both hemispheres (the rules are symmetric). ``snell:<eta>``
+    names the hemisphere rule :func:`snell_matched`.
     """
+    if name.startswith(SNELL):
+        _check_even(n, 16)
+        try:
+            eta = float(name[len(SNELL):])
+        except ValueError:
+            raise ValueError(f"bad Snell-matched rule name {name!r}") from None
+        return snell_matched(eta, n // 2)
     x, w = rule(name, n)
     h = n // 2
     return x[h:].copy(), w[h:].copy()

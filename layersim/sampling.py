@@ -55,12 +55,15 @@ Invalid queries
 ---------------
 ``wi`` on the horizon, light from below an opaque stack, or an incident direction from which no
 energy leaves give ``pdf = 0``, ``weight = 0`` and ``wo = (0, 0, 0)`` (a renderer drops such
-samples). The unscattered (delta) transmission of media is not part of ``eval`` and is not
-sampled.
+samples). Delta parts (the unscattered transmission of media, the mirror reflection of smooth
+interfaces) are not part of ``eval`` and are not sampled: :meth:`layersim.bsdf.BSDF.specular`
+gives their directions and energies. A BSDF with a smooth dielectric boundary is sampled inside
+the boundary and refracted out (:class:`BoundarySampler`).
 """
 
 from __future__ import annotations
 
+import copy
 import math
 import weakref
 
@@ -79,10 +82,91 @@ _SAMPLERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 def sampler_for(bsdf) -> "FourierSampler":
     """The (cached) sampler of a BSDF (anisotropic ones: see the module docstring)."""
     s = _SAMPLERS.get(bsdf)
+    if s is None and any(op.boundary for op in bsdf.operators):
+        s = BoundarySampler(bsdf)
+        _SAMPLERS[bsdf] = s
     if s is None:
         s = FourierSampler(bsdf.rotational_average(), target=bsdf)
         _SAMPLERS[bsdf] = s
     return s
+
+
+class BoundarySampler:
+    """Sampling of a BSDF with smooth dielectric boundaries (:mod:`layersim.boundary`): the
+    inside series is sampled as by :class:`FourierSampler`, in the refracted incident
+    direction, and the sampled inside direction is refracted out. The density changes by the
+    solid-angle factor ``domega_in / domega_out = x / (eta^2 mu)`` (``x`` and ``mu`` the outside
+    and inside cosines); inside directions under total internal reflection leave nowhere and
+    give invalid samples (weight 0). The weight is the whole BSDF's ``eval`` over that density,
+    so the estimator stays unbiased for the smooth part; deltas are not sampled."""
+
+    def __init__(self, bsdf):
+        self.target = bsdf
+        self.exits = bsdf.evaluator(0).exits
+        inside = []
+        for op in bsdf.operators:
+            op = copy.copy(op)
+            op.boundary = {}
+            inside.append(op)
+        self.inner = sampler_for(type(bsdf)(inside, info=bsdf.info))
+
+    def _side(self, w):
+        return np.where(w[..., 2] > 0, "top", "bottom")
+
+    def _to_inside(self, w):
+        out = w.copy()
+        for side, ex in self.exits.items():
+            sel = self._side(w) == side
+            out[sel] = ex.to_inside(w[sel])
+        return out
+
+    def _jacobian(self, wo_out, wo_in):
+        """``domega_in / domega_out`` for each outgoing pair (1 off the boundaries)."""
+        jac = np.ones(wo_out.shape[0])
+        for side, ex in self.exits.items():
+            sel = self._side(wo_out) == side
+            jac[sel] = np.abs(wo_out[sel, 2]) / (ex.eta**2 * np.abs(wo_in[sel, 2]))
+        return jac
+
+    def sample(self, wi, u):
+        """As :meth:`FourierSampler.sample`."""
+        wi = unit_directions("wi", wi)
+        u = _uniforms(u)
+        shape = np.broadcast_shapes(wi.shape[:-1], u.shape[:-1])
+        wi = np.broadcast_to(wi, shape + (3,)).reshape(-1, 3)
+        u = np.broadcast_to(u, shape + (2,)).reshape(-1, 2)
+        wo_in, _, pdf_in = self.inner.sample(self._to_inside(wi), u)
+        wo = wo_in.copy()
+        ok = pdf_in > 0
+        for side, ex in self.exits.items():
+            sel = ok & (self._side(wo_in) == side)
+            escapes = np.abs(wo_in[:, 2]) > ex.mu_c
+            ok &= ~sel | escapes
+            sel &= escapes
+            wo[sel] = ex.to_outside(wo_in[sel])
+        pdf = np.where(ok, pdf_in, 0.0)
+        pdf[ok] *= self._jacobian(wo[ok], wo_in[ok])
+        wo[~ok] = 0.0
+        nch = self.target.channels
+        weight = np.zeros((wi.shape[0], nch))
+        g = np.flatnonzero(ok)
+        if g.size:
+            f = self.target.eval(wi[g], wo[g]).reshape(g.size, nch)
+            weight[g] = np.maximum(f, 0.0) * (np.abs(wo[g, 2]) / pdf[g])[:, None]
+        weight = weight[:, 0] if nch == 1 else weight
+        return (wo.reshape(shape + (3,)), weight.reshape(shape + weight.shape[1:]),
+                pdf.reshape(shape))
+
+    def pdf(self, wi, wo) -> np.ndarray:
+        """As :meth:`FourierSampler.pdf`."""
+        wi = unit_directions("wi", wi)
+        wo = unit_directions("wo", wo)
+        wi, wo = np.broadcast_arrays(wi, wo)
+        shape = wi.shape[:-1]
+        wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+        wo_in = self._to_inside(wo)
+        pdf = np.asarray(self.inner.pdf(self._to_inside(wi), wo_in), float).reshape(-1)
+        return (pdf * self._jacobian(wo, wo_in)).reshape(shape)
 
 
 def _uniforms(u) -> np.ndarray:

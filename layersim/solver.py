@@ -18,6 +18,7 @@ from .ingredients import diffuse_operator, interface_operator, medium_operator
 from .ingredients.aniso_microfacet import AnisoProjectionStats, aniso_interface_operator
 from .ingredients.microfacet import ProjectionStats
 from .ingredients.numeric import numeric_interface_operator
+from .ingredients.smooth import boundary_reflector, smooth_conductor_operator
 from .kernels.runtime import device_for
 from .operator import IsoOperator, Operator, common_representation
 from .outofcore import memory
@@ -47,6 +48,12 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     notes = [] if notes is None else notes
     layer = scene.layers[i]
     eta_above = scene.ior_above(i)
+    if isinstance(layer, Conductor) and layer.smooth:
+        return smooth_conductor_operator(grid, plan.md, scene.relative_ior(i), eta_above)
+    if isinstance(layer, Dielectric) and layer.smooth:
+        side = "top" if i == 0 else "bottom"
+        inside = layer.ior.real if side == "top" else eta_above
+        return boundary_reflector(grid, plan.md, side, inside / plan.boundary[side], inside)
     if isinstance(layer, (Dielectric, Conductor)) and layer.anisotropic:
         lp = next(lp for lp in plan.layers if lp.index == i)
         op = aniso_interface_operator(grid, plan.md, lp.ms, layer, eta_above, stats,
@@ -234,6 +241,9 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
             for op in reversed(ops[:-1]):
                 stack = adding.add(op, stack, threads)
         del ops
+        if plan.boundary:
+            # the blocks hold the radiance inside the smooth boundaries (layersim.boundary)
+            stack.boundary = dict(plan.boundary)
         t_adding += time.perf_counter() - t0
         progress("adding", c + 1, len(monos), f"channel {c}" if len(monos) > 1 else "")
         stacks.append(stack)

@@ -65,6 +65,7 @@ import numpy as np
 import scipy.sparse as sps
 
 from .adding import add as iso_add
+from .adding import refuse_boundary
 from .aniso import basis
 from .aniso.adding import add as coupled_add
 from .aniso.banded import banded_solve
@@ -165,6 +166,12 @@ def subtract(stack, known, side: str = "top", eps: float | None = None,
 # ---------------------------------------------------------------------------------------------
 
 def _subtract_op(stack, known, side, eps, noise):
+    refuse_boundary("subtract", stack, known)
+    if any(name in op.delta for op in (stack, known) for name in ("Rt", "Rb")):
+        # the recovered layer's mirror delta would need the delta algebra inverted
+        # (layersim.deltas); without it the delta would be smeared into the smooth part
+        raise OperatorError("cannot subtract operators with a mirror (specular) reflection "
+                            "delta (a smooth interface, roughness 0); give it a roughness > 0")
     if stack.grid != known.grid:
         raise OperatorError(f"stack and known layer are on different grids ({stack.grid.rule} "
                             f"n={stack.grid.n} vs {known.grid.rule} n={known.grid.n}); solve "

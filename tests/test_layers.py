@@ -272,10 +272,19 @@ def test_rough_coatings_at_high_resolution_are_finite_and_conserving(alpha, n):
     assert np.all(np.isfinite(R)) and np.all((R > 0.3) & (R < 1.0))
 
 
-def test_smooth_interfaces_are_refused_with_a_reason():
+def test_smooth_interface_alone_is_fresnel_and_snell():
+    """A bare smooth interface: R = F and T = 1 - F, both deltas, T along the refracted
+    direction (layersim.boundary)."""
+    from layersim.kernels.fresnel import fresnel
     scene = layersim.Scene.from_dict({"layer": [{"kind": "dielectric", "ior": 1.5}]})
-    with pytest.raises(InfeasibleError, match="layer 0 \\(dielectric\\).*smooth.*montecarlo"):
-        layersim.solve(scene)
+    bsdf = layersim.solve(scene)
+    wi = unit([0.0, 45.0, 85.0])
+    R, T = bsdf.albedo(wi)
+    F = fresnel(wi[:, 2], 1.5)
+    assert np.allclose(R, F, atol=1e-12) and np.allclose(T, 1 - F, atol=1e-12)
+    wt = bsdf.specular(wi)["bottom"][1]
+    assert np.allclose(np.hypot(wt[:, 0], wt[:, 1]) * 1.5, np.hypot(wi[:, 0], wi[:, 1]))
+    assert np.all(wt[:, 2] < 0)
 
 
 def test_nearly_index_matched_interface_is_refused_up_front():

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 
 import scipy.sparse as sps
 
+from ..deltas import add_deltas
 from ..adding import check_pair
 from ..errors import OperatorError
 from ..operator import DROP_TOLERANCE, Grid
@@ -116,14 +117,12 @@ class _Pair:
     eta_top: float
     eta_bottom: float | None
     opaque: bool
-    delta: dict             # unscattered light crosses both layers only through both deltas
+    delta: dict             # the deltas of the stack (layersim.deltas)
 
     @classmethod
     def of(cls, top: AnisoOperator, bottom: AnisoOperator) -> "_Pair":
         opaque = bottom.opaque
-        delta = {} if opaque else {name: top.delta[name] * bottom.delta[name]
-                                   for name in ("Ttb", "Tbt")
-                                   if name in top.delta and name in bottom.delta}
+        delta = add_deltas(top.delta, bottom.delta, opaque)     # diagonal algebra
         return cls(top.grid, top.md, top.h, top.size, top.eta_top, bottom.eta_bottom, opaque,
                    delta)
 

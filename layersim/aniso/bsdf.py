@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 
+from ..deltas import specular
 from ..interpolation import (bin_quadrature, block_taps, closed_bin, hat_weights,
                              side_energies, spline_weights)
 from ..kernels import fourier_eval2d
@@ -178,6 +179,24 @@ class AnisoEvaluator:
                                                      phi_o[sel] + phi_i[sel])
         return out
 
+    def specular(self, wi: np.ndarray) -> dict:
+        """The delta parts for beams from ``wi`` (Q, 3) (:func:`layersim.deltas.specular`)."""
+        return specular(self.op, wi)
+
+    def node_energy(self, name: str, weight: np.ndarray | None = None,
+                    wi: np.ndarray | None = None) -> np.ndarray:
+        """Energy fraction through block ``name`` for beams from each node at the propagation
+        azimuths of ``wi`` (Q, 3): shape (Q, h); each outgoing node counted with ``weight``
+        (h,) (default 1; :mod:`layersim.boundary` passes a boundary's transmittance)."""
+        op = self.op
+        phi_in = np.arctan2(-wi[:, 1], -wi[:, 0])
+        if weight is None:
+            return node_energy(op, name, phi_in)
+        fw = op.grid.flux_weight
+        h = op.h
+        E = ((op.blocks[name][:h].T @ (weight * fw)) / np.tile(fw, op.slots)).reshape(op.slots, h)
+        return np.einsum("sh,sq->qh", E, _v(op.md, phi_in))
+
     def albedo(self, wi: np.ndarray):
         """(R, T), each (Q,), for azimuth-dependent incidence (module docstring)."""
         op = self.op
@@ -186,22 +205,21 @@ class AnisoEvaluator:
                              lambda name, q: None if op.blocks[name] is None
                              else node_energy(op, name, phi_in[q]))
 
-    def bins(self, wi: np.ndarray, mu_edges: np.ndarray, phi_edges: np.ndarray) -> dict:
+    def bins(self, wi: np.ndarray, mu_edges: np.ndarray, phi_edges: np.ndarray,
+             exits: dict | None = None, deltas: bool = True, taps=None) -> dict:
         """Bin energies for one incident direction ``wi`` (3,) (see
-        :meth:`layersim.bsdf.BSDF.bin_energies`)."""
+        :meth:`layersim.bsdf.BSDF.bin_energies`; ``exits``, ``deltas``, ``taps`` as for
+        :meth:`layersim.isobsdf.IsoEvaluator.bins`)."""
         op = self.op
         grid = op.grid
         h, md, S = op.h, op.md, op.slots
         fw = grid.flux_weight
         mu_in = wi[2]
         phi_in_prop = math.atan2(-wi[1], -wi[0])
-        ii, wi_ = hat_weights(grid.mu, np.array([abs(mu_in)]))
+        ii, wi_ = hat_weights(grid.mu, np.array([abs(mu_in)])) if taps is None else taps
         ii, wi_ = ii[0], wi_[0]
         v = _v(md, np.array(phi_in_prop))                      # (S,)
-        pts, gw, bin_of = bin_quadrature(grid.mu, mu_edges)
-        io, wo_ = spline_weights(grid.mu, pts)
-        full_pts, full_w, _ = bin_quadrature(grid.mu, np.array([0.0, 1.0]))
-        full_io, full_wo = spline_weights(grid.mu, full_pts)
+        exits = exits or {}
         # azimuth integrals of u_a(phi_o) = 1, cos l phi, sin l phi over each phi bin
         mode = basis.slot_mode(md)[:, None].astype(float)
         is_sin = basis.slot_is_sin(md)[:, None]
@@ -217,6 +235,19 @@ class AnisoEvaluator:
             E = np.zeros((mu_edges.size - 1, phi_edges.size - 1))
             blk = op.blocks[name]
             if blk is not None:
+                ex = exits.get(side)
+                if ex is None:
+                    pts, gw, bin_of = bin_quadrature(grid.mu, mu_edges)
+                    gw = gw * pts
+                    full_pts, full_w, _ = bin_quadrature(grid.mu, np.array([0.0, 1.0]))
+                    full_w = full_w * full_pts
+                    g = np.ones(h)
+                else:
+                    pts, gw, bin_of = ex.points(mu_edges)
+                    full_pts, full_w, _ = ex.points(np.array([0.0, 1.0]))
+                    g = ex.weight(grid.mu)
+                io, wo_ = spline_weights(grid.mu, pts)
+                full_io, full_wo = spline_weights(grid.mu, full_pts)
                 G = op.coefficients(name)
                 F = np.zeros((S, h))
                 delta = op.delta.get(name)
@@ -231,14 +262,14 @@ class AnisoEvaluator:
                     F += wt * (sub @ v).reshape(S, h)
                 vals = np.einsum("pk,apk->ap", wo_, F[:, io])           # (S, points)
                 M = np.zeros((S, mu_edges.size - 1))
-                np.add.at(M.T, bin_of, (vals * (gw * pts)[None, :]).T)
+                np.add.at(M.T, bin_of, (vals * gw[None, :]).T)
                 E = M.T @ phi_int
                 interp = 2.0 * np.pi * np.sum(np.einsum("pk,pk->p", full_wo, F[0][full_io])
-                                              * full_w * full_pts)
-                quad = 2.0 * np.pi * np.sum(F[0] * fw)
+                                              * full_w)
+                quad = 2.0 * np.pi * np.sum(F[0] * g * fw)
                 if interp != 0.0:
                     E *= quad / interp
-                if delta is not None:
+                if delta is not None and deltas:
                     energy = float(np.dot(wi_, delta[ii]))
                     kmu = closed_bin(mu_edges, abs(mu_in))
                     kphi = closed_bin(phi_edges, (math.atan2(wi[1], wi[0]) + np.pi) % (2 * np.pi))

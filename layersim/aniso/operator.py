@@ -50,7 +50,7 @@ class AnisoOperator(Operator):
     eta_top, eta_bottom : float
         Absolute indices of the media above and below (``eta_bottom`` None when opaque).
     delta : dict, optional
-        Unscattered transmission per node, ``{"Ttb": (h,), "Tbt": (h,)}``.
+        The delta part of each block per node, ``{block: (h,)}`` (:mod:`layersim.deltas`).
     ms : int, optional
         Largest mode coupling present (computed from the blocks when omitted).
     """
@@ -77,8 +77,8 @@ class AnisoOperator(Operator):
             raise OperatorError("an operator needs an Rt block")
         self.eta_top = float(eta_top)
         self.eta_bottom = None if self.opaque else float(eta_bottom)
-        self.delta = {} if self.opaque or not delta else {
-            k: np.asarray(v, float) for k, v in delta.items() if v is not None}
+        self.delta = {k: np.asarray(v, float) for k, v in (delta or {}).items()
+                      if v is not None and self.blocks.get(k) is not None}
         self.ms = self._coupling() if ms is None else int(ms)
         self.consumed = False           # see consume()
 

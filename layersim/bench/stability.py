@@ -114,6 +114,15 @@ def cases() -> list:
         Case("anisotropy_1to30", [cond(GOLD, [0.0167, 0.5])], "gold, alpha (0.0167, 0.5)",
              small={"n": 32, "md": 48}),
         Case("anisotropy_1to100", [cond(GOLD, [0.005, 0.5])], "gold, alpha (0.005, 0.5)"),
+        Case("smooth_conductor", [cond(GOLD, 0.0)], "smooth gold: a Fresnel delta"),
+        Case("smooth_coating_lambert", [diel(1.5, 0.0), {"kind": "diffuse", "albedo": 1.0}],
+             "smooth coating (eta 1.5) over a white Lambertian base", conservative=True,
+             angles=(0.0, 45.0, 80.0, 89.0)),
+        Case("smooth_coating_gold", [diel(1.5, 0.0), cond(GOLD, 0.2)],
+             "smooth coating over rough gold (alpha 0.2)"),
+        Case("smooth_slab", [diel(1.5, 0.0), med(1.0, 1.0, 0.5), diel(1.0, 0.0)],
+             "conservative HG slab between two smooth interfaces", conservative=True,
+             angles=(0.0, 45.0, 80.0, -30.0)),
         SubtractCase("subtract_blurring", "remove a thick HG slab (tau 10) from above a metal: "
                      "the slab hides the metal", blurring=True),
         SubtractCase("subtract_noise_1pct", "remove thin dust from above a rough glass interface, "

@@ -500,6 +500,18 @@ def export(bsdf: BSDF, path, version: int | None = None, alpha=(0.0, 0.0),
     if not isinstance(bsdf, BSDF):
         raise TypeError("export() takes a solved BSDF (from layersim.solve or BSDF.load), got "
                         f"{type(bsdf).__name__}")
+    for c, op in enumerate(bsdf.operators):
+        # the format tabulates cosine series per ordinate pair: a mirror reflection is not a
+        # function of the pair, and outside a smooth boundary the ordinates are not the
+        # format's (the inside nodes are matched by Snell's law)
+        if op.boundary or any(name in op.delta for name in ("Rt", "Rb")):
+            what = ("a smooth dielectric boundary" if op.boundary
+                    else "a specular (mirror) reflection")
+            raise InfeasibleError(
+                f"channel {c}: this BSDF has {what} (a smooth interface, roughness 0), a delta "
+                "in direction that .bsdf files cannot hold (they tabulate Fourier series per "
+                "pair of ordinates); give the interface a roughness > 0 to export, or keep the "
+                "solved BSDF (BSDF.save), which holds the delta exactly")
     table = FourierTable.from_bsdf(bsdf, version=version, alpha=alpha, relerr=relerr)
     table.write(path)
     return table

@@ -30,14 +30,13 @@ rule.
 from __future__ import annotations
 
 from ..errors import InfeasibleError
-from ..operator import Grid
 from ..scene import Scene, as_scene
 from .budget import (MD_LOWER_PER_INV_ALPHA, PROJECTION_BYTES, estimate_bytes, lower_bound,
                      memory_limit, refuse_below_lower_bound, refuse_over_limit)
 from .coupling import choose_ms, needed_ms
 from .layers import survey_layers
 from .model import LayerPlan, Plan
-from .ordinates import DEFAULT_RULE, N_MAX, N_MIN, N_PER_WIDTH, choose_n
+from .ordinates import DEFAULT_RULE, N_MAX, N_MIN, N_PER_WIDTH, SNELL_N_FACTOR, choose_grid
 from .orders import MD_MAX, THETA_FULL, choose_md, interface_lengths, truncation_notes
 
 __all__ = ["Plan", "LayerPlan", "make_plan", "memory_limit", "THETA_FULL", "N_PER_WIDTH",
@@ -74,7 +73,7 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
     ms_needed = needed_ms(layers, survey.left_out, notes)
     anisotropic = ms_needed > 0
     representation = "anisotropic" if anisotropic else "isotropic"
-    grid = Grid.make(rule, choose_n(disc, rule, survey.widths, notes, overridden))
+    grid = choose_grid(disc, rule, survey, notes, overridden)
     mono = scene.channel(0)
     try:
         refuse_below_lower_bound(disc, mono, layers, grid, survey.media_orders, ms_needed)
@@ -88,10 +87,10 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
         for k in ("md", "ms"):
             if getattr(disc, k) is not None:
                 overridden[k] = getattr(disc, k)
-        return Plan(rule=rule, n=grid.n, md=md, ms=(disc.ms or ms_needed) if anisotropic
+        return Plan(rule=grid.rule, n=grid.n, md=md, ms=(disc.ms or ms_needed) if anisotropic
                     else 0, layers=layers, left_out=survey.left_out, notes=notes,
                     memory_bytes=memory, overridden=overridden,
-                    representation=representation, refused=str(exc))
+                    representation=representation, refused=str(exc), boundary=survey.boundary)
     lengths = interface_lengths(grid, mono, layers)
     md_needed = max([survey.media_orders] + [lp.orders for lp, _ in lengths])
     md = choose_md(disc, md_needed, notes, overridden)
@@ -106,6 +105,6 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
         if refuse:
             raise
         refused = str(exc)
-    return Plan(rule=rule, n=grid.n, md=md, ms=ms, layers=layers, left_out=survey.left_out,
+    return Plan(rule=grid.rule, n=grid.n, md=md, ms=ms, layers=layers, left_out=survey.left_out,
                 notes=notes, memory_bytes=memory, overridden=overridden,
-                representation=representation, refused=refused)
+                representation=representation, refused=refused, boundary=survey.boundary)

@@ -31,12 +31,19 @@ class Survey:
         ``n``.
     media_orders : int
         Fourier orders the media's phase functions need.
+    boundary : dict
+        Smooth dielectric boundaries, ``{"top" | "bottom": index outside}``
+        (:mod:`layersim.boundary`).
+    snell_eta : float or None
+        Their relative index (inside / outside), which sets the Snell-matched grid.
     """
 
     layers: list = field(default_factory=list)
     left_out: list = field(default_factory=list)
     widths: list = field(default_factory=list)
     media_orders: int = 1
+    boundary: dict = field(default_factory=dict)
+    snell_eta: float | None = None
 
 
 def survey_layers(scene: Scene) -> Survey:
@@ -46,7 +53,8 @@ def survey_layers(scene: Scene) -> Survey:
     Raises
     ------
     InfeasibleError
-        For a smooth interface (not representable in the Fourier basis).
+        For a smooth dielectric interface inside the stack (only the top and bottom ones can
+        be matched by the ordinates; :func:`_smooth`).
     """
     survey = Survey()
     mono = scene.channel(0)
@@ -75,11 +83,8 @@ def _interface(scene: Scene, i: int, layer, survey: Survey) -> None:
         survey.layers.append(LayerPlan(i, kind, "left out", "index-matched"))
         return
     if layer.smooth:
-        raise InfeasibleError(
-            f"layer {i} ({kind}): smooth interfaces (roughness 0) are not representable "
-            "in the Fourier basis yet (their reflection is a delta in every Fourier "
-            "order); give a small roughness (e.g. 0.01), or use layersim.montecarlo, "
-            "which handles smooth interfaces exactly")
+        _smooth(scene, i, layer, survey)
+        return
     eta_rel = scene.channel(0).relative_ior(i)
     width, what = interface_width(layer, eta_rel)
     survey.widths.append((width, i, kind, what))
@@ -114,6 +119,58 @@ def _medium(scene: Scene, i: int, layer, survey: Survey) -> None:
     survey.layers.append(LayerPlan(i, kind, "adding-doubling",
                                    f"tau={layer.tau:g}, g={g:g}: scattering in {orders} "
                                    "order(s), unscattered beam in all", orders=orders))
+
+
+def _smooth(scene: Scene, i: int, layer, survey: Survey) -> None:
+    """A smooth interface: a conductor is a diagonal (exact on any grid); a dielectric is a
+    boundary of the stack (top, or bottom of a transmissive stack) matched by the ordinates,
+    and refused elsewhere."""
+    kind = layer.kind
+    if isinstance(layer, Conductor):
+        survey.layers.append(LayerPlan(i, kind, "exact (specular delta)",
+                                       "smooth: Fresnel reflectance on the diagonal of Rt in "
+                                       "every order"))
+        return
+    mono = scene.channel(0)
+    etas = {s.relative_ior(i).real for s in _channels(scene)}
+    last = len(mono.layers) - 1
+    side = "top" if i == 0 else "bottom" if i == last else None
+    if side is None:
+        raise InfeasibleError(
+            f"layer {i} ({kind}): a smooth dielectric interface inside the stack refracts "
+            "between two grids of ordinates that cannot both be matched to the stack's "
+            "(only the top interface, and the bottom one of a transmissive stack with the "
+            "same index ratio, are solved exactly); give it a roughness > 0, or use "
+            "layersim.montecarlo")
+    if len(etas) > 1:
+        raise InfeasibleError(
+            f"layer {i} ({kind}): a smooth dielectric boundary needs the same index in every "
+            "channel (the ordinates are matched to one refraction); give one ior, or a "
+            "roughness > 0")
+    outside = scene.top_ior if side == "top" else layer.ior.real
+    inside = mono.ior_above(i) if side == "bottom" else layer.ior.real
+    ratio = inside / outside
+    if ratio <= 1.0:
+        raise InfeasibleError(
+            f"layer {i} ({kind}): a smooth {side} boundary needs a denser medium inside the "
+            f"stack (index {inside:g}) than outside ({outside:g}); give it a roughness > 0")
+    if survey.snell_eta is not None and abs(survey.snell_eta - ratio) > 1e-12 * ratio:
+        raise InfeasibleError(
+            f"layer {i} ({kind}): the smooth bottom boundary has index ratio {ratio:g}, the "
+            f"smooth top one {survey.snell_eta:g}; one grid of ordinates matches only one "
+            "ratio: give one of them a roughness > 0")
+    if side == "bottom" and survey.boundary and len(mono.layers) == 2:
+        raise InfeasibleError(
+            f"layer {i} ({kind}): two smooth boundaries with nothing between them trap the "
+            "light beyond the critical angle forever (a singular adding step); put a medium "
+            "(tau > 0) between them")
+    survey.snell_eta = ratio
+    survey.boundary[side] = outside
+    survey.layers.append(LayerPlan(
+        i, kind, f"smooth {side} boundary (Snell-matched ordinates)",
+        f"relative index {ratio:.4g}: inside nodes in the escape cone are the refracted "
+        "outside nodes; Fresnel reflection (TIR: 1) on the diagonal, transmission applied "
+        "at evaluation"))
 
 
 def interface_width(layer, eta_rel: complex) -> tuple[float, str]:

@@ -56,6 +56,9 @@ class Plan:
     #: Why the solve refuses this plan (over the memory limit), or None; set only by
     #: ``make_plan(scene, refuse=False)``.
     refused: str | None = None
+    #: Smooth dielectric boundaries of the stack, ``{"top" | "bottom": index outside}``
+    #: (:mod:`layersim.boundary`).
+    boundary: dict = field(default_factory=dict)
 
     @property
     def grid(self) -> Grid:

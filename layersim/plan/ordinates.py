@@ -11,12 +11,18 @@ from __future__ import annotations
 import math
 
 from ..errors import InfeasibleError
+from ..operator import Grid
+from ..quadrature import SNELL, snell_rule
 from ..scene import Discretization
 
 #: Ordinates per unit of inverse lobe width (see the module docstring).
 N_PER_WIDTH = 6.5
 N_MIN, N_MAX = 64, 4096
 DEFAULT_RULE = "gauss-lobatto"
+#: Factor on ``n`` for stacks with a smooth dielectric boundary (Snell-matched grid): the
+#: ordinates outside the escape cone serve only the light trapped by total internal reflection.
+#: With it, three stacks agree with Monte Carlo at 1e7 paths (benchmarks/smooth_vs_mc.txt).
+SNELL_N_FACTOR = 2
 
 
 def n_for_width(width: float) -> int:
@@ -62,3 +68,32 @@ def choose_n(disc: Discretization, rule: str, widths: list, notes: list,
         n = 3 * math.ceil((n - 1) / 3) + 1
         n += 3 * (n % 2)
     return n
+
+
+def choose_grid(disc: Discretization, rule: str, survey, notes: list, overridden: dict) -> Grid:
+    """The grid of the plan: ``rule`` with :func:`choose_n` ordinates, or, for a stack with a
+    smooth dielectric boundary (``survey.snell_eta``), the Snell-matched grid of that boundary
+    (:func:`layersim.quadrature.snell_rule`) with :data:`SNELL_N_FACTOR` times the ordinates.
+
+    Raises
+    ------
+    InfeasibleError
+        If a Snell-matched grid would get fewer than 16 ordinates (an override).
+    """
+    eta = survey.snell_eta
+    if eta is None:
+        return Grid.make(rule, choose_n(disc, rule, survey.widths, notes, overridden))
+    if disc.quadrature and not disc.quadrature.startswith(SNELL):
+        notes.append(f"quadrature {disc.quadrature} from the scene replaced by the "
+                     "Snell-matched grid of the smooth boundary")
+    rule = snell_rule(eta)
+    n = choose_n(disc, rule, survey.widths, notes, overridden)
+    if n < 16:
+        raise InfeasibleError(f"[discretization] n = {n}: a stack with a smooth dielectric "
+                              "boundary needs n >= 16 (4 or more ordinates on either side of its "
+                              "critical angle); raise n or remove the override")
+    if disc.n is None:
+        n *= SNELL_N_FACTOR
+        notes.append(f"n doubled to {n} for the smooth boundary: the escape cone, which holds "
+                     "every direction seen from outside, gets about half of the ordinates")
+    return Grid.make(rule, n)
