@@ -14,6 +14,8 @@ variable                   field               meaning (default)
                                                (``cpu``; ``cuda`` for a GPU)
 ``LAYERSIM_MAX_MEMORY``    ``max_memory``      bytes a solve may plan for (half the
                                                available memory)
+``LAYERSIM_MAX_SECONDS``   ``max_seconds``     seconds a solve may plan for, estimated by
+                                               the plan (600; ``off``: no limit)
 ``LAYERSIM_PARK_DIR``      ``park_dir``        directory of the temporary files that hold
                                                idle blocks of coupled solves (the system's
                                                temporary directory; ``off``: in memory)
@@ -58,6 +60,9 @@ class Settings:
         Warp device name for the projection kernels (``"cpu"``, ``"cuda"``, ``"cuda:1"``).
     max_memory : int or None
         Bytes a solve may plan for; None: half the memory available when the plan is made.
+    max_seconds : float or None
+        Seconds a solve may plan for (:func:`layersim.plan.budget.estimate_seconds`); None: no
+        limit.
     park_dir : str or None
         Directory for the temporary files of coupled solves; None keeps everything in memory.
     malloc_arenas : int
@@ -74,6 +79,7 @@ class Settings:
 
     device: str = "cpu"
     max_memory: int | None = None
+    max_seconds: float | None = 600.0
     park_dir: str | None = dataclasses.field(default_factory=tempfile.gettempdir)
     malloc_arenas: int = 1
     threads: int = dataclasses.field(default_factory=lambda: os.cpu_count() or 1)
@@ -92,6 +98,10 @@ class Settings:
                                             or self.max_memory <= 0):
             raise ConfigError(f"max_memory must be a positive number of bytes, got "
                               f"{self.max_memory!r}")
+        if self.max_seconds is not None and (not isinstance(self.max_seconds, (int, float))
+                                             or not self.max_seconds > 0):
+            raise ConfigError(f"max_seconds must be a positive number of seconds, got "
+                              f"{self.max_seconds!r}")
         if not isinstance(self.device, str) or not DEVICE_NAME.fullmatch(self.device):
             raise ConfigError(f"device must be a Warp device name ('cpu', 'cuda' or "
                               f"'cuda:N'), got {self.device!r}")
@@ -122,6 +132,10 @@ def _bytes(text: str) -> int:
     return int(float(text))
 
 
+def _seconds(text: str) -> float | None:
+    return None if text.lower() == "off" else float(text)
+
+
 def _park(text: str) -> str | None:
     return None if text.lower() == "off" else text
 
@@ -133,6 +147,7 @@ def _flag(text: str) -> bool:
 _VARIABLES = {
     "device": ("LAYERSIM_DEVICE", str),
     "max_memory": ("LAYERSIM_MAX_MEMORY", _bytes),
+    "max_seconds": ("LAYERSIM_MAX_SECONDS", _seconds),
     "park_dir": ("LAYERSIM_PARK_DIR", _park),
     "malloc_arenas": ("LAYERSIM_MALLOC_ARENAS", int),
     "threads": ("LAYERSIM_THREADS", int),
@@ -142,6 +157,7 @@ _VARIABLES = {
 _EXPECTED = {
     "device": "expected a Warp device name ('cpu', 'cuda' or 'cuda:N')",
     "max_memory": "expected a number of bytes (e.g. 4e9)",
+    "max_seconds": "expected a number of seconds (e.g. 600) or 'off'",
     "park_dir": "expected a directory or 'off'",
     "malloc_arenas": "expected an integer >= 0",
     "threads": "expected an integer >= 1",

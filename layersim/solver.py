@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from dataclasses import replace
 
+import numpy as np
 from threadpoolctl import threadpool_limits
 
 from . import adding
@@ -69,10 +71,34 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
         notes += _check_energy(op, i, layer, plan)
         return op
     if isinstance(layer, Medium):
-        return medium_operator(grid, plan.md, layer.albedo, layer.g, layer.tau, eta_above)
+        return medium_operator(grid, plan.md, layer.albedo, layer.g, layer.tau, eta_above,
+                               name=f"layer {i} (medium)")
     if isinstance(layer, Diffuse):
         return diffuse_operator(grid, layer.albedo, eta_above)
     raise TypeError(f"layer {i}: no operator for kind {layer.kind!r}")  # pragma: no cover
+
+
+@contextlib.contextmanager
+def _singular_as_infeasible(where: str, advice: str):
+    """Report a singular or ill-conditioned linear system met inside the block (numpy's and
+    SciPy's ``LinAlgError``, SuperLU's "singular" ``RuntimeError``) as an
+    :class:`InfeasibleError` naming ``where`` and what to change (``advice``)."""
+    try:
+        yield
+    except np.linalg.LinAlgError as exc:
+        raise InfeasibleError(f"{where}: singular or ill-conditioned linear system ({exc}); "
+                              f"{advice}") from None
+    except RuntimeError as exc:
+        if "singular" not in str(exc).lower():
+            raise
+        raise InfeasibleError(f"{where}: singular linear system ({exc}); {advice}") from None
+
+
+#: What to change when the adding equations are singular: ``I - Rb1 Rt2`` is singular only when
+#: light can bounce between the two operands without loss in some Fourier order.
+_ADDING_ADVICE = ("the layers trap light without loss between them; give a medium an albedo "
+                  "slightly below 1, a conductor some absorption, or change n / md in "
+                  "[discretization]")
 
 
 def _check_energy(op, i: int, layer, plan: Plan) -> list[str]:
@@ -159,7 +185,8 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
     # Single-threaded BLAS: the projection's batched small QRs and the adding's small dense
     # products run several times slower with OpenBLAS threads on matrices of this size, where
     # the threads' synchronisation outweighs the arithmetic.
-    with threadpool_limits(1, user_api="blas"):
+    with threadpool_limits(1, user_api="blas"), _singular_as_infeasible(
+            f"scene {scene.name!r}", "change n / md in [discretization] or the stiffest layer"):
         return _solve(scene, like, threads, verbose, projection, device,
                       progress or _no_progress)
 
@@ -221,8 +248,11 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
             if key not in cache:
                 t0 = time.perf_counter()
                 progress("projection", built, n_ops, f"layer {lp.index} ({lp.kind})")
-                cache[key] = _layer_operator(plan, grid, mono, lp.index, stats, projection,
-                                             device, workspace if own else None, notes)
+                with _singular_as_infeasible(f"layer {lp.index} ({lp.kind})",
+                                             "change its parameters or n / md in "
+                                             "[discretization]"):
+                    cache[key] = _layer_operator(plan, grid, mono, lp.index, stats, projection,
+                                                 device, workspace if own else None, notes)
                 memory.release()
                 built += 1
                 progress("projection", built, n_ops, f"layer {lp.index} ({lp.kind})")
@@ -235,11 +265,14 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
         if not ops:
             stack = IsoOperator.identity(grid, plan.md, scene.top_ior)
         elif plan.representation == "anisotropic":
-            stack = _add_mixed(ops, owned, threads, workspace)
+            with _singular_as_infeasible("adding the layers (coupled modes)", _ADDING_ADVICE):
+                stack = _add_mixed(ops, owned, threads, workspace)
         else:
             stack = ops[-1]
-            for op in reversed(ops[:-1]):
-                stack = adding.add(op, stack, threads)
+            for lp, op in reversed(list(zip(used[:-1], ops[:-1]))):
+                with _singular_as_infeasible(f"adding layer {lp.index} ({lp.kind}) onto the "
+                                             "layers below it", _ADDING_ADVICE):
+                    stack = adding.add(op, stack, threads)
         del ops
         if plan.boundary:
             # the blocks hold the radiance inside the smooth boundaries (layersim.boundary)

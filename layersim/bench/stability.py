@@ -114,6 +114,7 @@ def cases() -> list:
         Case("anisotropy_1to30", [cond(GOLD, [0.0167, 0.5])], "gold, alpha (0.0167, 0.5)",
              small={"n": 32, "md": 48}),
         Case("anisotropy_1to100", [cond(GOLD, [0.005, 0.5])], "gold, alpha (0.005, 0.5)"),
+        *_forward_cases(diel, med),
         Case("smooth_conductor", [cond(GOLD, 0.0)], "smooth gold: a Fresnel delta"),
         Case("smooth_coating_lambert", [diel(1.5, 0.0), {"kind": "diffuse", "albedo": 1.0}],
              "smooth coating (eta 1.5) over a white Lambertian base", conservative=True,
@@ -133,6 +134,23 @@ def cases() -> list:
 
 
 _registered: list = []
+
+
+def _forward_cases(diel, med) -> list:
+    """Strongly forward-scattering media (delta-M scaled): g 0.95 and 0.99, tau 5, albedo 0.95
+    and 1, alone and between rough dielectric interfaces (alpha 0.1, eta 1.5)."""
+    out = []
+    for g in (0.95, 0.99):
+        for albedo in (0.95, 1.0):
+            out.append(Case(f"forward_g{g}_albedo{albedo}", [med(albedo, 5.0, g)],
+                            f"HG slab g = {g}, tau 5, albedo {albedo} (delta-M scaled)",
+                            conservative=albedo == 1.0, angles=(0.0, 45.0, 80.0, -30.0),
+                            mc_particles=1_000_000))
+            out.append(Case(f"forward_g{g}_albedo{albedo}_coated",
+                            [diel(1.5, 0.1), med(albedo, 5.0, g), diel(1.0, 0.1)],
+                            f"HG slab g = {g}, tau 5, albedo {albedo} between rough glass "
+                            "interfaces (alpha 0.1, eta 1.5)", mc_particles=1_000_000))
+    return out
 
 
 @dataclass

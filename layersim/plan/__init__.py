@@ -12,6 +12,9 @@ module of this package, and :func:`make_plan` composes them in order:
   layer is projected with the ``ms`` its roughness ratio needs
   (:func:`layersim.aniso.plan.ms_for_layer`), isotropic layers keep their cheaper operators
   and runs of them are added isotropically before conversion.
+* **Media** (:mod:`.layers`): a Henyey-Greenstein medium with ``|g|`` above
+  :data:`layersim.ingredients.medium.G_EXACT_MAX` is delta-M scaled to the Legendre moments the
+  grid represents (Wiscombe 1977); its ``N``, ``f`` and scaled ``tau``/albedo are reported.
 * **Ordinates** ``n`` (:mod:`.ordinates`; quadrature on mu in [-1, 1]): from the narrowest
   angular lobe of the stack.
 * **Fourier orders** ``md`` (:mod:`.orders`): from the lobes themselves, through the
@@ -22,6 +25,9 @@ module of this package, and :func:`make_plan` composes them in order:
   and refused up front when it exceeds the limit (``LAYERSIM_MAX_MEMORY`` bytes, default: half
   the available RAM); coupled plans are first checked against a lower bound, before the
   pre-pass.
+* **Time** (:mod:`.budget`): a cost model of projection, media and adding, calibrated on the
+  CI machine (``benchmarks/time_model.py``); an isotropic plan above the limit
+  (``LAYERSIM_MAX_SECONDS``, default 600 s) is refused before any heavy work.
 
 A ``[discretization]`` table in the scene overrides ``n``, ``md``, ``ms`` and the quadrature
 rule.
@@ -31,10 +37,11 @@ from __future__ import annotations
 
 from ..errors import InfeasibleError
 from ..scene import Scene, as_scene
-from .budget import (MD_LOWER_PER_INV_ALPHA, PROJECTION_BYTES, estimate_bytes, lower_bound,
-                     memory_limit, refuse_below_lower_bound, refuse_over_limit)
+from .budget import (MD_LOWER_PER_INV_ALPHA, PROJECTION_BYTES, estimate_bytes, estimate_seconds,
+                     lower_bound, memory_limit, refuse_below_lower_bound, refuse_over_limit,
+                     refuse_over_time, work_units)
 from .coupling import choose_ms, needed_ms
-from .layers import survey_layers
+from .layers import scale_media, survey_layers
 from .model import LayerPlan, Plan
 from .ordinates import DEFAULT_RULE, N_MAX, N_MIN, N_PER_WIDTH, SNELL_N_FACTOR, choose_grid
 from .orders import MD_MAX, THETA_FULL, choose_md, interface_lengths, truncation_notes
@@ -74,6 +81,7 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
     anisotropic = ms_needed > 0
     representation = "anisotropic" if anisotropic else "isotropic"
     grid = choose_grid(disc, rule, survey, notes, overridden)
+    scale_media(scene, survey, grid)
     mono = scene.channel(0)
     try:
         refuse_below_lower_bound(disc, mono, layers, grid, survey.media_orders, ms_needed)
@@ -98,13 +106,23 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
     truncation_notes(lengths, md, notes)
     memory = estimate_bytes(layers, lengths, grid, md, survey.media_orders, scene.channels,
                             anisotropic)
+    seconds = work = None
+    if not anisotropic:
+        solved = [lp for lp in layers if lp.action != "left out"]
+        media = [(lp.orders, mono.layers[lp.index].tau) for lp in solved
+                 if lp.action == "adding-doubling"]
+        work = work_units(lengths, media, grid, md, len(solved) - 1, scene.channels)
+        seconds = estimate_seconds(work)
     refused = None
     try:
         refuse_over_limit(memory, grid.n, md, ms, anisotropic)
+        if seconds is not None:
+            refuse_over_time(seconds, grid.n, md)
     except InfeasibleError as exc:
         if refuse:
             raise
         refused = str(exc)
     return Plan(rule=grid.rule, n=grid.n, md=md, ms=ms, layers=layers, left_out=survey.left_out,
-                notes=notes, memory_bytes=memory, overridden=overridden,
-                representation=representation, refused=refused, boundary=survey.boundary)
+                notes=notes, memory_bytes=memory, seconds=seconds, work=work,
+                overridden=overridden, representation=representation, refused=refused,
+                boundary=survey.boundary)

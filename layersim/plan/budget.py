@@ -149,3 +149,104 @@ def refuse_over_limit(memory: int, n: int, md: int, ms: int, anisotropic: bool) 
             "(LAYERSIM_MAX_MEMORY); lower n or md" + (" or ms" if anisotropic else "")
             + " in [discretization], or increase the roughness of the smoothest interface"
             + (" or reduce the anisotropy" if anisotropic else ""))
+
+
+# --- time ------------------------------------------------------------------------------------
+#
+# A solve's time is modelled as three parts, each a count of work units times seconds per unit
+# measured on the 2-core CI VM by ``python benchmarks/time_model.py`` (its output,
+# benchmarks/time_model.txt, lists every calibration solve with its measured and estimated
+# parts). The constants are the largest measured seconds per unit, so that the estimate is an
+# upper bound on that machine; a faster machine finishes early.
+
+#: Projection of a rough interface (numeric path, CPU), per stored Fourier coefficient
+#: (``min(series length, md)`` summed over the pre-pass's ordinate pairs) plus
+#: :data:`PAIR_UNITS` per ordinate pair.
+SECONDS_PER_COEFFICIENT = 2.5e-7
+PAIR_UNITS = 20
+#: Adding-doubling of a medium, per ``orders x h^3 x (doublings + 7)`` (the initial slab's
+#: matrix exponential costs about seven doublings).
+SECONDS_PER_MEDIUM_UNIT = 1.1e-9
+#: Adding equations, per ``orders x h^3`` per adding step (dense LU and products).
+SECONDS_PER_ADDING_UNIT = 2.1e-9
+
+
+def work_units(lengths: list, media: list, grid: Grid, md: int, steps: int,
+               channels: int) -> dict:
+    """The work of an isotropic solve, in the units of the time model.
+
+    Parameters
+    ----------
+    lengths : list of (LayerPlan, ndarray)
+        The projected interfaces' pre-pass (:func:`layersim.plan.orders.interface_lengths`).
+    media : list of (int, float)
+        ``(scattering orders, optical thickness)`` of every medium solved by adding-doubling.
+    grid : Grid
+    md : int
+        Fourier orders of the solve.
+    steps : int
+        Adding steps (layers solved minus one).
+    channels : int
+        Colour channels (each solved with its own operators).
+
+    Returns
+    -------
+    dict
+        ``{"projection": ..., "media": ..., "adding": ...}`` work units.
+    """
+    h = grid.h
+    projection = sum(float(np.minimum(pl, md).sum()) + PAIR_UNITS * pl.size for _, pl in lengths)
+    medium = 0.0
+    for orders, tau in media:
+        doublings = max(0, math.ceil(math.log2(max(tau, 1e-300) / (0.5 * grid.mu[0]))))
+        medium += min(orders, md) * float(h) ** 3 * (doublings + 7)
+    adding = max(0, steps) * md * float(h) ** 3
+    return {k: v * max(1, channels) for k, v in
+            (("projection", projection), ("media", medium), ("adding", adding))}
+
+
+def estimate_seconds(units: dict) -> dict:
+    """Seconds of each part of a solve from its :func:`work_units`, and their ``"total"``."""
+    out = {"projection": units["projection"] * SECONDS_PER_COEFFICIENT,
+           "media": units["media"] * SECONDS_PER_MEDIUM_UNIT,
+           "adding": units["adding"] * SECONDS_PER_ADDING_UNIT}
+    out["total"] = sum(out.values())
+    return out
+
+
+def time_limit() -> float | None:
+    """Seconds a solve may plan for: ``settings().max_seconds`` (``LAYERSIM_MAX_SECONDS``;
+    None: no limit)."""
+    return settings().max_seconds
+
+
+#: What to lower for each part of the time model, for the refusal's message.
+_TIME_ADVICE = {
+    "projection": "increase the roughness of the smoothest interface, or lower n or md in "
+                  "[discretization]",
+    "media": "lower n in [discretization] (a strongly forward-scattering medium is delta-M "
+             "scaled to the moments the grid holds), or the optical thickness",
+    "adding": "lower n or md in [discretization], or increase the roughness of the smoothest "
+              "interface",
+}
+
+
+def refuse_over_time(seconds: dict, n: int, md: int) -> None:
+    """Refuse a plan whose estimated time exceeds :func:`time_limit`, naming the largest part.
+
+    Raises
+    ------
+    InfeasibleError
+        Naming the plan, its estimate by part, the limit and what to lower.
+    """
+    limit = time_limit()
+    if limit is None or seconds["total"] <= limit:
+        return
+    parts = {k: v for k, v in seconds.items() if k != "total"}
+    worst = max(parts, key=parts.get)
+    raise InfeasibleError(
+        f"the plan (n = {n}, md = {md}) needs about {seconds['total']:.0f} s ("
+        + ", ".join(f"{k} {v:.0f} s" for k, v in parts.items())
+        + f"), over the limit of {limit:g} s (LAYERSIM_MAX_SECONDS); the {worst} part is the "
+        "largest: "
+        + _TIME_ADVICE[worst])

@@ -12,9 +12,18 @@ from dataclasses import dataclass, field
 
 from ..aniso import plan as aplan
 from ..errors import InfeasibleError
-from ..ingredients.medium import hg_orders
+from ..ingredients.medium import G_EXACT_MAX, hg_scaling
+from ..operator import Grid
 from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
 from .model import LayerPlan
+from .ordinates import N_PER_WIDTH
+
+#: Legendre moments a delta-M scaled medium needs (the accuracy target that sets its share of
+#: ``n``): for g = 0.99, tau 5, albedo 0.95 the albedo at normal incidence moves by 3e-5 from
+#: N = 31 to N = 195 moments (by 2.3e-4 from 15 to 31); ``benchmarks/forward_media.py``. A
+#: grid of ``n`` Gauss-Lobatto ordinates represents ``n - 1`` moments, so the planner's
+#: smallest grid (64) already meets it.
+DELTA_M_MOMENTS = 32
 
 
 @dataclass
@@ -30,7 +39,11 @@ class Survey:
         ``(width in radians, layer index, kind, lobe)`` of every lobe that competes to set
         ``n``.
     media_orders : int
-        Fourier orders the media's phase functions need.
+        Fourier orders the media's phase functions need (counted by :func:`scale_media`, once
+        the grid is known).
+    scaled : list of LayerPlan
+        The scattering media, whose phase-function representation (whole series or delta-M
+        scaled) :func:`scale_media` decides once the grid is known.
     boundary : dict
         Smooth dielectric boundaries, ``{"top" | "bottom": index outside}``
         (:mod:`layersim.boundary`).
@@ -42,6 +55,7 @@ class Survey:
     left_out: list = field(default_factory=list)
     widths: list = field(default_factory=list)
     media_orders: int = 1
+    scaled: list = field(default_factory=list)
     boundary: dict = field(default_factory=dict)
     snell_eta: float | None = None
 
@@ -108,17 +122,59 @@ def _medium(scene: Scene, i: int, layer, survey: Survey) -> None:
         survey.left_out.append(f"layer {i} (medium): tau = 0 is an exact no-op")
         survey.layers.append(LayerPlan(i, kind, "left out", "tau = 0"))
         return
-    # a per-channel g: the most forward-peaked channel sets the orders and the lobe width
+    # a per-channel g: every channel's representation is decided on the grid (scale_media);
+    # the most forward-peaked channel that keeps the whole series sets the lobe width
     channels = [s.layers[i] for s in _channels(scene)]
-    scatters = max(x.albedo for x in channels) > 0
-    g = max((x.g for x in channels), key=abs)
-    orders = hg_orders(g) if scatters else 1
-    survey.media_orders = max(survey.media_orders, orders)
-    if g != 0.0:
+    gs = [x.g for x in channels]
+    g_text = "/".join(f"{g:g}" for g in dict.fromkeys(gs))
+    lp = LayerPlan(i, kind, "adding-doubling", f"tau={layer.tau:g}, g={g_text}")
+    survey.layers.append(lp)
+    if max(x.albedo for x in channels) == 0:
+        lp.detail += ": no scattering, unscattered beam in all orders"
+        return
+    if max(gs) > G_EXACT_MAX:
+        # delta-M scaled: the scaled phase function needs DELTA_M_MOMENTS moments, i.e. a grid
+        # of DELTA_M_MOMENTS + 1 Gauss-Lobatto ordinates
+        survey.widths.append((N_PER_WIDTH / (DELTA_M_MOMENTS + 1), i, kind,
+                              f"delta-M scaled phase function ({DELTA_M_MOMENTS} moments)"))
+    whole = [g for g in gs if g <= G_EXACT_MAX and g != 0.0]
+    if whole:
+        g = max(whole, key=abs)
         survey.widths.append((math.sqrt(1.0 - abs(g)), i, kind, "phase-function lobe"))
-    survey.layers.append(LayerPlan(i, kind, "adding-doubling",
-                                   f"tau={layer.tau:g}, g={g:g}: scattering in {orders} "
-                                   "order(s), unscattered beam in all", orders=orders))
+    survey.scaled.append(lp)
+
+
+def scale_media(scene: Scene, survey: Survey, grid: Grid) -> int:
+    """Decide the phase-function representation of every scattering medium of ``survey`` on
+    ``grid`` (:func:`layersim.ingredients.medium.hg_scaling`, the same function the solve uses):
+    the whole series or delta-M scaled. Sets their ``orders`` and report lines, and returns the
+    Fourier orders the media need.
+
+    Raises
+    ------
+    InfeasibleError
+        Naming the layer and field ``g`` for a backward peak the grid cannot hold.
+    """
+    for lp in survey.scaled:
+        try:
+            scs = [hg_scaling(grid, s.layers[lp.index].g, s.layers[lp.index].albedo,
+                              s.layers[lp.index].tau) for s in _channels(scene)]
+        except InfeasibleError as exc:
+            raise InfeasibleError(f"layer {lp.index} (medium): field 'g': {exc}") from None
+        lp.orders = max(c.moments for c in scs)
+        if any(c.scaled for c in scs):
+            per = lambda v: "/".join(dict.fromkeys(v))      # one value, or one per channel
+            lp.detail += (f": delta-M scaled (Wiscombe 1977), N = "
+                          f"{per(str(c.moments) for c in scs)} moments, f = "
+                          f"{per(f'{c.f:.4g}' for c in scs)}, scaled tau = "
+                          f"{per(f'{c.tau:.4g}' for c in scs)}, albedo = "
+                          f"{'/'.join(f'{c.albedo:.4g}' for c in scs)}; scattering in "
+                          f"{lp.orders} order(s), unscattered beam (with the truncated forward "
+                          "peak) in all")
+        else:
+            lp.detail += f": scattering in {lp.orders} order(s), unscattered beam in all"
+        survey.media_orders = max(survey.media_orders, lp.orders)
+    return survey.media_orders
 
 
 def _smooth(scene: Scene, i: int, layer, survey: Survey) -> None:
