@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from .deltas import specular
+from .evaluator import Evaluator
 from .directions import azimuth
 from .interpolation import (bin_quadrature, block_taps, closed_bin, hat_weights,
                             side_energies, spline_weights)
@@ -71,7 +71,7 @@ class SeriesTable:
         return _BLOCK_ID[name] * self.h * self.h
 
 
-class IsoEvaluator:
+class IsoEvaluator(Evaluator):
     """Evaluation of one isotropic operator (one channel of a BSDF); directions are validated,
     flattened arrays (Q, 3) in the public convention.
 
@@ -80,16 +80,7 @@ class IsoEvaluator:
     op : IsoOperator
     """
 
-    def __init__(self, op):
-        self.op = op
-        self._table = None
-
-    @property
-    def table(self) -> SeriesTable:
-        """The operator's per-pair cosine series (built on first use)."""
-        if self._table is None:
-            self._table = SeriesTable(self.op)
-        return self._table
+    table_class = SeriesTable
 
     def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """f(wi, wo) (1/sr), shape (Q,)."""
@@ -114,10 +105,6 @@ class IsoEvaluator:
         if blk is None:
             return np.zeros(op.h)
         return (blk[0].T @ (fw if weight is None else weight * fw)) / fw
-
-    def specular(self, wi: np.ndarray) -> dict:
-        """The delta parts for beams from ``wi`` (Q, 3) (:func:`layersim.deltas.specular`)."""
-        return specular(self.op, wi)
 
     def albedo(self, wi: np.ndarray):
         """(R, T), each (Q,)."""

@@ -151,16 +151,7 @@ class BoundarySampler:
             wo[sel] = ex.to_outside(wo_in[sel])
         pdf = np.where(ok, pdf_in, 0.0)
         pdf[ok] *= self._jacobian(wo[ok], wo_in[ok])
-        wo[~ok] = 0.0
-        nch = self.target.channels
-        weight = np.zeros((wi.shape[0], nch))
-        g = np.flatnonzero(ok)
-        if g.size:
-            f = self.target.eval(wi[g], wo[g]).reshape(g.size, nch)
-            weight[g] = np.maximum(f, 0.0) * (np.abs(wo[g, 2]) / pdf[g])[:, None]
-        weight = weight[:, 0] if nch == 1 else weight
-        return (wo.reshape(shape + (3,)), weight.reshape(shape + weight.shape[1:]),
-                pdf.reshape(shape))
+        return _sample_result(self.target, wi, wo, pdf, shape)
 
     def pdf(self, wi, wo) -> np.ndarray:
         """As :meth:`FourierSampler.pdf`."""
@@ -293,17 +284,7 @@ class FourierSampler:
             wo[sel] = np.stack([sin_t * np.cos(phi_o), sin_t * np.sin(phi_o),
                                 sgn * mu_o[sel]], axis=-1)
             pdf[sel] = pdf_mu[sel] * pdf_phi
-        good = pdf > 0
-        wo[~good] = 0.0
-        nch = self.target.channels
-        weight = np.zeros((Q, nch))
-        if good.any():
-            g = np.flatnonzero(good)
-            f = self.target.eval(wi[g], wo[g]).reshape(g.size, nch)
-            weight[g] = np.maximum(f, 0.0) * (np.abs(wo[g, 2]) / pdf[g])[:, None]
-        weight = weight[:, 0] if nch == 1 else weight
-        return (wo.reshape(shape + (3,)), weight.reshape(shape + weight.shape[1:]),
-                pdf.reshape(shape))
+        return _sample_result(self.target, wi, wo, pdf, shape)
 
     def pdf(self, wi, wo) -> np.ndarray:
         """Solid-angle density (1/sr) with which :meth:`sample` draws ``wo`` given ``wi``.
@@ -339,3 +320,21 @@ class FourierSampler:
             pdf[ok] *= fourier_sample.pdf_azimuth(self.offsets, self.coef, pair, weight,
                                                   exact[ok], dphi, self.device)
         return pdf.reshape(shape)
+
+
+def _sample_result(target, wi: np.ndarray, wo: np.ndarray, pdf: np.ndarray, shape: tuple):
+    """``(wo, weight, pdf)`` of a batch of samples in the caller's ``shape``: ``weight`` is
+    ``f |wo.z| / pdf`` per channel (never negative: the cubic interpolation of ``eval`` may
+    undershoot slightly), and samples with ``pdf = 0`` (none drawn) return ``wo = 0`` and
+    weight 0. ``wi``, ``wo`` (Q, 3) and ``pdf`` (Q,) are flat; ``wo`` is modified."""
+    good = pdf > 0
+    wo[~good] = 0.0
+    nch = target.channels
+    weight = np.zeros((wi.shape[0], nch))
+    g = np.flatnonzero(good)
+    if g.size:
+        f = target.eval(wi[g], wo[g]).reshape(g.size, nch)
+        weight[g] = np.maximum(f, 0.0) * (np.abs(wo[g, 2]) / pdf[g])[:, None]
+    weight = weight[:, 0] if nch == 1 else weight
+    return (wo.reshape(shape + (3,)), weight.reshape(shape + weight.shape[1:]),
+            pdf.reshape(shape))

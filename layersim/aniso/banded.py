@@ -40,7 +40,7 @@ from ..outofcore.assemble import from_parts
 from ..outofcore.memory import empty_sparse
 from ..outofcore.rowpieces import RowPieces
 from ..outofcore.workspace import Workspace
-from ..plan import memory_limit
+from ..outofcore.memory import memory_limit
 from ..threads import parallel_map, workers
 from . import basis
 from .pairs import PairPruner, slot_pairs

@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from ..deltas import specular
+from ..evaluator import Evaluator
 from ..interpolation import (bin_quadrature, block_taps, closed_bin, hat_weights,
                              side_energies, spline_weights)
 from ..kernels import fourier_eval2d
@@ -147,7 +147,7 @@ def node_energy(op, name: str, phi_in: np.ndarray) -> np.ndarray:
     return np.einsum("sh,sq->qh", E, _v(op.md, phi_in))
 
 
-class AnisoEvaluator:
+class AnisoEvaluator(Evaluator):
     """Evaluation of one coupled operator (one channel of a BSDF); directions are validated,
     flattened arrays (Q, 3) in the public convention.
 
@@ -156,16 +156,7 @@ class AnisoEvaluator:
     op : AnisoOperator
     """
 
-    def __init__(self, op):
-        self.op = op
-        self._table = None
-
-    @property
-    def table(self) -> SeriesTable2D:
-        """The operator's per-pair runs of complex ``f_{d,s}`` (built on first use)."""
-        if self._table is None:
-            self._table = SeriesTable2D(self.op)
-        return self._table
+    table_class = SeriesTable2D
 
     def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """f(wi, wo) (1/sr), shape (Q,)."""
@@ -178,10 +169,6 @@ class AnisoEvaluator:
                                                      phi_o[sel] - phi_i[sel],
                                                      phi_o[sel] + phi_i[sel])
         return out
-
-    def specular(self, wi: np.ndarray) -> dict:
-        """The delta parts for beams from ``wi`` (Q, 3) (:func:`layersim.deltas.specular`)."""
-        return specular(self.op, wi)
 
     def node_energy(self, name: str, weight: np.ndarray | None = None,
                     wi: np.ndarray | None = None) -> np.ndarray:

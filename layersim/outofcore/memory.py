@@ -18,8 +18,11 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import os
 
 import numpy as np
+
+from ..config import settings
 
 _libc = None
 
@@ -77,3 +80,18 @@ def release() -> bool:
     whether anything was released (``False`` on other C libraries, where it does nothing)."""
     lib = _load()
     return bool(lib and lib.malloc_trim(0))
+
+
+def available_memory() -> int:
+    """Physical memory available now (bytes; 8 GiB where the system does not say)."""
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
+        return 8 << 30
+
+
+def memory_limit() -> int:
+    """Bytes a solve may use: ``settings().max_memory`` (``LAYERSIM_MAX_MEMORY``) or half the
+    available memory."""
+    limit = settings().max_memory
+    return available_memory() // 2 if limit is None else limit

@@ -37,9 +37,10 @@ from __future__ import annotations
 
 from ..errors import InfeasibleError
 from ..scene import Scene, as_scene
+from ..outofcore.memory import memory_limit
 from .budget import (MD_LOWER_PER_INV_ALPHA, PROJECTION_BYTES, estimate_bytes, estimate_seconds,
-                     lower_bound, memory_limit, refuse_below_lower_bound, refuse_over_limit,
-                     refuse_over_time, work_units)
+                     lower_bound, refuse_below_lower_bound, refuse_over_limit, refuse_over_time,
+                     work_units)
 from .coupling import choose_ms, needed_ms
 from .layers import scale_media, survey_layers
 from .model import LayerPlan, Plan

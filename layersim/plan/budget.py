@@ -6,7 +6,6 @@ and refused up front when it exceeds the limit (``layersim.config.settings().max
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 
@@ -14,6 +13,7 @@ from ..aniso import plan as aplan
 from ..config import settings
 from ..errors import InfeasibleError
 from ..operator import Grid
+from ..outofcore.memory import memory_limit
 from ..scene import Discretization, Scene
 
 #: Lower bound on the orders a lobe of roughness alpha needs: md >= this / alpha (half the
@@ -23,21 +23,6 @@ MD_LOWER_PER_INV_ALPHA = 10.0
 #: every block's pairs (~16) plus the dense per-block assembly and its temporaries (~24).
 #: ``benchmarks/memory_phases.py`` compares the estimate with the measured peak.
 PROJECTION_BYTES = 40
-
-
-def available_memory() -> int:
-    """Physical memory available now (bytes; 8 GiB where the system does not say)."""
-    try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
-        return 8 << 30
-
-
-def memory_limit() -> int:
-    """Bytes a solve may use: ``settings().max_memory`` (``LAYERSIM_MAX_MEMORY``) or half the
-    available memory."""
-    limit = settings().max_memory
-    return available_memory() // 2 if limit is None else limit
 
 
 def lower_bound(disc: Discretization, mono: Scene, layers: list, grid: Grid,
