@@ -15,7 +15,9 @@ keeps the azimuth; the grid's nodes in the escape cone are exactly the images of
 boundary, where the factor ``(1 - F)`` is 1 too), plus the boundary's own mirror reflection
 ``F(x_i)``, a delta. Energies use ``1 - F`` without the ``eta^2`` (radiance is compressed into
 the smaller solid angle). :class:`BoundaryEvaluator` wraps the evaluator of the inside
-operator with these factors.
+operator with these factors. A near-specular rough boundary (``op.lobes``,
+:mod:`layersim.lobe`) replaces ``1 - F`` by its rough transmittance and the mirror reflection
+by its microfacet reflection lobe.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import numpy as np
 
 from .interpolation import bin_quadrature, closed_bin, hat_weights, spline_weights
 from .kernels.fresnel import fresnel
+from .lobe import NearSpecularLobe
 
 
 class Exit:
@@ -33,8 +36,9 @@ class Exit:
     the elevation integral of bins in the outside cosine (:meth:`points`) and the transmittance
     of inside radiance at ``mu`` (:meth:`weight`)."""
 
-    def __init__(self, eta: float, nodes: np.ndarray):
+    def __init__(self, eta: float, nodes: np.ndarray, lobe: NearSpecularLobe | None = None):
         self.eta = float(eta)
+        self.lobe = lobe
         self.mu_c = math.sqrt(1.0 - 1.0 / self.eta**2)
         # outside images of the escaping nodes: the pieces of the inside spline
         self.x_nodes = self.outside(nodes[nodes > self.mu_c])
@@ -48,20 +52,29 @@ class Exit:
         return np.sqrt(np.clip(1.0 - self.eta**2 * (1.0 - np.asarray(mu, float) ** 2), 0, 1))
 
     def transmittance(self, x) -> np.ndarray:
-        """``1 - F`` at outside cosines ``x``."""
+        """``1 - F`` at outside cosines ``x`` (a near-specular boundary: its rough
+        transmittance, :meth:`layersim.lobe.NearSpecularLobe.transmittance`)."""
+        if self.lobe is not None:
+            return self.lobe.transmittance(x)
         return 1.0 - fresnel(np.asarray(x, float), self.eta)
+
+    def leaving(self, mu) -> np.ndarray:
+        """Fraction of the power of inside radiance at ``mu`` (> mu_c) that leaves: the
+        transmittance at its outside image (reciprocity)."""
+        return self.transmittance(self.outside(mu))
 
     def weight(self, mu) -> np.ndarray:
         """Fraction of the power of inside radiance at ``mu`` that leaves (0 below mu_c)."""
         mu = np.asarray(mu, float)
-        return np.where(mu > self.mu_c, self.transmittance(self.outside(mu)), 0.0)
+        return np.where(mu > self.mu_c, self.leaving(mu), 0.0)
 
     def points(self, edges: np.ndarray):
         """Inside cosines, weights ``(1 - F(x)) mu dmu = (1 - F(x)) x dx / eta^2`` and bins of
         the integral over the outside elevation bins ``edges``: exact in ``x`` (Gauss-Legendre
         between the images of the nodes)."""
         x, w, b = bin_quadrature(self.x_nodes, edges)
-        return self.inside(x), w * x * self.transmittance(x) / self.eta**2, b
+        mu = self.inside(x)
+        return mu, w * x * self.leaving(mu) / self.eta**2, b
 
     def to_inside(self, w: np.ndarray) -> np.ndarray:
         """Public directions (Q, 3) on this side, refracted to the inside (same azimuth)."""
@@ -83,7 +96,8 @@ class BoundaryEvaluator:
         self.op = op
         self.inner = inner
         eta_in = {"top": op.eta_top, "bottom": op.eta_bottom}
-        self.exits = {side: Exit(eta_in[side] / outside, op.grid.mu)
+        self.lobes = {side: NearSpecularLobe(**p) for side, p in op.lobes.items()}
+        self.exits = {side: Exit(eta_in[side] / outside, op.grid.mu, self.lobes.get(side))
                       for side, outside in op.boundary.items()}
 
     @property
@@ -94,13 +108,17 @@ class BoundaryEvaluator:
         return np.where(w[:, 2] > 0, "top", "bottom")
 
     def _map(self, w: np.ndarray):
-        """Inside directions of ``w`` (Q, 3) and the boundary's ``1 - F`` (1 off boundaries)."""
+        """Inside directions of ``w`` (Q, 3) and the boundary's ``1 - F`` (1 off boundaries;
+        a near-specular boundary's transmitted energy, :mod:`layersim.lobe`)."""
         w_in, t = w.copy(), np.ones(w.shape[0])
         for side, ex in self.exits.items():
             sel = self._side(w) == side
             if sel.any():
                 w_in[sel] = ex.to_inside(w[sel])
-                t[sel] = ex.transmittance(np.abs(w[sel, 2]))
+                # a near-specular boundary: its transmitted energy in this very direction
+                # (it depends on the azimuth where the roughness is anisotropic)
+                t[sel] = (ex.transmittance(np.abs(w[sel, 2])) if ex.lobe is None else
+                          ex.lobe.energies(w[sel])[1])
         return w_in, t
 
     def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
@@ -109,7 +127,9 @@ class BoundaryEvaluator:
         scale = np.ones(wo.shape[0])
         for side, ex in self.exits.items():
             scale[self._side(wo) == side] = 1.0 / ex.eta**2
-        return self.inner.eval(wi_in, wo_in) * ti * to * scale
+        f = self.inner.eval(wi_in, wo_in) * ti * to * scale
+        lobe = self.lobes.get("top")
+        return f if lobe is None else f + lobe.eval(wi, wo)
 
     def _weight(self, name: str):
         """Transmittance of the boundary that block ``name`` leaves through, per node (None:
@@ -164,8 +184,14 @@ class BoundaryEvaluator:
     def albedo(self, wi: np.ndarray):
         _, ti = self._map(wi)
         R, T = self._energies(wi, delta=False)
+        # the boundary's own reflection: the mirror's F, or a near-specular lobe's energy
+        own = 1.0 - ti
+        lobe = self.lobes.get("top")
+        top = wi[:, 2] > 0
+        if lobe is not None and top.any():
+            own[top] = lobe.energies(wi[top])[0]
         # cubic weights can undershoot where an energy vanishes: clipped there
-        return np.maximum(R * ti + (1.0 - ti), 0.0), np.maximum(T * ti, 0.0)
+        return np.maximum(R * ti + np.where(top, own, 1.0 - ti), 0.0), np.maximum(T * ti, 0.0)
 
     def specular(self, wi: np.ndarray) -> dict:
         wi_in, ti = self._map(wi)
@@ -180,7 +206,7 @@ class BoundaryEvaluator:
             ex = self.exits.get(side)
             if ex is not None:
                 wo = ex.to_outside(wo)
-            if ex is not None:          # the boundary's own mirror reflection
+            if ex is not None and side not in self.lobes:   # the boundary's own mirror
                 wo = np.where(is_same[:, None], mirror, wo)
                 energy = energy + np.where(is_same, 1.0 - ti, 0.0)
             out[side] = (energy, wo)
@@ -198,4 +224,7 @@ class BoundaryEvaluator:
                               math.atan2(wo[0, 1] + 0.0, wo[0, 0] + 0.0) % (2 * np.pi))
             if kmu is not None and kphi is not None and energy[0] > 0:
                 out[side][kmu, kphi] += energy[0]
+        for side, lobe in self.lobes.items():
+            if (wi[2] > 0) == (side == "top"):
+                out[side] += lobe.bins(wi, mu_edges, phi_edges)
         return out

@@ -135,10 +135,15 @@ class Operator(ABC):
         Snell-matched grid of :func:`layersim.quadrature.snell_matched`, and the BSDF applies
         the boundary's Fresnel transmission and refraction when it evaluates
         (:mod:`layersim.boundary`). Empty for ordinary operators.
+    lobes : dict
+        Near-specular rough boundaries among them, ``{"top": parameters}`` of
+        :class:`layersim.lobe.NearSpecularLobe`: their direct reflection is that lobe and their
+        transmittance the rough one (:mod:`layersim.lobe`). Empty otherwise.
     """
 
     representation: str = ""
     boundary: dict = {}
+    lobes: dict = {}
     #: True once an adding step that consumes its operands took this operator's blocks
     #: (:meth:`layersim.aniso.operator.AnisoOperator.consume`).
     consumed: bool = False
@@ -265,7 +270,14 @@ def from_arrays(d, prefix: str = "") -> Operator:
     op = representation_class(representation).from_arrays(d, prefix=prefix)
     op.boundary = {side: float(d[f"{prefix}boundary_{side}"]) for side in ("top", "bottom")
                    if f"{prefix}boundary_{side}" in d}
+    op.lobes = {side: {k: (str(v) if k == "distribution" else float(v)) for k, v in
+                       zip(_LOBE_KEYS, d[f"{prefix}lobe_{side}"])}
+                for side in ("top", "bottom") if f"{prefix}lobe_{side}" in d}
     return op
+
+
+#: Order of the saved parameters of a near-specular boundary (:attr:`Operator.lobes`).
+_LOBE_KEYS = ("eta", "alpha_u", "alpha_v", "distribution", "rotation")
 
 
 @register
@@ -564,6 +576,8 @@ def header_arrays(op, prefix: str) -> dict:
         d[f"{prefix}delta_{name}"] = vec
     for side, eta in op.boundary.items():
         d[f"{prefix}boundary_{side}"] = np.array(eta)
+    for side, lobe in op.lobes.items():
+        d[f"{prefix}lobe_{side}"] = np.array([str(lobe[k]) for k in _LOBE_KEYS])
     return d
 
 

@@ -101,6 +101,11 @@ class BoundarySampler:
     so the estimator stays unbiased for the smooth part; deltas are not sampled."""
 
     def __init__(self, bsdf):
+        if any(op.lobes for op in bsdf.operators):
+            raise NotImplementedError(
+                "sampling a near-specular boundary (layersim.lobe) is not implemented: its "
+                "direct reflection lobe would be missed; evaluate it with eval / albedo / "
+                "bin_energies, or use layersim.montecarlo")
         self.target = bsdf
         self.exits = bsdf.evaluator(0).exits
         inside = []

@@ -21,6 +21,7 @@ from .ingredients.aniso_microfacet import AnisoProjectionStats, aniso_interface_
 from .ingredients.microfacet import ProjectionStats
 from .ingredients.numeric import numeric_interface_operator
 from .ingredients.smooth import boundary_reflector, smooth_conductor_operator
+from .lobe import NearSpecularLobe
 from .kernels.runtime import device_for
 from .operator import IsoOperator, Operator, common_representation
 from .outofcore import memory
@@ -52,10 +53,13 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     eta_above = scene.ior_above(i)
     if isinstance(layer, Conductor) and layer.smooth:
         return smooth_conductor_operator(grid, plan.md, scene.relative_ior(i), eta_above)
-    if isinstance(layer, Dielectric) and layer.smooth:
+    if isinstance(layer, Dielectric) and (layer.smooth or i in plan.near_specular):
         side = "top" if i == 0 else "bottom"
         inside = layer.ior.real if side == "top" else eta_above
-        return boundary_reflector(grid, plan.md, side, inside / plan.boundary[side], inside)
+        # a near-specular coat: its rough internal reflectance (layersim.lobe)
+        lobe = plan.lobes.get(side) if i in plan.near_specular else None
+        R = None if lobe is None else NearSpecularLobe(**lobe).internal_reflectance(grid.mu)
+        return boundary_reflector(grid, plan.md, side, inside / plan.boundary[side], inside, R)
     if isinstance(layer, (Dielectric, Conductor)) and layer.anisotropic:
         lp = next(lp for lp in plan.layers if lp.index == i)
         op = aniso_interface_operator(grid, plan.md, lp.ms, layer, eta_above, stats,
@@ -277,6 +281,7 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
         if plan.boundary:
             # the blocks hold the radiance inside the smooth boundaries (layersim.boundary)
             stack.boundary = dict(plan.boundary)
+            stack.lobes = dict(plan.lobes)
         t_adding += time.perf_counter() - t0
         progress("adding", c + 1, len(monos), f"channel {c}" if len(monos) > 1 else "")
         stacks.append(stack)

@@ -121,6 +121,14 @@ def cases() -> list:
              angles=(0.0, 45.0, 80.0, 89.0)),
         Case("smooth_coating_gold", [diel(1.5, 0.0), cond(GOLD, 0.2)],
              "smooth coating over rough gold (alpha 0.2)"),
+        # near-specular coats (layersim.lobe); not at 0 deg, where the walk itself dips
+        # (benchmarks/near_specular.py)
+        Case("near_specular_coat_0.001", [diel(1.5, 0.001), cond(GOLD, 0.2)],
+             "coat alpha 0.001 over rough gold (alpha 0.2): near-specular split",
+             angles=(5.0, 45.0, 80.0)),
+        Case("near_specular_coat_1to10", [diel(1.5, [0.005, 0.05]), cond(GOLD, 0.2)],
+             "coat alpha (0.005, 0.05) over rough gold (alpha 0.2): near-specular split",
+             angles=(5.0, 45.0, 80.0)),
         Case("smooth_slab", [diel(1.5, 0.0), med(1.0, 1.0, 0.5), diel(1.0, 0.0)],
              "conservative HG slab between two smooth interfaces", conservative=True,
              angles=(0.0, 45.0, 80.0, -30.0)),

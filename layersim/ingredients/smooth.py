@@ -36,7 +36,7 @@ def smooth_conductor_operator(grid: Grid, m: int, eta: complex,
 
 
 def boundary_reflector(grid: Grid, m: int, side: str, eta_rel: float,
-                       eta_inside: float) -> IsoOperator:
+                       eta_inside: float, reflectance: np.ndarray | None = None) -> IsoOperator:
     """The internal reflection of a smooth dielectric boundary, seen from inside the stack.
 
     Parameters
@@ -51,6 +51,9 @@ def boundary_reflector(grid: Grid, m: int, side: str, eta_rel: float,
         Index inside relative to outside (> 1).
     eta_inside : float
         Absolute index of the medium inside the boundary.
+    reflectance : ndarray (h,), optional
+        Internal reflectance per node in place of Fresnel's: a near-specular boundary's rough
+        one (:meth:`layersim.lobe.NearSpecularLobe.internal_reflectance`).
 
     Returns
     -------
@@ -60,7 +63,7 @@ def boundary_reflector(grid: Grid, m: int, side: str, eta_rel: float,
         ``Ttb = Tbt = I`` (radiance arriving at the boundary is handed on: the BSDF applies the
         transmission) and ``Rt = 0``; mirrored for ``"bottom"``. All of it is a delta.
     """
-    F = fresnel(-grid.mu, eta_rel)      # arriving from the dense side (cos < 0)
+    F = fresnel(-grid.mu, eta_rel) if reflectance is None else np.asarray(reflectance, float)
     h = grid.h
     diag, eye, zero = sps.diags(F, format="csr"), sps.identity(h, format="csr"), \
         sps.csr_matrix((h, h))

@@ -99,7 +99,8 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
         return Plan(rule=grid.rule, n=grid.n, md=md, ms=(disc.ms or ms_needed) if anisotropic
                     else 0, layers=layers, left_out=survey.left_out, notes=notes,
                     memory_bytes=memory, overridden=overridden,
-                    representation=representation, refused=str(exc), boundary=survey.boundary)
+                    representation=representation, refused=str(exc), boundary=survey.boundary,
+                    lobes=survey.lobes, near_specular=survey.near_specular)
     lengths = interface_lengths(grid, mono, layers)
     md_needed = max([survey.media_orders] + [lp.orders for lp, _ in lengths])
     md = choose_md(disc, md_needed, notes, overridden)
@@ -126,4 +127,5 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
     return Plan(rule=grid.rule, n=grid.n, md=md, ms=ms, layers=layers, left_out=survey.left_out,
                 notes=notes, memory_bytes=memory, seconds=seconds, work=work,
                 overridden=overridden, representation=representation, refused=refused,
-                boundary=survey.boundary)
+                boundary=survey.boundary, lobes=survey.lobes,
+                near_specular=survey.near_specular)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from ..aniso import plan as aplan
 from ..errors import InfeasibleError
 from ..ingredients.medium import G_EXACT_MAX, hg_scaling
+from ..lobe import NEAR_SPECULAR_ALPHA, NEAR_SPECULAR_WIDE_MAX, near_specular_error
 from ..operator import Grid
 from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
 from .model import LayerPlan
@@ -58,6 +59,8 @@ class Survey:
     scaled: list = field(default_factory=list)
     boundary: dict = field(default_factory=dict)
     snell_eta: float | None = None
+    lobes: dict = field(default_factory=dict)
+    near_specular: tuple = ()
 
 
 def survey_layers(scene: Scene) -> Survey:
@@ -98,6 +101,8 @@ def _interface(scene: Scene, i: int, layer, survey: Survey) -> None:
         return
     if layer.smooth:
         _smooth(scene, i, layer, survey)
+        return
+    if _near_specular(scene, i, layer, survey):
         return
     eta_rel = scene.channel(0).relative_ior(i)
     width, what = interface_width(layer, eta_rel)
@@ -227,6 +232,37 @@ def _smooth(scene: Scene, i: int, layer, survey: Survey) -> None:
         f"relative index {ratio:.4g}: inside nodes in the escape cone are the refracted "
         "outside nodes; Fresnel reflection (TIR: 1) on the diagonal, transmission applied "
         "at evaluation"))
+
+
+def _near_specular(scene: Scene, i: int, layer, survey: Survey) -> bool:
+    """Plan a nearly smooth dielectric top interface as a smooth boundary plus its lobe
+    (:mod:`layersim.lobe`) and return True; False where the split does not apply, leaving it
+    to the exact projection: not the top interface, too rough, a boundary the smooth machinery
+    refuses, or a base that would show the refraction blur the split leaves out (the split
+    needs an opaque base that scatters wider than that blur: diffuse, or a conductor rougher
+    than :data:`~layersim.lobe.NEAR_SPECULAR_ALPHA`)."""
+    lo, hi = min(layer.alpha_u, layer.alpha_v), max(layer.alpha_u, layer.alpha_v)
+    base = scene.channel(0).layers[-1]
+    wide_base = isinstance(base, Diffuse) or (
+        isinstance(base, Conductor) and min(base.alpha_u, base.alpha_v) > NEAR_SPECULAR_ALPHA)
+    if (not isinstance(layer, Dielectric) or i != 0 or lo > NEAR_SPECULAR_ALPHA
+            or hi > NEAR_SPECULAR_WIDE_MAX or not wide_base):
+        return False
+    try:
+        _smooth(scene, i, layer, survey)
+    except InfeasibleError:
+        return False
+    lp = survey.layers[-1]
+    lp.action = "near-specular split (smooth top boundary + lobe)"
+    lp.detail = (f"{layer.distribution} alpha=({layer.alpha_u:g}, {layer.alpha_v:g}), relative "
+                 f"index {survey.snell_eta:.4g}: Snell-matched smooth transport with the rough "
+                 "transmittance; the direct reflection is the microfacet lobe (layersim.lobe); "
+                 f"{near_specular_error(hi)}")
+    survey.lobes["top"] = {"eta": survey.snell_eta, "alpha_u": layer.alpha_u,
+                           "alpha_v": layer.alpha_v, "distribution": layer.distribution,
+                           "rotation": layer.rotation}
+    survey.near_specular = (*survey.near_specular, i)
+    return True
 
 
 def interface_width(layer, eta_rel: complex) -> tuple[float, str]:

@@ -65,6 +65,10 @@ class Plan:
     #: Smooth dielectric boundaries of the stack, ``{"top" | "bottom": index outside}``
     #: (:mod:`layersim.boundary`).
     boundary: dict = field(default_factory=dict)
+    #: Near-specular rough boundaries among them, ``{"top": parameters}`` of
+    #: :class:`layersim.lobe.NearSpecularLobe`, and the layer indices they stand for.
+    lobes: dict = field(default_factory=dict)
+    near_specular: tuple = ()
 
     @property
     def grid(self) -> Grid:
