@@ -246,7 +246,9 @@ def sample_vndf_beckmann(wi: Any, au: Any, av: Any, u1: Any, u2: Any, u3: Any):
     one = type(au)(1.0)
     ws = wp.normalize(wp.vector(au * wi[0], av * wi[1], wi[2]))
     cos_t = ws[2]
-    sin_t = wp.sqrt(wp.max(one - cos_t * cos_t, zero))
+    # from the tangential components, not sqrt(1 - cos^2): near the normal the cancellation
+    # leaves float32 with a few correct digits, and cp, sp below would not be a unit pair
+    sin_t = wp.sqrt(ws[0] * ws[0] + ws[1] * ws[1])
     r = wp.sqrt(-wp.log(u2))
     phi = type(au)(6.283185307179586) * u3
     sx = r * wp.cos(phi)
