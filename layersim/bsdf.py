@@ -35,7 +35,7 @@ import numpy as np
 
 from .aniso.bsdf import AnisoEvaluator
 from .boundary import BoundaryEvaluator
-from .directions import bin_edges, unit_directions
+from .directions import bin_edges, direction_pairs, unit_directions
 from .errors import FileFormatError, OperatorError
 from .isobsdf import IsoEvaluator
 from .operator import from_arrays
@@ -175,11 +175,7 @@ class BSDF:
             reflection and refraction of smooth interfaces) are not included: see
             :meth:`specular`.
         """
-        wi = unit_directions("wi", wi)
-        wo = unit_directions("wo", wo)
-        wi, wo = np.broadcast_arrays(wi, wo)
-        shape = wi.shape[:-1]
-        wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+        wi, wo, shape = direction_pairs(wi, wo)
         return self._per_channel(lambda c: self.evaluator(c).eval(wi, wo).reshape(shape))
 
     def specular(self, wi) -> dict:

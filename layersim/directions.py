@@ -43,6 +43,14 @@ def unit_directions(name: str, v) -> np.ndarray:
     return v
 
 
+def direction_pairs(wi, wo) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """``wi`` and ``wo`` validated (:func:`unit_directions`), broadcast together and flattened
+    to ``(Q, 3)``, with the broadcast shape ``(...)`` to give results back in."""
+    wi, wo = np.broadcast_arrays(unit_directions("wi", wi), unit_directions("wo", wo))
+    shape = wi.shape[:-1]
+    return wi.reshape(-1, 3), wo.reshape(-1, 3), shape
+
+
 def azimuth(v: np.ndarray) -> np.ndarray:
     """Azimuth ``atan2(y, x)`` (radians) of directions (..., 3)."""
     return np.arctan2(v[..., 1], v[..., 0])

@@ -70,7 +70,7 @@ import weakref
 import numpy as np
 
 from .channels import luminance_series
-from .directions import azimuth, unit_directions
+from .directions import azimuth, direction_pairs, unit_directions
 from .interpolation import spline_weights
 from .kernels import fourier_sample
 from .operator import BLOCKS
@@ -135,11 +135,7 @@ class BoundarySampler:
 
     def sample(self, wi, u):
         """As :meth:`FourierSampler.sample`."""
-        wi = unit_directions("wi", wi)
-        u = _uniforms(u)
-        shape = np.broadcast_shapes(wi.shape[:-1], u.shape[:-1])
-        wi = np.broadcast_to(wi, shape + (3,)).reshape(-1, 3)
-        u = np.broadcast_to(u, shape + (2,)).reshape(-1, 2)
+        wi, u, shape = _sample_inputs(wi, u)
         wo_in, _, pdf_in = self.inner.sample(self._to_inside(wi), u)
         wo = wo_in.copy()
         ok = pdf_in > 0
@@ -155,11 +151,7 @@ class BoundarySampler:
 
     def pdf(self, wi, wo) -> np.ndarray:
         """As :meth:`FourierSampler.pdf`."""
-        wi = unit_directions("wi", wi)
-        wo = unit_directions("wo", wo)
-        wi, wo = np.broadcast_arrays(wi, wo)
-        shape = wi.shape[:-1]
-        wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+        wi, wo, shape = direction_pairs(wi, wo)
         wo_in = self._to_inside(wo)
         pdf = np.asarray(self.inner.pdf(self._to_inside(wi), wo_in), float).reshape(-1)
         return (pdf * self._jacobian(wo, wo_in)).reshape(shape)
@@ -259,11 +251,7 @@ class FourierSampler:
         pdf : ndarray, shape (...)
             Solid-angle density of ``wo`` (1/sr), equal to :meth:`pdf` at ``wo``.
         """
-        wi = unit_directions("wi", wi)
-        u = _uniforms(u)
-        shape = np.broadcast_shapes(wi.shape[:-1], u.shape[:-1])
-        wi = np.broadcast_to(wi, shape + (3,)).reshape(-1, 3)
-        u = np.broadcast_to(u, shape + (2,)).reshape(-1, 2)
+        wi, u, shape = _sample_inputs(wi, u)
         Q = wi.shape[0]
         mu_in = wi[:, 2]
         in_taps, in_w, base_r, base_t, masses = self._incident(mu_in)
@@ -299,11 +287,7 @@ class FourierSampler:
         ndarray, shape (...)
             0 on the horizon, for left-out blocks and for invalid ``wi``.
         """
-        wi = unit_directions("wi", wi)
-        wo = unit_directions("wo", wo)
-        wi, wo = np.broadcast_arrays(wi, wo)
-        shape = wi.shape[:-1]
-        wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+        wi, wo, shape = direction_pairs(wi, wo)
         mu_in = wi[:, 2]
         in_taps, in_w, base_r, base_t, masses = self._incident(mu_in)
         same = np.sign(wo[:, 2]) == np.sign(mu_in)
@@ -338,3 +322,13 @@ def _sample_result(target, wi: np.ndarray, wo: np.ndarray, pdf: np.ndarray, shap
     weight = weight[:, 0] if nch == 1 else weight
     return (wo.reshape(shape + (3,)), weight.reshape(shape + weight.shape[1:]),
             pdf.reshape(shape))
+
+
+def _sample_inputs(wi, u) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """``wi`` (validated directions) and ``u`` (uniforms in [0, 1)^2) broadcast together and
+    flattened to ``(Q, 3)`` and ``(Q, 2)``, with the broadcast shape ``(...)``."""
+    wi = unit_directions("wi", wi)
+    u = _uniforms(u)
+    shape = np.broadcast_shapes(wi.shape[:-1], u.shape[:-1])
+    return (np.broadcast_to(wi, shape + (3,)).reshape(-1, 3),
+            np.broadcast_to(u, shape + (2,)).reshape(-1, 2), shape)

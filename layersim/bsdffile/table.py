@@ -14,7 +14,7 @@ import numpy as np
 
 from ..bsdf import BSDF
 from ..channels import green_from_ybr
-from ..directions import azimuth, unit_directions
+from ..directions import azimuth, direction_pairs
 from ..errors import FileFormatError, InfeasibleError
 from ..interpolation import spline_weights
 from ..kernels import fourier_eval, fourier_eval2d
@@ -388,11 +388,7 @@ class FourierTable:
         -------
         ndarray, shape (...) or (..., 3)
         """
-        wi = unit_directions("wi", wi)
-        wo = unit_directions("wo", wo)
-        wi, wo = np.broadcast_arrays(wi, wo)
-        shape = wi.shape[:-1]
-        wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+        wi, wo, shape = direction_pairs(wi, wo)
         N = self.n_nodes
         x = self.nodes.astype(float)
         mu_fi = wo[:, 2]                  # camera: the file's incident direction
