@@ -8,6 +8,7 @@ entries bounds those temporaries whatever the matrix.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sps
 
 #: Entries per piece when a CSR matrix is read piece by piece
 #: (:meth:`~layersim.outofcore.rowpieces.RowPieces.of`): bounds the per-entry temporaries of a
