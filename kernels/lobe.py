@@ -1,7 +1,8 @@
-"""Host access to the rough-dielectric physics of :mod:`layersim.kernels.physics` at given
-directions and microfacet normals, for the near-specular boundaries of :mod:`layersim.lobe`
+"""Host access to the rough-interface physics of :mod:`layersim.kernels.physics` at given
+directions and microfacet normals, for the near-specular interfaces of :mod:`layersim.lobe`
 (the direct reflection lobe, its energy and the transmitted energy come from the same functions
-as the Monte Carlo walk's microfacet events)."""
+as the Monte Carlo walk's microfacet events). ``k > 0`` selects a conductor (complex relative
+index ``eta + i k``), which reflects with the conductor Fresnel term and transmits nothing."""
 
 from __future__ import annotations
 
@@ -14,38 +15,42 @@ from .runtime import device_for, ensure_init
 
 @wp.kernel
 def _eval_kernel(wi: wp.array(dtype=wp.vec3d), wo: wp.array(dtype=wp.vec3d), eta: wp.float64,
-                 au: wp.float64, av: wp.float64, dist: int, out: wp.array(dtype=wp.float64)):
+                 k: wp.float64, au: wp.float64, av: wp.float64, dist: int,
+                 out: wp.array(dtype=wp.float64)):
     q = wp.tid()
-    out[q] = physics.microfacet_eval(wi[q], wo[q], eta, wp.float64(0.0), au, av, dist)
+    out[q] = physics.microfacet_eval(wi[q], wo[q], eta, k, au, av, dist)
 
 
 @wp.kernel
 def _facet_kernel(wi: wp.array(dtype=wp.vec3d), m: wp.array(dtype=wp.vec3d), eta: wp.float64,
-                  au: wp.float64, av: wp.float64, dist: int,
+                  k: wp.float64, au: wp.float64, av: wp.float64, dist: int,
                   vis: wp.array2d(dtype=wp.float64), refl: wp.array2d(dtype=wp.float64),
                   trans: wp.array2d(dtype=wp.float64), wo: wp.array2d(dtype=wp.vec3d)):
-    q, k = wp.tid()
+    q, j = wp.tid()
     zero = wp.float64(0.0)
     one = wp.float64(1.0)
     w = wi[q]
-    n = m[k]
+    n = m[j]
     c = wp.dot(w, n)
-    vis[q, k] = zero
-    refl[q, k] = zero
-    trans[q, k] = zero
-    wo[q, k] = wp.vec3d(zero, zero, one)
+    vis[q, j] = zero
+    refl[q, j] = zero
+    trans[q, j] = zero
+    wo[q, j] = wp.vec3d(zero, zero, one)
     if c <= zero or w[2] <= zero:
         return
     # visible-normal density relative to D(m) cos(theta_m): G1(wi, m) (wi.m) / (wi.z m.z)
-    vis[q, k] = physics.smith_g1(w, n, au, av, dist) * c / (w[2] * n[2])
-    f = physics.fresnel_dielectric(c, eta)
+    vis[q, j] = physics.smith_g1(w, n, au, av, dist) * c / (w[2] * n[2])
     r = n * (wp.float64(2.0) * c) - w
-    wo[q, k] = r
-    refl[q, k] = f * physics.smith_g1(r, n, au, av, dist)
+    wo[q, j] = r
+    if k > zero:
+        refl[q, j] = physics.fresnel_conductor(c, eta, k) * physics.smith_g1(r, n, au, av, dist)
+        return
+    f = physics.fresnel_dielectric(c, eta)
+    refl[q, j] = f * physics.smith_g1(r, n, au, av, dist)
     # refraction into the denser side (eta > 1: no total internal reflection from above)
     s = one - (one - c * c) / (eta * eta)
     t = -w / eta + n * (c / eta - wp.sqrt(wp.max(s, zero)))
-    trans[q, k] = (one - f) * physics.smith_g1(t, n, au, av, dist)
+    trans[q, j] = (one - f) * physics.smith_g1(t, n, au, av, dist)
 
 
 def _vec(a) -> wp.array:
@@ -54,9 +59,9 @@ def _vec(a) -> wp.array:
 
 
 def microfacet_reflection(wi, wo, eta: float, alpha_u: float, alpha_v: float,
-                          distribution: str) -> np.ndarray:
+                          distribution: str, k: float = 0.0) -> np.ndarray:
     """Microfacet BSDF ``f(wi, wo)`` (1/sr, no cosine; :func:`physics.microfacet_eval`) of a
-    rough dielectric interface of relative index ``eta``, directions ``(Q, 3)`` in its tangent
+    rough interface of relative index ``eta + i k``, directions ``(Q, 3)`` in its tangent
     frame."""
     ensure_init()
     wi = np.asarray(wi, float).reshape(-1, 3)
@@ -64,13 +69,14 @@ def microfacet_reflection(wi, wo, eta: float, alpha_u: float, alpha_v: float,
         return np.zeros(0)
     out = wp.zeros(wi.shape[0], dtype=wp.float64, device=device_for("cpu"))
     wp.launch(_eval_kernel, dim=wi.shape[0],
-              inputs=[_vec(wi), _vec(wo), float(eta), float(alpha_u), float(alpha_v),
+              inputs=[_vec(wi), _vec(wo), float(eta), float(k), float(alpha_u), float(alpha_v),
                       int(physics.DISTRIBUTION_CODES[distribution])],
               outputs=[out], device=device_for("cpu"))
     return out.numpy()
 
 
-def facet_events(wi, m, eta: float, alpha_u: float, alpha_v: float, distribution: str):
+def facet_events(wi, m, eta: float, alpha_u: float, alpha_v: float, distribution: str,
+                 k: float = 0.0):
     """Per incident direction ``wi`` (Q, 3) and microfacet normal ``m`` (K, 3), both in the
     tangent frame: the visible-normal factor ``G1(wi, m) (wi.m) / (wi.z m.z)``, the reflected
     and refracted weights ``F G1(wo, m)`` and ``(1 - F) G1(wt, m)`` (0 where the event leaves
@@ -84,7 +90,7 @@ def facet_events(wi, m, eta: float, alpha_u: float, alpha_v: float, distribution
     outs = [wp.zeros(shape, dtype=wp.float64, device=dev) for _ in range(3)]
     wo = wp.zeros(shape, dtype=wp.vec3d, device=dev)
     wp.launch(_facet_kernel, dim=shape,
-              inputs=[_vec(wi), _vec(m), float(eta), float(alpha_u), float(alpha_v),
+              inputs=[_vec(wi), _vec(m), float(eta), float(k), float(alpha_u), float(alpha_v),
                       int(physics.DISTRIBUTION_CODES[distribution])],
               outputs=[*outs, wo], device=dev)
     return (*(o.numpy() for o in outs), wo.numpy())

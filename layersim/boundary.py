@@ -17,7 +17,8 @@ boundary, where the factor ``(1 - F)`` is 1 too), plus the boundary's own mirror
 the smaller solid angle). :class:`BoundaryEvaluator` wraps the evaluator of the inside
 operator with these factors. A near-specular rough boundary (``op.lobes``,
 :mod:`layersim.lobe`) replaces ``1 - F`` by its rough transmittance and the mirror reflection
-by its microfacet reflection lobe.
+by its microfacet reflection lobe. A lobe on a side without a boundary (a bare near-specular
+conductor) replaces the operator's own delta reflection on that side.
 """
 
 from __future__ import annotations
@@ -181,9 +182,22 @@ class BoundaryEvaluator:
                 out[sel] = np.sum(w[sel] * np.take_along_axis(e, idx[sel], axis=1), axis=1)
         return same, other
 
+    def _own_delta(self, wi: np.ndarray) -> np.ndarray:
+        """Per query, the delta reflection that a lobe on a side without a boundary replaces
+        (0 elsewhere)."""
+        own = np.zeros(wi.shape[0])
+        bare = [side for side in self.lobes if side not in self.exits]
+        if bare:
+            same, _ = self._energies(wi, delta=True)
+            for side in bare:
+                sel = (wi[:, 2] > 0) == (side == "top")
+                own[sel] = same[sel]
+        return own
+
     def albedo(self, wi: np.ndarray):
         _, ti = self._map(wi)
         R, T = self._energies(wi, delta=False)
+        R = R - self._own_delta(wi)
         # the boundary's own reflection: the mirror's F, or a near-specular lobe's energy
         own = 1.0 - ti
         lobe = self.lobes.get("top")
@@ -196,6 +210,7 @@ class BoundaryEvaluator:
     def specular(self, wi: np.ndarray) -> dict:
         wi_in, ti = self._map(wi)
         same, other = (np.maximum(e, 0.0) for e in self._energies(wi, delta=True))
+        same = same - np.maximum(self._own_delta(wi), 0.0)
         top = wi[:, 2] > 0
         mirror = wi * np.array([-1.0, -1.0, 1.0])
         out = {}

@@ -130,7 +130,7 @@ class BSDF:
         if c not in self._evaluators:
             op = self.operators[c]
             ev = EVALUATORS[op.representation](op)
-            self._evaluators[c] = BoundaryEvaluator(op, ev) if op.boundary else ev
+            self._evaluators[c] = BoundaryEvaluator(op, ev) if op.boundary or op.lobes else ev
         return self._evaluators[c]
 
     def series_table(self, c: int):

@@ -138,7 +138,9 @@ class Operator(ABC):
     lobes : dict
         Near-specular rough boundaries among them, ``{"top": parameters}`` of
         :class:`layersim.lobe.NearSpecularLobe`: their direct reflection is that lobe and their
-        transmittance the rough one (:mod:`layersim.lobe`). Empty otherwise.
+        transmittance the rough one (:mod:`layersim.lobe`). On a side without a boundary (a
+        bare near-specular conductor) the lobe replaces the operator's own delta reflection on
+        that side, which stands for it in the adding equations. Empty otherwise.
     """
 
     representation: str = ""
@@ -276,8 +278,9 @@ def from_arrays(d, prefix: str = "") -> Operator:
     return op
 
 
-#: Order of the saved parameters of a near-specular boundary (:attr:`Operator.lobes`).
-_LOBE_KEYS = ("eta", "alpha_u", "alpha_v", "distribution", "rotation")
+#: Order of the saved parameters of a near-specular interface (:attr:`Operator.lobes`); files
+#: without the last ones (``k``) load with their defaults.
+_LOBE_KEYS = ("eta", "alpha_u", "alpha_v", "distribution", "rotation", "k")
 
 
 @register
@@ -577,7 +580,7 @@ def header_arrays(op, prefix: str) -> dict:
     for side, eta in op.boundary.items():
         d[f"{prefix}boundary_{side}"] = np.array(eta)
     for side, lobe in op.lobes.items():
-        d[f"{prefix}lobe_{side}"] = np.array([str(lobe[k]) for k in _LOBE_KEYS])
+        d[f"{prefix}lobe_{side}"] = np.array([str(lobe.get(k, 0.0)) for k in _LOBE_KEYS])
     return d
 
 

@@ -82,6 +82,11 @@ _SAMPLERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 def sampler_for(bsdf) -> "FourierSampler":
     """The (cached) sampler of a BSDF (anisotropic ones: see the module docstring)."""
     s = _SAMPLERS.get(bsdf)
+    if any(op.lobes for op in bsdf.operators):
+        raise NotImplementedError(
+            "sampling a near-specular interface (layersim.lobe) is not implemented: its "
+            "reflection lobe would be missed; evaluate it with eval / albedo / bin_energies, "
+            "or use layersim.montecarlo")
     if s is None and any(op.boundary for op in bsdf.operators):
         s = BoundarySampler(bsdf)
         _SAMPLERS[bsdf] = s
@@ -101,11 +106,6 @@ class BoundarySampler:
     so the estimator stays unbiased for the smooth part; deltas are not sampled."""
 
     def __init__(self, bsdf):
-        if any(op.lobes for op in bsdf.operators):
-            raise NotImplementedError(
-                "sampling a near-specular boundary (layersim.lobe) is not implemented: its "
-                "direct reflection lobe would be missed; evaluate it with eval / albedo / "
-                "bin_energies, or use layersim.montecarlo")
         self.target = bsdf
         self.exits = bsdf.evaluator(0).exits
         inside = []

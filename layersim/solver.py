@@ -53,6 +53,9 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     eta_above = scene.ior_above(i)
     if isinstance(layer, Conductor) and layer.smooth:
         return smooth_conductor_operator(grid, plan.md, scene.relative_ior(i), eta_above)
+    if isinstance(layer, Conductor) and i in plan.near_specular:
+        return _near_specular_conductor(grid, plan.md, layer, scene.relative_ior(i), eta_above,
+                                        alone=i == 0)
     if isinstance(layer, Dielectric) and (layer.smooth or i in plan.near_specular):
         side = "top" if i == 0 else "bottom"
         inside = layer.ior.real if side == "top" else eta_above
@@ -80,6 +83,19 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     if isinstance(layer, Diffuse):
         return diffuse_operator(grid, layer.albedo, eta_above)
     raise TypeError(f"layer {i}: no operator for kind {layer.kind!r}")  # pragma: no cover
+
+
+def _near_specular_conductor(grid, m: int, layer, eta: complex, eta_above: float,
+                             alone: bool) -> IsoOperator:
+    """A near-specular conductor (:func:`layersim.plan.layers._near_specular_conductor`): a
+    mirror whose reflectance is the rough reflected energy; ``alone``, its exact lobe
+    replaces that mirror when the BSDF is evaluated (:attr:`Operator.lobes`)."""
+    lobe = NearSpecularLobe(eta.real, layer.alpha_u, layer.alpha_v, layer.distribution,
+                            layer.rotation, k=eta.imag)
+    op = smooth_conductor_operator(grid, m, eta, eta_above, lobe.reflectance(grid.mu))
+    if alone:
+        op.lobes = {"top": lobe.params()}
+    return op
 
 
 @contextlib.contextmanager

@@ -26,11 +26,14 @@ from ..kernels.fresnel import fresnel
 from ..operator import Grid, IsoOperator
 
 
-def smooth_conductor_operator(grid: Grid, m: int, eta: complex,
-                              eta_above: float) -> IsoOperator:
+def smooth_conductor_operator(grid: Grid, m: int, eta: complex, eta_above: float,
+                              reflectance: np.ndarray | None = None) -> IsoOperator:
     """Opaque operator of a smooth conductor of relative index ``eta`` (complex: ``eta.real +
-    i eta.imag``): ``Rt = diag(F(mu))`` in each of the ``m`` orders, all of it a delta."""
-    F = fresnel(grid.mu, eta.real, eta.imag)
+    i eta.imag``): ``Rt = diag(F(mu))`` in each of the ``m`` orders, all of it a delta.
+    ``reflectance`` (h,) replaces ``F``: a near-specular conductor's rough reflected energy
+    (:meth:`layersim.lobe.NearSpecularLobe.reflectance`)."""
+    F = (fresnel(grid.mu, eta.real, eta.imag) if reflectance is None
+         else np.asarray(reflectance, float))
     diag = sps.diags(F, format="csr")
     return IsoOperator(grid, {"Rt": [diag] * m}, eta_above, None, delta={"Rt": F})
 

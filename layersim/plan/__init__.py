@@ -87,8 +87,9 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
     try:
         refuse_below_lower_bound(disc, mono, layers, grid, survey.media_orders, ms_needed)
     except InfeasibleError as exc:
+        exc = with_hints(exc, survey.hints)
         if refuse:
-            raise
+            raise exc from None
         md, memory = lower_bound(disc, mono, layers, grid, survey.media_orders, ms_needed)
         if disc.md is None:
             notes.append(f"md = {md} is a lower bound: the pre-pass that finds the orders the "
@@ -121,11 +122,17 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
         if seconds is not None:
             refuse_over_time(seconds, grid.n, md)
     except InfeasibleError as exc:
+        exc = with_hints(exc, survey.hints)
         if refuse:
-            raise
+            raise exc from None
         refused = str(exc)
     return Plan(rule=grid.rule, n=grid.n, md=md, ms=ms, layers=layers, left_out=survey.left_out,
                 notes=notes, memory_bytes=memory, seconds=seconds, work=work,
                 overridden=overridden, representation=representation, refused=refused,
                 boundary=survey.boundary, lobes=survey.lobes,
                 near_specular=survey.near_specular)
+
+
+def with_hints(exc: InfeasibleError, hints: list) -> InfeasibleError:
+    """The refusal ``exc`` with the survey's ``hints`` (why a layer is costly) appended."""
+    return InfeasibleError("; ".join([str(exc), *hints])) if hints else exc

@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 from ..aniso import plan as aplan
 from ..errors import InfeasibleError
 from ..ingredients.medium import G_EXACT_MAX, hg_scaling
-from ..lobe import NEAR_SPECULAR_ALPHA, NEAR_SPECULAR_WIDE_MAX, near_specular_error
+from ..lobe import (NEAR_SPECULAR_ALPHA, NEAR_SPECULAR_BASE_ALPHA, NEAR_SPECULAR_WIDE_MAX,
+                    near_specular_conductor_error, near_specular_error)
 from ..operator import Grid
 from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
 from .model import LayerPlan
@@ -45,6 +46,8 @@ class Survey:
     scaled : list of LayerPlan
         The scattering media, whose phase-function representation (whole series or delta-M
         scaled) :func:`scale_media` decides once the grid is known.
+    hints : list of str
+        What would make a refused plan affordable (added to the refusal's message).
     boundary : dict
         Smooth dielectric boundaries, ``{"top" | "bottom": index outside}``
         (:mod:`layersim.boundary`).
@@ -61,6 +64,7 @@ class Survey:
     snell_eta: float | None = None
     lobes: dict = field(default_factory=dict)
     near_specular: tuple = ()
+    hints: list = field(default_factory=list)
 
 
 def survey_layers(scene: Scene) -> Survey:
@@ -102,7 +106,7 @@ def _interface(scene: Scene, i: int, layer, survey: Survey) -> None:
     if layer.smooth:
         _smooth(scene, i, layer, survey)
         return
-    if _near_specular(scene, i, layer, survey):
+    if _near_specular(scene, i, layer, survey) or _near_specular_conductor(scene, i, layer, survey):
         return
     eta_rel = scene.channel(0).relative_ior(i)
     width, what = interface_width(layer, eta_rel)
@@ -260,7 +264,54 @@ def _near_specular(scene: Scene, i: int, layer, survey: Survey) -> bool:
                  f"{near_specular_error(hi)}")
     survey.lobes["top"] = {"eta": survey.snell_eta, "alpha_u": layer.alpha_u,
                            "alpha_v": layer.alpha_v, "distribution": layer.distribution,
-                           "rotation": layer.rotation}
+                           "rotation": layer.rotation, "k": 0.0}
+    survey.near_specular = (*survey.near_specular, i)
+    return True
+
+
+def _blurred_below(scene: Scene, i: int) -> bool:
+    """True if a rough dielectric interface that the solve projects (not smooth, not
+    near-specular) lies above layer ``i``: it blurs what layer ``i`` reflects by more than a
+    near-specular lobe's width."""
+    return any(isinstance(x, Dielectric) and min(x.alpha_u, x.alpha_v) > NEAR_SPECULAR_ALPHA
+               for x in scene.channel(0).layers[:i])
+
+
+def _near_specular_conductor(scene: Scene, i: int, layer, survey: Survey) -> bool:
+    """Plan a nearly smooth conductor as a mirror (Fresnel diagonal) whose reflectance is the
+    rough interface's reflected energy ``E_R`` (azimuth average, single-scattering loss
+    included; :meth:`layersim.lobe.NearSpecularLobe.reflectance`), and return True; False
+    where it is left to the exact projection.
+
+    Alone (the top layer), the conductor is the whole BSDF: ``eval``, ``albedo`` and
+    ``bin_energies`` use its exact microfacet lobe, and the mirror only stands for it when the
+    BSDF is added to other layers. Under other layers its lobe (about ``2 alpha`` wide) must be
+    blurred by a rough interface above it (:func:`_blurred_below`) and both its roughnesses be
+    at most :data:`~layersim.lobe.NEAR_SPECULAR_BASE_ALPHA`; behind a smooth or near-specular coat
+    the lobe is seen directly, and near the coat's critical angle part of it is trapped, which
+    a mirror does not reproduce (``benchmarks/near_specular.txt``)."""
+    if not isinstance(layer, Conductor):
+        return False
+    lo, hi = min(layer.alpha_u, layer.alpha_v), max(layer.alpha_u, layer.alpha_v)
+    if lo > NEAR_SPECULAR_ALPHA:
+        return False
+    if i > 0 and (hi > NEAR_SPECULAR_BASE_ALPHA or not _blurred_below(scene, i)):
+        why = (f"its wider roughness exceeds {NEAR_SPECULAR_BASE_ALPHA:g}"
+               if hi > NEAR_SPECULAR_BASE_ALPHA else "no rough interface above it blurs its lobe")
+        survey.hints.append(
+            f"layer {i} (conductor) is near-specular but is projected exactly, at a cost that "
+            f"grows like 1 / alpha: it is split into a mirror only under a rough interface "
+            f"(alpha > {NEAR_SPECULAR_ALPHA:g}) and with both roughnesses at most "
+            f"{NEAR_SPECULAR_BASE_ALPHA:g}, and here {why}; use layersim.montecarlo for this "
+            "stack")
+        return False
+    where = ("alone: eval, albedo and bin_energies use its exact microfacet lobe "
+             "(layersim.lobe)" if i == 0 else
+             f"the rough interface above blurs its lobe; {near_specular_conductor_error(hi)}")
+    survey.layers.append(LayerPlan(
+        i, layer.kind, "near-specular conductor (mirror with the rough reflectance)",
+        f"{layer.distribution} alpha=({layer.alpha_u:g}, {layer.alpha_v:g}): Fresnel diagonal "
+        f"scaled to the rough reflected energy; {where}"))
     survey.near_specular = (*survey.near_specular, i)
     return True
 
