@@ -120,6 +120,15 @@ class BSDF:
         return self.operators[0].grid
 
     @property
+    def error_estimate(self) -> float | None:
+        """Estimated relative L2 error of the bin energies (18 x 36 bins per side, worst
+        incidence of 0, 30, 60, 80 degrees) from the discretisation, or None if the solve
+        did not estimate it (``layersim.solve(..., error_estimate=True)`` or ``tol=``;
+        :mod:`layersim.accuracy`)."""
+        acc = self.info.get("accuracy")
+        return None if acc is None else float(acc["estimate"])
+
+    @property
     def anisotropic(self) -> bool:
         """True if the operators couple Fourier modes (see :mod:`layersim.aniso`)."""
         return self.operators[0].representation == "anisotropic"

@@ -162,6 +162,19 @@ def _print_notes(info: dict) -> None:
         print(f"  note: {note}")
 
 
+def _print_accuracy(info: dict) -> None:
+    """The error estimate of the solve (``info["accuracy"]``), if it made one."""
+    acc = info.get("accuracy")
+    if acc is None:
+        return
+    tol = f" (tol {acc['tol']:g})" if "tol" in acc else ""
+    comps = " and ".join(f"n = {c['n']}, md = {c['md']}" for c in acc["companions"])
+    print(f"error estimate: {acc['estimate']:.2g}{tol}, relative L2 of bin energies "
+          f"({acc['bins'][0]} x {acc['bins'][1]} per side, worst of "
+          f"{', '.join(f'{a:g}' for a in acc['angles'])} deg), from companion solves at "
+          f"{comps}")
+
+
 def cmd_solve(args) -> int:
     out = _output(args.output if args.output else Path(args.scene).stem + ".lsim",
                   "output file")
@@ -173,11 +186,13 @@ def cmd_solve(args) -> int:
               f"md = {like.operators[0].m}")
     bars = _progress(args)
     try:
-        bsdf = solve(scene, like=like, verbose=True, progress=bars)
+        bsdf = solve(scene, like=like, verbose=True, progress=bars, tol=args.tol,
+                     error_estimate=args.estimate_error)
     finally:
         bars.close()
     info = bsdf.info
     _print_notes(info)
+    _print_accuracy(info)
     print(f"stack: {info['nnz']} nonzero coefficients, {info['memory_bytes'] / 2**20:.1f} MiB")
     print("albedo (energy fractions):")
     print(_albedo_table(bsdf, TABLE_ANGLES))
@@ -220,6 +235,7 @@ def cmd_info(args) -> int:
     if "seconds" in info:
         print(f"solved in {info['seconds']['total']:.2f} s")
     _print_notes(info)
+    _print_accuracy(info)
     print("albedo (energy fractions):")
     print(_albedo_table(bsdf, TABLE_ANGLES))
     return 0
@@ -543,6 +559,12 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--like", metavar="STACK.lsim",
                     help="solve on the discretisation (n, md, rule) of this saved BSDF, so "
                          "that the two can be added or subtracted")
+    sp.add_argument("--tol", type=float, metavar="T",
+                    help="solve to this relative error of bin energies (e.g. 1e-3): n and md "
+                         "are chosen by a ladder of solves, and the error estimate printed")
+    sp.add_argument("--estimate-error", action="store_true",
+                    help="estimate the discretisation error from companion solves at n and "
+                         "md over sqrt 2 and over 2 (about half as much time again)")
     sp.set_defaults(func=cmd_solve)
     sp = _subparser(sub, "info", "print the summary and albedos of a saved BSDF (.lsim) or a "
                                  ".bsdf file")

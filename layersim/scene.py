@@ -140,13 +140,15 @@ class Discretization:
     n : number of ordinates on mu in [-1, 1] (even); md : number of Fourier orders in the azimuth
     difference (cosine orders 0..md-1, or complex modes -(md-1)..md-1); ms : coupling half-width
     in the azimuth sum (modes -ms..ms; 0 for isotropic stacks); quadrature : one of
-    :data:`QUADRATURES`.
+    :data:`QUADRATURES`; tol : relative error of bin energies that :func:`layersim.solve`
+    solves to (:mod:`layersim.accuracy`; not with ``n`` or ``md``).
     """
 
     n: int | None = None
     md: int | None = None
     ms: int | None = None
     quadrature: str | None = None
+    tol: float | None = None
 
 
 # --------------------------------------------------------------------------------------------
@@ -347,7 +349,7 @@ _REQUIRED = {
 }
 _TOP_FIELDS = {"layer", "stack", "discretization"}
 _STACK_FIELDS = {"top_ior", "name"}
-_DISC_FIELDS = {"n", "md", "ms", "quadrature"}
+_DISC_FIELDS = {"n", "md", "ms", "quadrature", "tol"}
 
 
 class _Ctx:
@@ -528,7 +530,7 @@ def _parse_scene(data: Mapping[str, Any], source: str | None, default_name: str)
     unknown = set(disc_raw) - _DISC_FIELDS
     if unknown:
         raise SceneError(f"unknown field '{sorted(unknown)[0]}' in [discretization] (allowed: "
-                         "n, md, ms, quadrature)", source=source)
+                         "n, md, ms, quadrature, tol)", source=source)
     dctx = _Ctx(source)
     n = disc_raw.get("n")
     if n is not None:
@@ -549,6 +551,15 @@ def _parse_scene(data: Mapping[str, Any], source: str | None, default_name: str)
     if quad == "simpson38" and n is not None and (n - 1) % 3:
         raise dctx.error("discretization.n", "composite Simpson 3/8 needs n = 3k + 1 nodes "
                                              f"(k odd), got n = {n}")
+    tol = disc_raw.get("tol")
+    if tol is not None:
+        if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0.0 < tol < 1.0:
+            raise dctx.error("discretization.tol", "must be a relative error in (0, 1) (e.g. "
+                                                   f"1e-3), got {tol!r}")
+        if n is not None or md is not None:
+            raise dctx.error("discretization.tol", "chooses n and md itself: give tol, or n "
+                                                   "and md, not both")
+        tol = float(tol)
     return Scene(stacks=stacks, top_ior=top_ior,
-                 discretization=Discretization(n=n, md=md, ms=ms, quadrature=quad),
+                 discretization=Discretization(n=n, md=md, ms=ms, quadrature=quad, tol=tol),
                  name=name, source=source)

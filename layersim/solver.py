@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import time
 from dataclasses import replace
@@ -10,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from . import adding
+from . import accuracy, adding
 from .aniso import adding as aniso_adding
 from .aniso.plan import COUPLED_RELERR, STACK_RELERR, STACK_RELERR_INTERMEDIATE
 from .bsdf import BSDF, channel_pairs
@@ -153,7 +154,7 @@ def _check_energy(op, i: int, layer, plan: Plan) -> list[str]:
 
 def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
           verbose: bool = False, projection: str = "numeric", device=None,
-          progress=None) -> BSDF:
+          progress=None, tol: float | None = None, error_estimate: bool = False) -> BSDF:
     """Solve a scene with the adding equations in the Fourier basis.
 
     Parameters
@@ -179,10 +180,20 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
         after each of its steps: phase ``"projection"`` (a step per layer operator built, all
         channels) then ``"adding"`` (a step per channel); ``what`` names the step under way.
         The solver prints nothing through it; the command line draws progress bars with it.
+    tol : float, optional
+        Solve to this relative error of bin energies (18 x 36 bins per side, worst of 0, 30,
+        60 and 80 degrees) instead of on the planner's ``n`` and ``md``: a ladder of
+        discretisations, each the error estimate of the next (:mod:`layersim.accuracy`). Also
+        ``tol`` in the scene's ``[discretization]``.
+    error_estimate : bool
+        Estimate the discretisation error from companion solves at ``n`` and ``md`` over
+        ``sqrt 2`` and over 2 (about half as much time again). With ``tol`` the estimate is
+        always made.
 
     Returns
     -------
     BSDF
+        With :attr:`BSDF.error_estimate` and ``info["accuracy"]`` when estimated.
 
     Raises
     ------
@@ -194,6 +205,18 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
     """
     scene = as_scene(scene, "solve()")
     like = _like_argument(like)
+    tol = scene.discretization.tol if tol is None else tol
+    if tol is not None or error_estimate:
+        if like is not None:
+            raise ValueError("tol and error_estimate choose or vary the discretisation, which "
+                             "like= fixes: give one or the other")
+        # the rungs and the companion solve quietly: their plans are the ladder's business
+        plain = functools.partial(solve, threads=threads, projection=projection,
+                                  device=device, progress=progress)
+        if tol is not None:
+            return accuracy.solve_to_tolerance(scene, tol, plain,
+                                               log=print if verbose else None)
+        return accuracy.with_estimate(scene, plain, plain(scene))
     if device is not None or settings().device != "cpu":
         device_for(device)          # an unusable device is refused before the plan
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int)

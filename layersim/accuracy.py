@@ -1,0 +1,196 @@
+"""How accurate a solved BSDF is: an a-posteriori error estimate, and solves to a tolerance.
+
+The discretisation error of a solve (ordinates ``n``, Fourier orders ``md``) is estimated from
+companion solves on coarser discretisations of the same scene, the way an embedded pair
+estimates the error of an integrator: all are reduced to bin energies (18 x 36 bins per side,
+at the incidence angles :data:`ANGLES`) and compared by relative L2 distance at the worst
+incidence. Where the error falls like ``s^-p`` in the scale ``s`` of ``n`` and ``md``, the
+distance to the companion at ``s / sqrt 2`` is ``2^(p/2) - 1`` times the error (1 for
+``p = 2``), and to the one at ``s / 2`` it is ``2^p - 1`` (3). Convergence is not monotone,
+though: a narrow lobe moves across bin edges and between ordinates as ``n`` changes, and two
+neighbouring discretisations can agree by accident. The estimate is therefore
+:data:`SAFETY` times the larger of the distance to the ``s / sqrt 2`` companion and a third of
+the distance to the ``s / 2`` one; ``benchmarks/accuracy.py`` measures how it compares with the
+error against solves at twice ``n`` and ``md``.
+
+A solve to a tolerance (:func:`solve_to_tolerance`) climbs a ladder of scales of the planner's
+``n`` and ``md`` (:data:`LADDER`, a factor ``sqrt 2`` apart, so that the two rungs below are
+each rung's companions) and stops at the first rung whose estimate is at most ``tol``; a rung
+the memory or time limits refuse ends the ladder with a refusal that says the best estimate
+reached.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from .errors import InfeasibleError
+from .plan import make_plan
+from .scene import Scene
+
+#: Incidence angles (degrees) at which the estimate compares bin energies; the estimate is the
+#: worst of them.
+ANGLES = (0.0, 30.0, 60.0, 80.0)
+
+#: Bins in the cosine of the elevation and in the azimuth, per side.
+BINS = (18, 36)
+
+#: Scales of the companion solves' ``n`` and ``md`` relative to the estimated solve's, and the
+#: factor that turns the distance to each into an error estimate for ``p = 2``.
+COMPANIONS = ((1.0 / math.sqrt(2.0), 1.0), (0.5, 1.0 / 3.0))
+
+#: Estimate = SAFETY x the largest weighted distance to a companion (module docstring).
+SAFETY = 1.5
+
+#: Scales of the planner's ``n`` and ``md`` that a solve to a tolerance climbs; a rung is
+#: accepted from the third on (both companions solved).
+LADDER = tuple(0.25 * 2.0 ** (k / 2.0) for k in range(1, 8))
+
+
+def bin_table(bsdf, angles=ANGLES, bins=BINS) -> np.ndarray:
+    """Bin energies of ``bsdf`` for beams from ``angles`` (degrees, azimuth 0): an array
+    (angles, 2 sides, channels, bins[0], bins[1])."""
+    mu_edges = np.linspace(0.0, 1.0, bins[0] + 1)
+    phi_edges = np.linspace(0.0, 2.0 * np.pi, bins[1] + 1)
+    out = []
+    for theta in np.radians(angles):
+        wi = np.array([math.sin(theta), 0.0, math.cos(theta)])
+        e = bsdf.bin_energies(wi, mu_edges, phi_edges)
+        sides = [np.moveaxis(np.asarray(e[side]).reshape(*bins, -1), -1, 0)
+                 for side in ("top", "bottom")]
+        out.append(np.stack(sides))
+    return np.array(out)
+
+
+def relative_errors(table: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Relative L2 distance of bin energies per incidence angle (first axis):
+    ``sqrt(sum (E - E_ref)^2 / sum E_ref^2)`` over sides, channels and bins."""
+    axes = tuple(range(1, table.ndim))
+    den = np.sum(reference ** 2, axis=axes)
+    num = np.sum((table - reference) ** 2, axis=axes)
+    return np.sqrt(num / np.where(den > 0, den, 1.0))
+
+
+def scaled(scene: Scene, plan, scale: float) -> Scene:
+    """``scene`` with ``n`` and ``md`` set to ``scale`` times the plan's (``n`` even, at least
+    8; ``md`` at least 1)."""
+    n = max(8, 2 * int(round(plan.n * scale / 2.0)))
+    md = max(1, int(round(plan.md * scale)))
+    return replace(scene, discretization=replace(scene.discretization, n=n, md=md, tol=None))
+
+
+def estimate(bsdf, companions: list) -> dict:
+    """The error estimate of ``bsdf`` from its coarser ``companions`` (same scene, at the
+    scales of :data:`COMPANIONS`, in that order; the last may be missing).
+
+    Returns
+    -------
+    dict
+        ``estimate`` (relative L2 error of bin energies, worst incidence), ``per_angle`` (the
+        same per angle of :data:`ANGLES`), ``angles``, ``bins``, ``safety`` and the companions'
+        ``n`` and ``md``.
+    """
+    table = bin_table(bsdf)
+    per_angle = np.zeros(len(ANGLES))
+    for (_, weight), companion in zip(COMPANIONS, companions):
+        d = relative_errors(table, bin_table(companion))
+        per_angle = np.maximum(per_angle, SAFETY * weight * d)
+    return {"estimate": float(per_angle.max()), "per_angle": [float(x) for x in per_angle],
+            "angles": list(ANGLES), "bins": list(BINS), "safety": SAFETY,
+            "companions": [{"n": c.info.get("n"), "md": c.info.get("md")} for c in companions]}
+
+
+def with_estimate(scene: Scene, solve, bsdf):
+    """``bsdf`` (solved from ``scene``) with its error estimate in ``bsdf.info["accuracy"]``,
+    from companion solves at the scales of :data:`COMPANIONS` (``solve(scene)`` solves)."""
+    t0 = time.perf_counter()
+    plan = replace(make_plan(scene), n=bsdf.info["n"], md=bsdf.info["md"])
+    companions = []
+    for ratio, _ in COMPANIONS:
+        try:
+            companions.append(solve(scaled(scene, plan, ratio)))
+        except InfeasibleError as exc:
+            # too coarse to resolve a lobe: the estimate rests on the finer companion
+            if not companions:
+                raise InfeasibleError(
+                    f"no error estimate: the companion solve at n = "
+                    f"{scaled(scene, plan, ratio).discretization.n} is refused ({exc}); "
+                    "estimate a solve with a larger n") from None
+            break
+    bsdf.info["accuracy"] = {**estimate(bsdf, companions), "seconds": time.perf_counter() - t0}
+    return bsdf
+
+
+def solve_to_tolerance(scene: Scene, tol: float, solve, log=None):
+    """Solve ``scene`` on the smallest rung of :data:`LADDER` whose error estimate is at most
+    ``tol`` (relative L2 of bin energies, worst incidence).
+
+    Parameters
+    ----------
+    scene : Scene
+    tol : float
+        Requested relative error, in (0, 1).
+    solve : callable
+        ``solve(scene) -> BSDF``: the solver (with the caller's options).
+    log : callable, optional
+        ``log(str)`` for a line per rung.
+
+    Returns
+    -------
+    BSDF
+        With ``info["accuracy"]`` (:func:`estimate`, plus ``tol``, ``met`` and ``ladder``: the
+        rungs solved with their ``n``, ``md``, seconds and estimates).
+
+    Raises
+    ------
+    InfeasibleError
+        If the memory or time limits refuse a rung before the tolerance is met; the message
+        gives the best estimate reached and on which discretisation.
+    """
+    if not (isinstance(tol, (int, float)) and 0.0 < tol < 1.0):
+        raise ValueError(f"tol must be a number in (0, 1), got {tol!r}")
+    plan = make_plan(scene, refuse=False)
+    ladder, solved, best = [], [], None
+    for scale in LADDER:
+        rung = scaled(scene, plan, scale)
+        t0 = time.perf_counter()
+        try:
+            bsdf = solve(rung)
+        except InfeasibleError as exc:
+            if not solved:      # too coarse for a lobe (or over the limits: the last rung says)
+                if scale == LADDER[-1]:
+                    raise
+                continue
+            if best is None:
+                raise
+            raise InfeasibleError(
+                f"tol = {tol:g} not reached: the best estimate is {best[1]:.2g} at n = "
+                f"{best[0].info['n']}, md = {best[0].info['md']}; the next rung (n = "
+                f"{rung.discretization.n}, md = {rung.discretization.md}) is refused: {exc}; "
+                "raise LAYERSIM_MAX_MEMORY / LAYERSIM_MAX_SECONDS or ask for a larger tol"
+            ) from None
+        step = {"n": bsdf.info["n"], "md": bsdf.info["md"],
+                "seconds": time.perf_counter() - t0, "estimate": None}
+        ladder.append(step)
+        solved.append(bsdf)
+        if len(solved) >= 3:
+            acc = estimate(bsdf, [solved[-2], solved[-3]])
+            step["estimate"] = acc["estimate"]
+            if log is not None:
+                log(f"n = {step['n']}, md = {step['md']}: estimated error "
+                    f"{acc['estimate']:.2g} ({step['seconds']:.2f} s)")
+            if best is None or acc["estimate"] < best[1]:
+                best = (bsdf, acc["estimate"])
+            if acc["estimate"] <= tol:
+                bsdf.info["accuracy"] = {**acc, "tol": tol, "met": True, "ladder": ladder}
+                return bsdf
+            del solved[0]
+    bsdf, est = best
+    raise InfeasibleError(
+        f"tol = {tol:g} not reached within {LADDER[-1]:.2g} times the planned n and md: the "
+        f"best estimate is {est:.2g} at n = {bsdf.info['n']}, md = {bsdf.info['md']}; ask for "
+        "a larger tol, or set n and md in [discretization]")

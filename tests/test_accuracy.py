@@ -1,0 +1,74 @@
+"""Error estimates and solves to a tolerance (layersim.accuracy) against refined solves."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import layersim
+from layersim import accuracy
+from layersim.plan import make_plan
+
+GLASS_ON_WHITE = {"layer": [{"kind": "dielectric", "ior": 1.5, "roughness": 0.3},
+                            {"kind": "diffuse", "albedo": 0.5}]}
+
+
+def _measured(scene, bsdf, scale=2.0) -> float:
+    """Worst-angle relative L2 error of ``bsdf``'s bin energies against a solve at ``scale``
+    times its n and md."""
+    plan = replace(make_plan(scene), n=bsdf.info["n"], md=bsdf.info["md"])
+    ref = layersim.solve(accuracy.scaled(scene, plan, scale))
+    return float(accuracy.relative_errors(accuracy.bin_table(bsdf),
+                                          accuracy.bin_table(ref)).max())
+
+
+def test_solve_to_tolerance_meets_it_and_the_estimate_bounds_the_error():
+    """tol = 1e-2 on rough glass over a Lambertian base: the ladder stops at the first rung
+    whose estimate is below tol; the error against a solve at twice its n and md is below
+    the estimate (which is conservative) and so below tol."""
+    scene = layersim.Scene.from_dict(GLASS_ON_WHITE)
+    bsdf = layersim.solve(scene, tol=1e-2)
+    acc = bsdf.info["accuracy"]
+    assert acc["met"] and bsdf.error_estimate == acc["estimate"] <= 1e-2
+    assert len(acc["ladder"]) >= 3 and acc["ladder"][-1]["n"] == bsdf.info["n"]
+    # every earlier rung's estimate was above tol (the ladder stops at the first that meets it)
+    assert all(step["estimate"] > 1e-2 for step in acc["ladder"][2:-1])
+    err = _measured(scene, bsdf)
+    assert err <= bsdf.error_estimate, (err, bsdf.error_estimate)
+
+
+def test_error_estimate_of_a_plain_solve(tmp_path):
+    """error_estimate=True keeps the planner's discretisation and adds the estimate, which
+    survives saving; a plain solve has none."""
+    scene = layersim.Scene.from_dict({**GLASS_ON_WHITE, "discretization": {"n": 64, "md": 128}})
+    plain = layersim.solve(scene)
+    assert plain.error_estimate is None
+    bsdf = layersim.solve(scene, error_estimate=True)
+    assert bsdf.info["n"] == 64 and bsdf.info["md"] == 128
+    assert bsdf.info["accuracy"]["companions"] == [{"n": 46, "md": 91}, {"n": 32, "md": 64}]
+    assert 0 < bsdf.error_estimate < 0.1
+    assert np.allclose(bsdf.albedo([0, 0, 1])[0], plain.albedo([0, 0, 1])[0], atol=1e-14)
+    assert _measured(scene, bsdf) <= bsdf.error_estimate
+    back = layersim.BSDF.load(bsdf.save(tmp_path / "g.lsim"))
+    assert back.error_estimate == bsdf.error_estimate
+
+
+def test_tolerance_input_is_checked():
+    with pytest.raises(layersim.SceneError, match="discretization.tol"):
+        layersim.Scene.from_dict({**GLASS_ON_WHITE, "discretization": {"tol": 1e-3, "n": 64}})
+    with pytest.raises(layersim.SceneError, match="discretization.tol"):
+        layersim.Scene.from_dict({**GLASS_ON_WHITE, "discretization": {"tol": 0}})
+    with pytest.raises(ValueError, match="tol"):
+        layersim.solve(GLASS_ON_WHITE, tol=1.5)
+    with pytest.raises(ValueError, match="like"):
+        like = layersim.solve({**GLASS_ON_WHITE, "discretization": {"n": 32, "md": 16}})
+        layersim.solve(GLASS_ON_WHITE, like=like, error_estimate=True)
+
+
+def test_unreachable_tolerance_is_refused_with_the_best_estimate():
+    """A tolerance below what the ladder can reach within the limits ends in a refusal that
+    names the best estimate and its discretisation."""
+    scene = layersim.Scene.from_dict(GLASS_ON_WHITE)
+    with layersim.config.configure(max_memory=24 * 2**20):
+        with pytest.raises(layersim.InfeasibleError, match="not reached.*best estimate"):
+            layersim.solve(scene, tol=1e-9)
