@@ -141,7 +141,9 @@ class Discretization:
     difference (cosine orders 0..md-1, or complex modes -(md-1)..md-1); ms : coupling half-width
     in the azimuth sum (modes -ms..ms; 0 for isotropic stacks); quadrature : one of
     :data:`QUADRATURES`; tol : relative error of bin energies that :func:`layersim.solve`
-    solves to (:mod:`layersim.accuracy`; not with ``n`` or ``md``).
+    solves to (:mod:`layersim.accuracy`; not with ``n`` or ``md``); theta_full : elevation
+    (degrees, 80 by default) within which ordinate pairs keep every Fourier order their lobes
+    need (:mod:`layersim.plan.orders`; closer to 90 keeps grazing peaks sharp at more orders).
     """
 
     n: int | None = None
@@ -149,6 +151,7 @@ class Discretization:
     ms: int | None = None
     quadrature: str | None = None
     tol: float | None = None
+    theta_full: float | None = None
 
 
 # --------------------------------------------------------------------------------------------
@@ -349,7 +352,7 @@ _REQUIRED = {
 }
 _TOP_FIELDS = {"layer", "stack", "discretization"}
 _STACK_FIELDS = {"top_ior", "name"}
-_DISC_FIELDS = {"n", "md", "ms", "quadrature", "tol"}
+_DISC_FIELDS = {"n", "md", "ms", "quadrature", "tol", "theta_full"}
 
 
 class _Ctx:
@@ -530,7 +533,7 @@ def _parse_scene(data: Mapping[str, Any], source: str | None, default_name: str)
     unknown = set(disc_raw) - _DISC_FIELDS
     if unknown:
         raise SceneError(f"unknown field '{sorted(unknown)[0]}' in [discretization] (allowed: "
-                         "n, md, ms, quadrature, tol)", source=source)
+                         "n, md, ms, quadrature, tol, theta_full)", source=source)
     dctx = _Ctx(source)
     n = disc_raw.get("n")
     if n is not None:
@@ -560,6 +563,11 @@ def _parse_scene(data: Mapping[str, Any], source: str | None, default_name: str)
             raise dctx.error("discretization.tol", "chooses n and md itself: give tol, or n "
                                                    "and md, not both")
         tol = float(tol)
+    theta_full = disc_raw.get("theta_full")
+    if theta_full is not None:
+        theta_full = _real(dctx, "discretization.theta_full", theta_full, 0.0, 90.0,
+                           lo_open=True, hi_open=True)
     return Scene(stacks=stacks, top_ior=top_ior,
-                 discretization=Discretization(n=n, md=md, ms=ms, quadrature=quad, tol=tol),
+                 discretization=Discretization(n=n, md=md, ms=ms, quadrature=quad, tol=tol,
+                                               theta_full=theta_full),
                  name=name, source=source)

@@ -102,11 +102,12 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
                     memory_bytes=memory, overridden=overridden,
                     representation=representation, refused=str(exc), boundary=survey.boundary,
                     lobes=survey.lobes, near_specular=survey.near_specular)
-    lengths = interface_lengths(grid, mono, layers)
+    theta_full = disc.theta_full or THETA_FULL
+    lengths = interface_lengths(grid, mono, layers, theta_full)
     md_needed = max([survey.media_orders] + [lp.orders for lp, _ in lengths])
     md = choose_md(disc, md_needed, notes, overridden)
     ms = choose_ms(disc, layers, ms_needed, notes, overridden)
-    truncation_notes(lengths, md, notes)
+    truncation_notes(lengths, md, notes, theta_full)
     memory = estimate_bytes(layers, lengths, grid, md, survey.media_orders, scene.channels,
                             anisotropic)
     seconds = work = None

@@ -30,12 +30,14 @@ THETA_FULL = 80.0
 MD_MAX = MAX_ORDERS
 
 
-def interface_lengths(grid: Grid, mono: Scene, layers: list) -> list:
+def interface_lengths(grid: Grid, mono: Scene, layers: list,
+                      theta_full: float = THETA_FULL) -> list:
     """The pre-pass of every projected interface of ``mono`` (one channel): a list of
     ``(LayerPlan, lengths)``, with each layer plan's ``orders`` set to the longest series of
-    its pairs within :data:`THETA_FULL`. Coupled layers (``ms > 0``) are measured at their
-    ``ms`` and :data:`layersim.aniso.plan.COUPLED_RELERR`."""
-    mu_full = math.cos(math.radians(THETA_FULL))
+    its pairs within ``theta_full`` degrees of the normal (:data:`THETA_FULL`, or the scene's
+    ``[discretization] theta_full``). Coupled layers (``ms > 0``) are measured at their ``ms``
+    and :data:`layersim.aniso.plan.COUPLED_RELERR`."""
+    mu_full = math.cos(math.radians(theta_full))
     out = []
     for lp in layers:
         if not lp.action.startswith("project"):
@@ -74,12 +76,13 @@ def choose_md(disc: Discretization, md_needed: int, notes: list, overridden: dic
     return md
 
 
-def truncation_notes(lengths: list, md: int, notes: list) -> None:
-    """A note per interface whose pairs (beyond :data:`THETA_FULL`) need more than ``md``
+def truncation_notes(lengths: list, md: int, notes: list,
+                     theta_full: float = THETA_FULL) -> None:
+    """A note per interface whose pairs (beyond ``theta_full`` degrees) need more than ``md``
     orders (``lengths``: the ``(LayerPlan, lengths)`` of :func:`interface_lengths`)."""
     for lp, pair_lengths in lengths:
         trunc = int(np.count_nonzero(pair_lengths > md))
         if trunc:
-            notes.append(f"layer {lp.index}: {trunc} ordinate pairs beyond {THETA_FULL:g} deg "
+            notes.append(f"layer {lp.index}: {trunc} ordinate pairs beyond {theta_full:g} deg "
                          f"would need up to {int(pair_lengths.max())} orders; they keep {md} "
                          "(tapered; energy unaffected)")
