@@ -70,7 +70,10 @@ def test_quick_bench_writes_results_report_and_plots(tmp_path):
     assert len(errors) == 2 and errors[1] < errors[0] < 1e-2   # converges with n
     for row in scene["solver"]:
         assert {"n", "md", "ms", "seconds", "error"} <= set(row)
+    (tol,) = scene["tolerance"]
+    assert tol["tol"] == 1e-2 and tol["estimate"] <= 1e-2 and tol["error"] <= tol["estimate"]
     report = (tmp_path / "report.md").read_text()
     assert "vandehulst_slab" in report and "![vandehulst_slab_error_time.png]" in report
+    assert "| tol | n | md |" in report
     assert (tmp_path / "vandehulst_slab_error_time.png").stat().st_size > 1000
     assert results["stability"] == []

@@ -98,6 +98,7 @@ def _plots(out: Path, s: dict, settings) -> list[str]:
     plt = _plt()
     names = []
     solver = [r for r in s.get("solver", []) if "error" in r]
+    tols = [r for r in s.get("tolerance", []) if "error" in r]
     mc = [r for r in s.get("montecarlo", []) if "error" in r]
     if solver or mc:
         fig, ax = plt.subplots(figsize=(5.5, 4))
@@ -107,6 +108,12 @@ def _plots(out: Path, s: dict, settings) -> list[str]:
             for r in solver:
                 ax.annotate(f"n={r['n']}", (r["seconds"], r["error"]), fontsize=7,
                             textcoords="offset points", xytext=(4, 4))
+        if tols:
+            ax.loglog([r["seconds"] for r in tols], [r["error"] for r in tols], "D:",
+                      label="solver to a tolerance (error; tol marked)")
+            for r in tols:
+                ax.annotate(f"tol {r['tol']:g}", (r["seconds"], r["error"]), fontsize=7,
+                            textcoords="offset points", xytext=(4, -10))
         for backend in sorted({r["backend"] for r in mc}):
             rows = [r for r in mc if r["backend"] == backend]
             ax.loglog([r["seconds"] for r in rows], [r["error"] for r in rows], "s--",
@@ -246,6 +253,16 @@ def _markdown(results: dict, images: dict, throughput) -> str:
                 lines.append(f"| {r['n']} | {r['md']} | {r.get('ms', 0)} | "
                              f"{r['seconds']:.2f} | {_fmt(r['error'])} | "
                              f"{_fmt(r['albedo_error'])} |")
+            lines.append("")
+        if s.get("tolerance"):
+            lines += ["| tol | n | md | seconds | estimate | error |",
+                      "|---:|---:|---:|---:|---:|---:|"]
+            for r in s["tolerance"]:
+                if "refused" in r:
+                    lines.append(f"| {r['tol']:g} | refused | | | | {r['refused']} |")
+                    continue
+                lines.append(f"| {r['tol']:g} | {r['n']} | {r['md']} | {r['seconds']:.2f} | "
+                             f"{_fmt(r['estimate'])} | {_fmt(r['error'])} |")
             lines.append("")
         if s.get("montecarlo"):
             lines += ["| MC backend | paths | seconds | paths/s | error | stderr | in 3 sigma |",

@@ -38,6 +38,7 @@ class Settings:
     n_mu: int = 18
     n_phi: int = 36
     scales: tuple = (0.5, 0.75, 1.0, 1.5)
+    tols: tuple = (1e-2, 1e-3, 1e-4)
     reference_scale: float = 2.0
     particles: tuple = (10_000, 100_000, 1_000_000, 10_000_000)
     check_particles: int = 10_000_000
@@ -46,7 +47,8 @@ class Settings:
 
     @classmethod
     def quick(cls) -> "Settings":
-        return cls(angles=(30.0,), n_mu=9, n_phi=18, scales=(0.5, 1.0), reference_scale=1.5,
+        return cls(angles=(30.0,), n_mu=9, n_phi=18, scales=(0.5, 1.0), tols=(1e-2,),
+                   reference_scale=1.5,
                    particles=(10_000, 100_000), check_particles=200_000)
 
     @property
@@ -129,6 +131,25 @@ def _within(bins, ref, sigma, particles, k=3.0) -> float:
     return float(np.mean(ok[populated]))
 
 
+def _tolerance_row(scene: Scene, tol: float, s: Settings, ref_bins, ref_alb, log) -> dict:
+    """A solve to ``tol`` (:mod:`layersim.accuracy`): its discretisation, time, estimate and
+    error against the reference (which a rung at or above the reference's scale can reach)."""
+    try:
+        t0 = time.perf_counter()
+        b = solve(scene, tol=tol)
+        sec = time.perf_counter() - t0
+    except LayersimError as exc:
+        log(f"  solver tol {tol:g}: {exc}")
+        return {"tol": tol, "refused": str(exc)}
+    bins, alb = _solver_bins(b, s)
+    row = {"tol": tol, "n": b.info["n"], "md": b.info["md"], "seconds": sec,
+           "estimate": b.error_estimate, "error": _error(bins, ref_bins),
+           "albedo_error": _albedo_error(alb, ref_alb)}
+    log(f"  solver tol {tol:g}: n={row['n']} md={row['md']} {sec:7.2f} s  estimate "
+        f"{row['estimate']:.2e}  error {row['error']:.2e}")
+    return row
+
+
 def run_scene(path: Path, s: Settings, log=print) -> dict:
     """Benchmark one scene file; returns the ``scenes[]`` entry of results.json."""
     scene = Scene.from_toml(path)
@@ -191,6 +212,8 @@ def run_scene(path: Path, s: Settings, log=print) -> dict:
             out["solver"].append(row)
             out.setdefault("_solver_bins", {})[scale] = bins
             log(f"  solver n={row['n']:4d} md={row['md']:5d}: {sec:7.2f} s  error {row['error']:.2e}")
+        out["tolerance"] = [_tolerance_row(scene, tol, s, ref_bins, ref_alb, log)
+                            for tol in s.tols]
     # ---- Monte Carlo ladder -----------------------------------------------------------
     if mc is not None:
         for backend in s.backends:
