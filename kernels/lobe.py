@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from . import physics
+from . import physics, sampling
 from .runtime import device_for, ensure_init
 
 
@@ -53,6 +53,28 @@ def _facet_kernel(wi: wp.array(dtype=wp.vec3d), m: wp.array(dtype=wp.vec3d), eta
     trans[q, j] = (one - f) * physics.smith_g1(t, n, au, av, dist)
 
 
+@wp.kernel
+def _sample_kernel(wi: wp.array(dtype=wp.vec3d), u: wp.array2d(dtype=wp.float64),
+                   au: wp.float64, av: wp.float64, dist: int, wo: wp.array(dtype=wp.vec3d)):
+    q = wp.tid()
+    m = sampling.sample_vndf(wi[q], au, av, dist, u[q, 0], u[q, 1], u[q, 2])
+    wo[q] = sampling.reflect(wi[q], m)
+
+
+@wp.kernel
+def _pdf_kernel(wi: wp.array(dtype=wp.vec3d), wo: wp.array(dtype=wp.vec3d), au: wp.float64,
+                av: wp.float64, dist: int, out: wp.array(dtype=wp.float64)):
+    q = wp.tid()
+    zero = wp.float64(0.0)
+    out[q] = zero
+    h = wi[q] + wo[q]
+    if wi[q][2] <= zero or wo[q][2] <= zero or wp.dot(h, h) <= zero:
+        return
+    m = wp.normalize(h)
+    # reflection maps the visible-normal density to directions with 1 / (4 |wo.m|)
+    out[q] = sampling.vndf_pdf(wi[q], m, au, av, dist) / (wp.float64(4.0) * wp.dot(wo[q], m))
+
+
 def _vec(a) -> wp.array:
     return wp.array(np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3), dtype=wp.vec3d,
                     device=device_for("cpu"))
@@ -94,3 +116,36 @@ def facet_events(wi, m, eta: float, alpha_u: float, alpha_v: float, distribution
                       int(physics.DISTRIBUTION_CODES[distribution])],
               outputs=[*outs, wo], device=dev)
     return (*(o.numpy() for o in outs), wo.numpy())
+
+
+def sample_reflection(wi, u, alpha_u: float, alpha_v: float, distribution: str) -> np.ndarray:
+    """Directions ``wo`` (Q, 3) reflected about visible microfacet normals drawn for ``wi``
+    (Q, 3, upper hemisphere, tangent frame) with uniforms ``u`` (Q, 3)
+    (:func:`sampling.sample_vndf`); ``wo`` may point below the surface (no sample)."""
+    ensure_init()
+    wi = np.asarray(wi, float).reshape(-1, 3)
+    dev = device_for("cpu")
+    wo = wp.zeros(wi.shape[0], dtype=wp.vec3d, device=dev)
+    if wi.shape[0]:
+        wp.launch(_sample_kernel, dim=wi.shape[0],
+                  inputs=[_vec(wi), wp.array(np.ascontiguousarray(u, dtype=np.float64),
+                                             dtype=wp.float64, device=dev),
+                          float(alpha_u), float(alpha_v),
+                          int(physics.DISTRIBUTION_CODES[distribution])],
+                  outputs=[wo], device=dev)
+    return wo.numpy()
+
+
+def reflection_pdf(wi, wo, alpha_u: float, alpha_v: float, distribution: str) -> np.ndarray:
+    """Solid-angle density (1/sr) of :func:`sample_reflection` at ``wo`` (Q, 3) for ``wi``
+    (Q, 3): ``D_wi(m) / (4 |wo.m|)`` at the half vector; 0 unless both lie above."""
+    ensure_init()
+    wi = np.asarray(wi, float).reshape(-1, 3)
+    dev = device_for("cpu")
+    out = wp.zeros(wi.shape[0], dtype=wp.float64, device=dev)
+    if wi.shape[0]:
+        wp.launch(_pdf_kernel, dim=wi.shape[0],
+                  inputs=[_vec(wi), _vec(wo), float(alpha_u), float(alpha_v),
+                          int(physics.DISTRIBUTION_CODES[distribution])],
+                  outputs=[out], device=dev)
+    return out.numpy()

@@ -34,7 +34,7 @@ import math
 import numpy as np
 
 from .kernels.fresnel import fresnel
-from .kernels.lobe import facet_events, microfacet_reflection
+from .kernels.lobe import facet_events, microfacet_reflection, reflection_pdf, sample_reflection
 
 #: A dielectric top interface whose narrower roughness ``min(alpha_u, alpha_v)`` is at most
 #: this is solved as a near-specular boundary: its exact projection over rough gold costs
@@ -134,6 +134,7 @@ class NearSpecularLobe:
         self.m = m / np.linalg.norm(m, axis=1)[:, None]
         self.w = np.repeat(wu, nphi) / nphi
         self._table = None
+        self._reflected = None
         self._flipped = None
         self._fine = None
 
@@ -155,6 +156,18 @@ class NearSpecularLobe:
                                              self.eta, self.au, self.av, self.distribution,
                                              self.k)
         return out
+
+    def sample(self, wi: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Directions (Q, 3) reflected about visible normals drawn for ``wi`` (Q, 3, above)
+        with uniforms ``u`` (Q, 3); the density is :meth:`pdf` (the Fresnel factor and the
+        shadowing of the reflected direction stay in the sample's weight)."""
+        wo = sample_reflection(self._frame(wi), u, self.au, self.av, self.distribution)
+        return self._frame(wo, sign=-1.0)
+
+    def pdf(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """Solid-angle density (1/sr) of :meth:`sample` at ``wo`` (Q, 3)."""
+        return reflection_pdf(self._frame(wi), self._frame(wo), self.au, self.av,
+                              self.distribution)
 
     def _events(self, wi: np.ndarray):
         vis, refl, trans, wo = facet_events(self._frame(wi), self.m, self.eta, self.au,
@@ -209,6 +222,15 @@ class NearSpecularLobe:
             self._flipped = NearSpecularLobe(1.0 / self.eta, self.au, self.av,
                                               self.distribution, self.rotation)
         return self._flipped
+
+    def reflected(self, x) -> np.ndarray:
+        """Reflected energy at outside cosines ``x``, averaged over the incident azimuth and
+        interpolated in a table (the share of the lobe when a BSDF with it is sampled,
+        :class:`layersim.sampling.LobeSampler`)."""
+        if self._reflected is None:
+            nodes = np.linspace(0.0, 1.0, _X_TABLE) ** 2
+            self._reflected = (nodes, self._average(nodes, 0))
+        return np.interp(np.asarray(x, float), *self._reflected)
 
     def transmittance(self, x) -> np.ndarray:
         """Transmitted energy at outside cosines ``x``, averaged over the incident azimuth

@@ -69,7 +69,7 @@ import weakref
 
 import numpy as np
 
-from .channels import luminance_series
+from .channels import luminance, luminance_series
 from .directions import azimuth, direction_pairs, unit_directions
 from .interpolation import spline_weights
 from .kernels import fourier_sample
@@ -82,11 +82,9 @@ _SAMPLERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 def sampler_for(bsdf) -> "FourierSampler":
     """The (cached) sampler of a BSDF (anisotropic ones: see the module docstring)."""
     s = _SAMPLERS.get(bsdf)
-    if any(op.lobes for op in bsdf.operators):
-        raise NotImplementedError(
-            "sampling a near-specular interface (layersim.lobe) is not implemented: its "
-            "reflection lobe would be missed; evaluate it with eval / albedo / bin_energies, "
-            "or use layersim.montecarlo")
+    if s is None and any(op.lobes for op in bsdf.operators):
+        s = LobeSampler(bsdf)
+        _SAMPLERS[bsdf] = s
     if s is None and any(op.boundary for op in bsdf.operators):
         s = BoundarySampler(bsdf)
         _SAMPLERS[bsdf] = s
@@ -155,6 +153,91 @@ class BoundarySampler:
         wo_in = self._to_inside(wo)
         pdf = np.asarray(self.inner.pdf(self._to_inside(wi), wo_in), float).reshape(-1)
         return (pdf * self._jacobian(wo, wo_in)).reshape(shape)
+
+
+class LobeSampler:
+    """Sampling of a BSDF with a near-specular lobe (:mod:`layersim.lobe`): a mixture of the
+    lobe's own sampling (visible normals, reflected: :meth:`layersim.lobe.NearSpecularLobe.
+    sample`), chosen with probability ``P(wi)``, the lobe's share of the (luminance) energy
+    leaving from ``wi`` outside the deltas, and the sampler of the rest of the BSDF (the same
+    operators without the lobe). The density is ``P pdf_lobe + (1 - P) pdf_rest`` and the weight
+    the whole ``eval`` over it, so the estimator is unbiased, and exact in the lobe's share
+    where the rest carries no energy (a bare conductor).
+
+    ``u[..., 0]`` chooses the component and is reused, rescaled, as the lobe's first variate;
+    the lobe's Box-Muller angle (Beckmann) takes the low-order digits of ``u[..., 1]``."""
+
+    def __init__(self, bsdf):
+        self.target = bsdf
+        self.lobes = [bsdf.evaluator(c).lobes["top"] for c in range(bsdf.channels)]
+        rest = []
+        for op in bsdf.operators:
+            op = copy.copy(op)
+            op.lobes = {}
+            rest.append(op)
+        self.rest_bsdf = type(bsdf)(rest, info=bsdf.info)
+        self._rest = None
+
+    @property
+    def rest(self):
+        if self._rest is None:
+            self._rest = sampler_for(self.rest_bsdf)
+        return self._rest
+
+    def _share(self, wi: np.ndarray) -> np.ndarray:
+        """``P(wi)`` (Q,): the lobe's energy (azimuth average) over all the energy leaving
+        outside the deltas; any ``P`` keeps the estimator unbiased, this one makes the weights
+        nearly constant."""
+        lobe = np.zeros((wi.shape[0], len(self.lobes)))
+        total = np.zeros_like(lobe)
+        top = wi[:, 2] > 0
+        for c, lb in enumerate(self.lobes):
+            ev = self.target.evaluator(c)
+            R, T = ev.albedo(wi)
+            deltas = sum(e for e, _ in ev.specular(wi).values())
+            total[:, c] = R + T - deltas
+            if top.any():
+                lobe[top, c] = lb.reflected(wi[top, 2])
+        if len(self.lobes) == 3:
+            lobe, total = luminance(lobe), luminance(total)
+        else:
+            lobe, total = lobe[:, 0], total[:, 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            share = np.where(total > 0, lobe / np.where(total > 0, total, 1.0), 0.0)
+        return np.clip(share, 0.0, 1.0)
+
+    def sample(self, wi, u):
+        """As :meth:`FourierSampler.sample`."""
+        wi, u, shape = _sample_inputs(wi, u)
+        P = self._share(wi)
+        pick = u[:, 0] < P
+        wo = np.zeros_like(wi)
+        if pick.any():
+            u0 = u[pick, 0] / P[pick]
+            u1 = u[pick, 1]
+            u2 = np.modf(u1 * 4096.0)[0]
+            wo[pick] = self.lobes[0].sample(wi[pick], np.stack([u0, u1, u2], axis=1))
+        rest = ~pick & (P < 1)
+        if rest.any():
+            v = np.stack([(u[rest, 0] - P[rest]) / (1.0 - P[rest]), u[rest, 1]], axis=1)
+            wo[rest] = self.rest.sample(wi[rest], v)[0]
+        valid = np.linalg.norm(wo, axis=1) > 0
+        pdf = np.zeros(wi.shape[0])
+        pdf[valid] = self._pdf(wi[valid], wo[valid], P[valid])
+        return _sample_result(self.target, wi, wo, pdf, shape)
+
+    def _pdf(self, wi: np.ndarray, wo: np.ndarray, P: np.ndarray) -> np.ndarray:
+        out = P * self.lobes[0].pdf(wi, wo)
+        rest = P < 1
+        if rest.any():
+            out[rest] += (1.0 - P[rest]) * np.asarray(
+                self.rest.pdf(wi[rest], wo[rest]), float).reshape(-1)
+        return out
+
+    def pdf(self, wi, wo) -> np.ndarray:
+        """As :meth:`FourierSampler.pdf`."""
+        wi, wo, shape = direction_pairs(wi, wo)
+        return self._pdf(wi, wo, self._share(wi)).reshape(shape)
 
 
 def _uniforms(u) -> np.ndarray:
