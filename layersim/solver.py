@@ -17,6 +17,7 @@ from .bsdf import BSDF, channel_pairs
 from .config import settings
 from .errors import InfeasibleError
 from .ingredients import diffuse_operator, interface_operator, medium_operator
+from .ingredients.compensation import compensate
 from .ingredients.aniso_microfacet import AnisoProjectionStats, aniso_interface_operator
 from .ingredients.microfacet import ProjectionStats
 from .ingredients.numeric import numeric_interface_operator
@@ -72,6 +73,8 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
                                             device=device)
         else:
             op = interface_operator(grid, plan.md, layer, eta_above, stats)
+        op, note = compensate(op, layer, eta_above)
+        notes += [f"layer {i}: {note}"] if note else []
         notes += _check_energy(op, i, layer, plan)
         return op
     if isinstance(layer, Medium):
@@ -298,6 +301,9 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
         "nnz": sum(op.nnz() for op in stacks),
         "memory_bytes": sum(op.memory_bytes() for op in stacks),
         "notes": notes,
+        "energy_compensation": {i: layer.energy_compensation
+                                for i, layer in enumerate(scene.channel(0).layers)
+                                if getattr(layer, "energy_compensation", "none") != "none"},
     }
     if verbose:
         s = info["seconds"]

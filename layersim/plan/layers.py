@@ -118,7 +118,8 @@ def _interface(scene: Scene, i: int, layer, survey: Survey) -> None:
     else:
         survey.layers.append(LayerPlan(i, kind, "project",
                                        f"{layer.distribution} alpha={layer.alpha_u:g}, relative "
-                                       f"index {_fmt_eta(eta_rel)}", width=width))
+                                       f"index {_fmt_eta(eta_rel)}"
+                                       + compensation_text(layer), width=width))
 
 
 def _medium(scene: Scene, i: int, layer, survey: Survey) -> None:
@@ -245,8 +246,10 @@ def _near_specular(scene: Scene, i: int, layer, survey: Survey) -> bool:
     base = scene.channel(0).layers[-1]
     wide_base = isinstance(base, Diffuse) or (
         isinstance(base, Conductor) and min(base.alpha_u, base.alpha_v) > NEAR_SPECULAR_ALPHA)
+    # a compensated coat is projected exactly: the split's lobe has no compensation term
     if (not isinstance(layer, Dielectric) or i != 0 or lo > NEAR_SPECULAR_ALPHA
-            or hi > NEAR_SPECULAR_WIDE_MAX or not wide_base):
+            or hi > NEAR_SPECULAR_WIDE_MAX or not wide_base
+            or layer.energy_compensation != "none"):
         return False
     try:
         _smooth(scene, i, layer, survey)
@@ -263,6 +266,16 @@ def _near_specular(scene: Scene, i: int, layer, survey: Survey) -> bool:
                            "rotation": layer.rotation}
     survey.near_specular = (*survey.near_specular, i)
     return True
+
+
+def compensation_text(layer) -> str:
+    """The plan's words for a rough interface's energy compensation (empty for none)."""
+    mode = layer.energy_compensation
+    if mode == "none":
+        return ""
+    what = {"multiple-scattering": "Kulla & Conty 2017 multiple-scattering lobe",
+            "layerlab": "layerlab's near-diffuse correction"}[mode]
+    return f"; energy compensation {mode!r} ({what}, order 0, solver and Monte Carlo)"
 
 
 def interface_width(layer, eta_rel: complex) -> tuple[float, str]:
