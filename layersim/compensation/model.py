@@ -100,7 +100,8 @@ def layerlab_conductor(e1: np.ndarray, f_avg: float) -> Lobes:
                           {"E1_avg": e_avg, "F_avg": f_avg, "factor": factor})
 
 
-def multiple_scattering_dielectric(a: tables.Albedos, eta: float) -> Lobes:
+def multiple_scattering_dielectric(a: tables.Albedos, eta: float,
+                                   integral=tables.hemispherical_integral) -> Lobes:
     """Reciprocal, energy-conserving compensation of a rough dielectric interface.
 
     Separable lobes in the losses (the form of Kulla & Conty 2017's ``f_ms``):
@@ -113,11 +114,15 @@ def multiple_scattering_dielectric(a: tables.Albedos, eta: float) -> Lobes:
     bottom's share ``tau_b = tau_t A_t / (eta^2 A_b)`` follows from reciprocity and is capped at
     1 (then ``tau_t`` is lowered to keep both equations). ``E + L = 1`` holds on both sides at
     every node, and hence wherever the tables are interpolated.
+
+    ``a`` holds the albedos at some nodes and ``integral(v)`` is ``2 pi int v mu dmu`` over
+    them: the table nodes (the walk's term), or the solver's ordinates with its quadrature
+    (:mod:`layersim.ingredients.compensation`).
     """
     lt, lb = _loss(a.r_top, a.t_top), _loss(a.r_bottom, a.t_bottom)
-    at, ab = tables.hemispherical_integral(lt), tables.hemispherical_integral(lb)
-    r_avg = tables.hemispherical_integral(a.r_top)
-    t_avg = tables.hemispherical_integral(a.t_top)
+    at, ab = integral(lt), integral(lb)
+    r_avg = integral(a.r_top)
+    t_avg = integral(a.t_top)
     tau_t = _ratio(t_avg, r_avg + t_avg)
     tau_b = _ratio(tau_t * at, eta * eta * ab)
     if tau_b > 1.0:
@@ -131,7 +136,7 @@ def multiple_scattering_dielectric(a: tables.Albedos, eta: float) -> Lobes:
                   "transmitted_share_top": tau_t, "transmitted_share_bottom": tau_b})
 
 
-def layerlab(a: tables.Albedos, eta: float) -> Lobes:
+def layerlab(a: tables.Albedos, eta: float, integral=tables.hemispherical_integral) -> Lobes:
     """layerlab's near-diffuse correction of a rough dielectric (``Layer::setMicrofacet`` with
     ``conserveEnergy``; Jakob's layerlab tutorial sec. 6.2), in continuous form.
 
@@ -141,13 +146,14 @@ def layerlab(a: tables.Albedos, eta: float) -> Lobes:
     with ``D = max(V(A_bt), V(A_tb) / eta^2)`` (as much of the wanted energy as reciprocity and
     conservation allow); what is still missing, ``A_t = 1 - R_t - T_t - A_tb V(A_bt) / D`` (and
     ``A_b``), goes into ``f_Rt = A_t A_t / V(A_t)`` and ``f_Rb = A_b A_b / V(A_b)``. The
-    compensated albedo is 1 from both sides wherever these are non-negative.
+    compensated albedo is 1 from both sides wherever these are non-negative. ``a`` and
+    ``integral`` as in :func:`multiple_scattering_dielectric`.
     """
     def share(r, t):
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.nan_to_num(_loss(r, t) * t / (r + t))
     atb, abt = share(a.r_top, a.t_top), share(a.r_bottom, a.t_bottom)
-    vtb, vbt = tables.hemispherical_integral(atb), tables.hemispherical_integral(abt)
+    vtb, vbt = integral(atb), integral(abt)
     d = max(vbt, vtb / eta ** 2)
     inv = _ratio(1.0, d)
     u = {"Ttb": atb * inv, "Tbt": abt * inv / eta ** 2}
@@ -156,10 +162,14 @@ def layerlab(a: tables.Albedos, eta: float) -> Lobes:
     added_b = abt * _ratio(vtb, eta ** 2 * d)
     at_ = _loss(a.r_top, a.t_top + added_t)
     ab_ = _loss(a.r_bottom, a.t_bottom + added_b)
-    u["Rt"] = at_ * _ratio(1.0, tables.hemispherical_integral(at_))
-    u["Rb"] = ab_ * _ratio(1.0, tables.hemispherical_integral(ab_))
+    u["Rt"] = at_ * _ratio(1.0, integral(at_))
+    u["Rb"] = ab_ * _ratio(1.0, integral(ab_))
     v.update(Rt=at_, Rb=ab_)
     return Lobes("layerlab", u, v, {"denominator": d})
+
+
+#: Dielectric terms by mode.
+DIELECTRIC = {"multiple-scattering": multiple_scattering_dielectric, "layerlab": layerlab}
 
 
 def lobes_for(mode: str, eta: complex, alpha: float, dist: str) -> Lobes | None:
@@ -174,9 +184,7 @@ def lobes_for(mode: str, eta: complex, alpha: float, dist: str) -> Lobes | None:
         build = multiple_scattering_conductor if mode == "multiple-scattering" \
             else layerlab_conductor
         return build(e1, f_avg)
-    a = tables.albedos(eta.real, 0.0, alpha, dist)
-    build = multiple_scattering_dielectric if mode == "multiple-scattering" else layerlab
-    return build(a, eta.real)
+    return DIELECTRIC[mode](tables.albedos(eta.real, 0.0, alpha, dist), eta.real)
 
 
 def layer_lobes(layer, eta_above: float) -> Lobes | None:
