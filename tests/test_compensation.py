@@ -8,7 +8,7 @@ import pytest
 import layersim
 from layersim import config
 from layersim.compensation import lobes_for, tables
-from layersim.errors import SceneError
+from layersim.errors import InfeasibleError, SceneError
 from layersim.scene import Conductor, Scene
 
 ANGLES = np.radians(np.arange(0, 86, 5))
@@ -144,7 +144,15 @@ def test_bad_input_names_the_field(data, field):
         layersim.Scene.from_dict(scene)
 
 
-def test_plan_and_info_say_what_was_used():
+def test_near_specular_coat_is_refused():
+    scene = layersim.Scene.from_dict({"stack": {"energy_compensation": "layerlab"}, "layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": 0.02},
+        {"kind": "diffuse", "albedo": 0.5}]})
+    with pytest.raises(InfeasibleError, match="layer 0 .*energy_compensation"):
+        layersim.make_plan(scene)
+
+
+def test_plan_and_info_say_what_was_used(tmp_path):
     scene = layersim.Scene.from_dict({"stack": {"energy_compensation": "layerlab"}, "layer": [
         {"kind": "dielectric", "ior": 1.5, "roughness": 0.3},
         {"kind": "conductor", "ior": [0.2, 3.0], "roughness": 0.3,
@@ -156,7 +164,10 @@ def test_plan_and_info_say_what_was_used():
                                                 "roughness": 0.3,
                                                 "energy_compensation": "layerlab"}]})
     bsdf = layersim.solve(gold)
-    assert bsdf.info["energy_compensation"] == {0: "layerlab"}
+    expected = [{"layer": 0, "kind": "conductor", "mode": "layerlab"}]
+    assert bsdf.info["energy_compensation"] == expected
+    bsdf.save(tmp_path / "gold.lsim")
+    assert layersim.BSDF.load(tmp_path / "gold.lsim").info["energy_compensation"] == expected
     assert any("energy compensation (layerlab)" in n for n in bsdf.info["notes"])
 
 

@@ -246,11 +246,17 @@ def _near_specular(scene: Scene, i: int, layer, survey: Survey) -> bool:
     base = scene.channel(0).layers[-1]
     wide_base = isinstance(base, Diffuse) or (
         isinstance(base, Conductor) and min(base.alpha_u, base.alpha_v) > NEAR_SPECULAR_ALPHA)
-    # a compensated coat is projected exactly: the split's lobe has no compensation term
     if (not isinstance(layer, Dielectric) or i != 0 or lo > NEAR_SPECULAR_ALPHA
-            or hi > NEAR_SPECULAR_WIDE_MAX or not wide_base
-            or layer.energy_compensation != "none"):
+            or hi > NEAR_SPECULAR_WIDE_MAX or not wide_base):
         return False
+    if layer.energy_compensation != "none":
+        # the split's lobe has no compensation term, and the exact projection of so narrow a
+        # lobe is far over the memory limit
+        raise InfeasibleError(
+            f"layer {i} (dielectric): field 'energy_compensation': a near-specular coat (alpha "
+            f"<= {NEAR_SPECULAR_ALPHA:g}) is solved by the smooth split, which has no "
+            "compensation term; set energy_compensation = \"none\" on this layer (at alpha "
+            "0.03 the hemispherical single-scattering loss is 4e-4)")
     try:
         _smooth(scene, i, layer, survey)
     except InfeasibleError:
