@@ -10,7 +10,8 @@ Prints
    directly, past the scene file's guard rail k <= 100) and k 100 (F_avg = 0.9996, where the
    multiple-scattering term rightly absorbs a little more): the largest |R - 1|;
 3. an 8-interface non-absorbing stack (rough glass/air interfaces, alpha 0.3): R + T;
-4. four stacks (the last one that of 3.), solver against PATHS Monte Carlo paths: R and T with their standard errors.
+4. four stacks (the last one that of 3.), solver against PATHS Monte Carlo paths: R and T
+   with their standard errors.
 """
 
 from __future__ import annotations

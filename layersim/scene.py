@@ -326,6 +326,8 @@ def _describe_layer(per_channel: tuple[Layer, ...]) -> str:
         extra = f", {layer.distribution}" if not layer.smooth else ""
         if layer.rotation:
             extra += f", rotated {math.degrees(layer.rotation):g} deg"
+        if layer.energy_compensation != "none" and not layer.smooth:
+            extra += f", energy compensation {layer.energy_compensation}"
         return f"{layer.kind} ior={ior}, {rough}{extra}"
     if isinstance(layer, Medium):
         return (f"medium tau={layer.tau:g}, albedo={vals(lambda x: f'{x.albedo:g}')}, "

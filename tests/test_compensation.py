@@ -47,20 +47,20 @@ def test_tables_match_the_solvers_projection():
     assert np.abs(tables.interpolate(a.r_top, mu) - alb).max() < 1e-3
 
 
-def test_perfect_mirror_conserves_energy():
+@pytest.mark.parametrize("dist, alpha", [("beckmann", 0.1), ("ggx", 0.6), ("beckmann", 1.0)])
+def test_perfect_mirror_conserves_energy(dist, alpha):
     # k = 1e6 (beyond the scene file's guard rail): Fresnel 1 - O(1e-6), F_avg = 1 - 4e-12
-    for dist in ("beckmann", "ggx"):
-        layer = Conductor(ior=complex(1.0, 1e6), alpha_u=0.6, alpha_v=0.6, distribution=dist,
-                          energy_compensation="multiple-scattering")
-        bsdf = layersim.solve(Scene(stacks=((layer,),)))
-        r, _ = bsdf.albedo(directions())
-        assert np.abs(r - 1).max() < 1e-3, (dist, r)
-        plain = layersim.solve(Scene(stacks=((Conductor(ior=complex(1.0, 1e6), alpha_u=0.6,
-                                                        alpha_v=0.6, distribution=dist),),)))
-        assert np.abs(plain.albedo(directions())[0] - 1).max() > 0.02      # the loss it fills
+    layer = Conductor(ior=complex(1.0, 1e6), alpha_u=alpha, alpha_v=alpha, distribution=dist,
+                      energy_compensation="multiple-scattering")
+    r, _ = layersim.solve(Scene(stacks=((layer,),))).albedo(directions())
+    assert np.abs(r - 1).max() < 1e-9, r
+    plain = Conductor(ior=complex(1.0, 1e6), alpha_u=alpha, alpha_v=alpha, distribution=dist)
+    r, _ = layersim.solve(Scene(stacks=((plain,),))).albedo(directions())
+    assert np.abs(r - 1).max() > 0.02                                  # the loss it fills
 
 
-@pytest.mark.parametrize("dist, alpha, eta", [("beckmann", 0.5, 1.5), ("ggx", 0.3, 2.2)])
+@pytest.mark.parametrize("dist, alpha, eta", [("beckmann", 0.5, 1.5), ("ggx", 0.3, 2.2),
+                                              ("beckmann", 0.1, 3.0), ("ggx", 1.0, 1.1)])
 def test_rough_dielectric_conserves_energy_from_both_sides(dist, alpha, eta):
     scene = layersim.Scene.from_dict({"stack": {"energy_compensation": "multiple-scattering"},
                                       "layer": [{"kind": "dielectric", "ior": eta,
@@ -68,7 +68,7 @@ def test_rough_dielectric_conserves_energy_from_both_sides(dist, alpha, eta):
     bsdf = layersim.solve(scene)
     for side in (1.0, -1.0):
         r, t = bsdf.albedo(directions(side))
-        assert np.abs(r + t - 1).max() < 1e-3, (side, r + t)
+        assert np.abs(r + t - 1).max() < 1e-9, (side, r + t)
 
 
 @pytest.mark.parametrize("mode", ["multiple-scattering", "layerlab"])

@@ -71,33 +71,37 @@ def _ratio(num: float, den: float) -> float:
     return num / den if den > 1e-15 else 0.0
 
 
-def conductor_term(e1: np.ndarray, factor: float, mode: str, summary: dict) -> Lobes:
+def conductor_term(e1: np.ndarray, factor: float, mode: str, summary: dict,
+                   integral=tables.hemispherical_integral) -> Lobes:
     """``f = factor (1 - E1(mu_i)) (1 - E1(mu_o)) / V`` on ``Rt``: the separable lobe of Kulla
     & Conty 2017 (their ``f_ms``, with ``V = pi (1 - E1_avg)``) times a Fresnel factor."""
     loss = _loss(e1, 0.0)
-    area = tables.hemispherical_integral(loss)
+    area = integral(loss)
     return Lobes(mode, {"Rt": loss * _ratio(factor, area)}, {"Rt": loss}, summary)
 
 
-def multiple_scattering_conductor(e1: np.ndarray, f_avg: float) -> Lobes:
+def multiple_scattering_conductor(e1: np.ndarray, f_avg: float,
+                                  integral=tables.hemispherical_integral) -> Lobes:
     """Kulla & Conty 2017 for a conductor: ``E1`` is the albedo with the Fresnel factor set to 1
     and the lobe is scaled by ``F_avg^2 E1_avg / (1 - F_avg (1 - E1_avg))`` (the energy of the
     light that leaves after two or more bounces on facets of average reflectance ``F_avg``,
     per unit of the lobe's albedo ``1 - E1_avg``). With ``F_avg = 1`` (a perfect mirror) the
-    interface conserves energy exactly: ``E1(mu) + (1 - E1(mu)) = 1``."""
-    e_avg = tables.hemispherical_integral(e1) / np.pi
+    interface conserves energy exactly: ``E1(mu) + (1 - E1(mu)) = 1``. ``e1`` is given at some
+    nodes and ``integral`` integrates over them (see :func:`multiple_scattering_dielectric`)."""
+    e_avg = integral(e1) / np.pi
     factor = _ratio(f_avg * f_avg * e_avg, 1.0 - f_avg * (1.0 - e_avg))
     return conductor_term(e1, factor, "multiple-scattering",
-                          {"E1_avg": e_avg, "F_avg": f_avg, "factor": factor})
+                          {"E1_avg": e_avg, "F_avg": f_avg, "factor": factor}, integral)
 
 
-def layerlab_conductor(e1: np.ndarray, f_avg: float) -> Lobes:
+def layerlab_conductor(e1: np.ndarray, f_avg: float,
+                       integral=tables.hemispherical_integral) -> Lobes:
     """layerlab's conductor correction: the same lobe scaled by ``F_avg E1_avg / (1 - F_avg (1 -
     E1_avg))`` (one factor ``F_avg`` fewer than Kulla & Conty's)."""
-    e_avg = tables.hemispherical_integral(e1) / np.pi
+    e_avg = integral(e1) / np.pi
     factor = _ratio(f_avg * e_avg, 1.0 - f_avg * (1.0 - e_avg))
     return conductor_term(e1, factor, "layerlab",
-                          {"E1_avg": e_avg, "F_avg": f_avg, "factor": factor})
+                          {"E1_avg": e_avg, "F_avg": f_avg, "factor": factor}, integral)
 
 
 def multiple_scattering_dielectric(a: tables.Albedos, eta: float,
@@ -168,8 +172,10 @@ def layerlab(a: tables.Albedos, eta: float, integral=tables.hemispherical_integr
     return Lobes("layerlab", u, v, {"denominator": d})
 
 
-#: Dielectric terms by mode.
+#: Dielectric and conductor terms by mode.
 DIELECTRIC = {"multiple-scattering": multiple_scattering_dielectric, "layerlab": layerlab}
+CONDUCTOR = {"multiple-scattering": multiple_scattering_conductor,
+             "layerlab": layerlab_conductor}
 
 
 def lobes_for(mode: str, eta: complex, alpha: float, dist: str) -> Lobes | None:
@@ -180,10 +186,7 @@ def lobes_for(mode: str, eta: complex, alpha: float, dist: str) -> Lobes | None:
     eta = complex(eta)
     if eta.imag > 0:
         e1 = tables.albedos(eta.real, eta.imag, alpha, dist, unit_fresnel=True).r_top
-        f_avg = tables.fresnel_average(eta.real, eta.imag)
-        build = multiple_scattering_conductor if mode == "multiple-scattering" \
-            else layerlab_conductor
-        return build(e1, f_avg)
+        return CONDUCTOR[mode](e1, tables.fresnel_average(eta.real, eta.imag))
     return DIELECTRIC[mode](tables.albedos(eta.real, 0.0, alpha, dist), eta.real)
 
 

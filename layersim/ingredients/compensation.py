@@ -7,11 +7,13 @@ A dielectric's term is built, as layerlab builds it (``Layer::setMicrofacet``), 
 operator's own albedos at the ordinates, with the ordinates' quadrature for the hemispherical
 integrals: the compensated operator then reflects and transmits exactly the incident energy at
 every ordinate (to rounding), whatever the discretisation error of its single-scattering part.
-The random walk builds the same term from the albedo tables (:mod:`layersim.compensation.tables`);
-the two differ by the solver's discretisation error of the single-scattering albedo, which the
-comparison with the walk measures anyway. A conductor's term (Kulla & Conty's, with the albedo
-``E1`` of the Fresnel-free interface) takes ``E1`` from the tables, interpolated at the
-ordinates, in both.
+A conductor's term (Kulla & Conty's) needs the albedo ``E1`` of the Fresnel-free interface,
+which the operator does not hold: the solver takes the table's ``E1`` plus the operator's
+discretisation error of its own albedo (operator minus table, with the Fresnel factor), so that
+a perfect mirror conserves energy at every ordinate too. The random walk builds the same terms
+from the tables (:mod:`layersim.compensation.tables`); the two differ by the solver's
+discretisation error of the single-scattering albedo, which the comparison with the walk
+measures anyway.
 """
 
 from __future__ import annotations
@@ -19,25 +21,24 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sps
 
-from ..compensation import layer_lobes
-from ..compensation.model import DIELECTRIC
-from ..compensation.tables import Albedos, interpolate
+from ..compensation import tables
+from ..compensation.model import CONDUCTOR, DIELECTRIC
 from ..operator import IsoOperator, order_weight
 
 
-def _discrete_dielectric(op: IsoOperator, mode: str, eta: float):
-    """``(u, v)`` of a dielectric's term at the ordinates, from the operator's albedos."""
+def _discrete_lobes(op: IsoOperator, layer, eta: complex):
+    """The compensation term of ``layer`` at the operator's ordinates (module docstring)."""
     alb = op.albedo_nodes()
     fw = op.grid.flux_weight
     integral = lambda v: float(2.0 * np.pi * np.dot(fw, v))
-    lobes = DIELECTRIC[mode](Albedos(alb["Rt"], alb["Ttb"], alb["Rb"], alb["Tbt"]), eta,
-                             integral)
-    return lobes.mode, {name: (lobes.u[name], lobes.v[name]) for name in lobes.u}
-
-
-def _tabulated(lobes, mu):
-    return lobes.mode, {name: (interpolate(lobes.u[name], mu),
-                               interpolate(lobes.v[name], mu)) for name in lobes.u}
+    mode = layer.energy_compensation
+    if eta.imag == 0:
+        return DIELECTRIC[mode](tables.Albedos(alb["Rt"], alb["Ttb"], alb["Rb"], alb["Tbt"]),
+                                eta.real, integral)
+    mu, args = op.grid.mu, (eta.real, eta.imag, layer.alpha, layer.distribution)
+    e1 = (tables.interpolate(tables.albedos(*args, unit_fresnel=True).r_top, mu) + alb["Rt"]
+          - tables.interpolate(tables.albedos(*args).r_top, mu))
+    return CONDUCTOR[mode](e1, tables.fresnel_average(eta.real, eta.imag), integral)
 
 
 def compensate(op: IsoOperator, layer, eta_above: float) -> tuple[IsoOperator, str | None]:
@@ -55,15 +56,12 @@ def compensate(op: IsoOperator, layer, eta_above: float) -> tuple[IsoOperator, s
     """
     if layer.energy_compensation == "none" or layer.smooth:
         return op, None
-    eta = complex(layer.ior) / eta_above
-    if eta.imag > 0:
-        mode, terms = _tabulated(layer_lobes(layer, eta_above), op.grid.mu)
-    else:
-        mode, terms = _discrete_dielectric(op, layer.energy_compensation, eta.real)
+    lobes = _discrete_lobes(op, layer, complex(layer.ior) / eta_above)
     grid = op.grid
     blocks = dict(op.blocks)
     added = {}
-    for name, (u, v) in terms.items():
+    for name, u in lobes.u.items():
+        v = lobes.v[name]
         blk = op.blocks.get(name)
         if blk is None:
             continue
@@ -73,4 +71,4 @@ def compensate(op: IsoOperator, layer, eta_above: float) -> tuple[IsoOperator, s
         added[name] = float(np.max(extra.T @ grid.flux_weight / grid.flux_weight))
     out = IsoOperator(grid, blocks, op.eta_top, op.eta_bottom, op.delta)
     text = ", ".join(f"{k} up to {v:.3g}" for k, v in added.items())
-    return out, f"energy compensation ({mode}): albedo added {text}"
+    return out, f"energy compensation ({lobes.mode}): albedo added {text}"
