@@ -186,3 +186,22 @@ def test_solver_matches_monte_carlo(mode):
     r, t = (float(x) for x in bsdf.albedo(wi))
     assert abs(r - res.reflectance) < 4 * res.reflectance_stderr
     assert abs(t - res.transmittance) < 4 * res.transmittance_stderr
+
+
+@pytest.mark.slow
+def test_opencl_walk_draws_the_same_compensation(cl_device):
+    """The OpenCL kernel is generated from the same Warp functions (kernels/compensation.py):
+    with the same random numbers it follows the same paths."""
+    import layersim.montecarlo as mc
+    scene = layersim.Scene.from_dict({"stack": {"energy_compensation": "multiple-scattering"},
+                                      "layer": [{"kind": "dielectric", "ior": 1.5,
+                                                 "roughness": 0.5},
+                                                {"kind": "conductor", "ior": [1.0, 50.0],
+                                                 "roughness": 0.5, "distribution": "ggx"}]})
+    wi = np.array([np.sin(0.7), 0.0, np.cos(0.7)])
+    kw = dict(wi=wi, particles=50_000, mu_edges=np.linspace(0, 1, 3),
+              phi_edges=np.linspace(0, 2 * np.pi, 3), seed=4)
+    w = mc.simulate(scene, backend="warp-cpu", **kw)
+    o = mc.simulate(scene, backend="opencl", **kw)
+    assert abs(w.reflectance - o.reflectance) < 0.1 * w.reflectance_stderr
+    assert abs(w.events - o.events) <= 1e-3 * w.events
