@@ -128,6 +128,12 @@ def test_cache_directory(tmp_path):
     assert np.array_equal(first.r_top, again.r_top) and first.r_top.max() > 0.3
 
 
+def test_cache_dir_setting():
+    assert config.Settings.from_env({"LAYERSIM_CACHE_DIR": "off"}).cache_dir is None
+    assert config.Settings.from_env({"LAYERSIM_CACHE_DIR": "/x/y"}).cache_dir == "/x/y"
+    assert config.Settings.from_env({}).cache_dir.endswith("layersim")
+
+
 @pytest.mark.parametrize("data, field", [
     ({"stack": {"energy_compensation": "kulla"}}, "energy_compensation"),
     ({"layer_extra": {"energy_compensation": "full"}}, "energy_compensation"),
