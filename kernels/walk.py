@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from . import rng, sampling
+from . import compensation, rng, sampling
 
 wp.set_module_options({"enable_backward": False})
 
@@ -60,7 +60,8 @@ CONDUCTOR = wp.constant(2)
 DIFFUSE = wp.constant(3)
 #: ints per boundary record: kind, distribution
 BND_I = wp.constant(2)
-#: floats per boundary record: eta, k, alpha_u, alpha_v, cos(rot), sin(rot), albedo, unused
+#: floats per boundary record: eta, k, alpha_u, alpha_v, cos(rot), sin(rot), albedo, offset of
+#: the boundary's energy-compensation tables in ``bnd_f`` (0: none; :mod:`.compensation`)
 BND_F = wp.constant(8)
 #: floats per slab record: tau, albedo, g
 SLAB_F = wp.constant(3)
@@ -101,11 +102,19 @@ def boundary_scatter(d: wp.vec3, b: int, bnd_i: wp.array(dtype=wp.int32),
     if au == wp.float32(0.0):
         ws, fs = sampling.sample_smooth(wi, eta, k, u0)
         return ws, fs
+    # the compensation lobe (isotropic, azimuth independent) or the single-scattering one
+    v0 = u0
+    scale = wp.float32(1.0)
+    comp = int(bnd_f[o + 7])
+    if comp > 0:
+        taken, wc, fc, v0, scale = compensation.choose_lobe(wi, bnd_f, comp, u0, u1, u2)
+        if taken:
+            return wc, fc
     cr = bnd_f[o + 4]
     sr = bnd_f[o + 5]
     wl = sampling.to_tangent_frame(wi, cr, sr)
-    wo, weight = sampling.sample_microfacet(wl, eta, k, au, av, dist, u0, u1, u2, u3)
-    return sampling.from_tangent_frame(wo, cr, sr), weight
+    wo, weight = sampling.sample_microfacet(wl, eta, k, au, av, dist, v0, u1, u2, u3)
+    return sampling.from_tangent_frame(wo, cr, sr), weight * scale
 
 
 @wp.func

@@ -28,11 +28,14 @@ from .errors import SceneError
 
 __all__ = [
     "Layer", "Dielectric", "Conductor", "Medium", "Diffuse", "Discretization", "Scene",
-    "QUADRATURES", "DISTRIBUTIONS", "as_scene",
+    "QUADRATURES", "DISTRIBUTIONS", "COMPENSATIONS", "as_scene",
 ]
 
 #: Microfacet normal distributions understood by the solver and the random walk.
 DISTRIBUTIONS = ("beckmann", "ggx")
+#: Energy-loss compensation terms of rough interfaces (``energy_compensation``, in [stack] or
+#: per layer; :mod:`layersim.compensation`).
+COMPENSATIONS = ("none", "layerlab", "multiple-scattering")
 #: Quadrature rules on mu in [-1, 1] (see :mod:`layersim.quadrature`).
 QUADRATURES = ("gauss-lobatto", "gauss-legendre", "simpson38")
 
@@ -75,6 +78,9 @@ class _Interface(Layer):
     rotation: float = 0.0
     """Rotation of the tangent frame (radians) about the normal: alpha_u acts along
     ``(cos rotation, sin rotation, 0)``."""
+    energy_compensation: str = "none"
+    """Energy-loss compensation of a rough interface (:data:`COMPENSATIONS`;
+    :mod:`layersim.compensation`), applied by the solver and the Monte Carlo walk alike."""
 
     @property
     def smooth(self) -> bool:
@@ -325,6 +331,8 @@ def _describe_layer(per_channel: tuple[Layer, ...]) -> str:
         extra = f", {layer.distribution}" if not layer.smooth else ""
         if layer.rotation:
             extra += f", rotated {math.degrees(layer.rotation):g} deg"
+        if layer.energy_compensation != "none" and not layer.smooth:
+            extra += f", energy compensation {layer.energy_compensation}"
         return f"{layer.kind} ior={ior}, {rough}{extra}"
     if isinstance(layer, Medium):
         return (f"medium tau={layer.tau:g}, albedo={vals(lambda x: f'{x.albedo:g}')}, "
@@ -339,8 +347,10 @@ def _describe_layer(per_channel: tuple[Layer, ...]) -> str:
 # --------------------------------------------------------------------------------------------
 
 _LAYER_FIELDS = {
-    "dielectric": {"kind", "ior", "roughness", "distribution", "rotation"},
-    "conductor": {"kind", "ior", "roughness", "distribution", "rotation"},
+    "dielectric": {"kind", "ior", "roughness", "distribution", "rotation",
+                   "energy_compensation"},
+    "conductor": {"kind", "ior", "roughness", "distribution", "rotation",
+                  "energy_compensation"},
     "medium": {"kind", "albedo", "g", "tau"},
     "diffuse": {"kind", "albedo"},
 }
@@ -351,7 +361,7 @@ _REQUIRED = {
     "diffuse": {"albedo"},
 }
 _TOP_FIELDS = {"layer", "stack", "discretization"}
-_STACK_FIELDS = {"top_ior", "name"}
+_STACK_FIELDS = {"top_ior", "name", "energy_compensation"}
 _DISC_FIELDS = {"n", "md", "ms", "quadrature", "tol", "theta_full"}
 
 
@@ -420,7 +430,20 @@ def _conductor_ior(ctx: _Ctx, fld: str, value: Any) -> complex:
     return complex(eta, k)
 
 
-def _parse_layer(ctx: _Ctx, raw: Any) -> list[Layer]:
+def _compensation(ctx: _Ctx, fld: str, value: Any, au: float = 0.0, av: float = 0.0) -> str:
+    """A value of ``energy_compensation``; anisotropic roughness is refused (the albedo tables
+    are those of isotropic interfaces)."""
+    if value not in COMPENSATIONS:
+        raise ctx.error(fld, f"unknown compensation {value!r}; expected one of "
+                             + ", ".join(COMPENSATIONS))
+    if value != "none" and au != av:
+        raise ctx.error(fld, f"{value!r} is not available for anisotropic roughness "
+                             f"[{au:g}, {av:g}]: set energy_compensation = \"none\" on this "
+                             "layer (or use an isotropic roughness)")
+    return value
+
+
+def _parse_layer(ctx: _Ctx, raw: Any, compensation: str = "none") -> list[Layer]:
     if not isinstance(raw, Mapping):
         raise ctx.error(None, f"must be a table with a 'kind', got {type(raw).__name__}")
     if "kind" not in raw:
@@ -446,19 +469,21 @@ def _parse_layer(ctx: _Ctx, raw: Any) -> list[Layer]:
             raise ctx.error("distribution", f"unknown distribution {dist!r}; expected one of "
                                             + ", ".join(DISTRIBUTIONS))
         rot = math.radians(_real(ctx, "rotation", raw.get("rotation", 0.0), lo=-360.0, hi=360.0))
+        comp = _compensation(ctx, "energy_compensation",
+                             raw.get("energy_compensation", compensation), au, av)
         if kind == "dielectric":
             iors = _per_channel(ctx, "ior", raw["ior"], lambda c, f, v: complex(
                 _real(c, f, v, lo=0.0, hi=_MAX_IOR, lo_open=True)))
-            return [Dielectric(ior=e, alpha_u=au, alpha_v=av, distribution=dist, rotation=rot)
-                    for e in iors]
+            return [Dielectric(ior=e, alpha_u=au, alpha_v=av, distribution=dist, rotation=rot,
+                               energy_compensation=comp) for e in iors]
         value = raw["ior"]
         if (isinstance(value, (list, tuple)) and len(value) == 3
                 and all(isinstance(v, (list, tuple, complex)) for v in value)):
             iors = [_conductor_ior(ctx, f"ior[{c}]", v) for c, v in enumerate(value)]
         else:
             iors = [_conductor_ior(ctx, "ior", value)]
-        return [Conductor(ior=e, alpha_u=au, alpha_v=av, distribution=dist, rotation=rot)
-                for e in iors]
+        return [Conductor(ior=e, alpha_u=au, alpha_v=av, distribution=dist, rotation=rot,
+                          energy_compensation=comp) for e in iors]
 
     if kind == "medium":
         albedos = _per_channel(ctx, "albedo", raw["albedo"],
@@ -499,7 +524,7 @@ def _parse_scene(data: Mapping[str, Any], source: str | None, default_name: str)
     unknown = set(stack) - _STACK_FIELDS
     if unknown:
         raise SceneError(f"unknown field '{sorted(unknown)[0]}' in [stack] (allowed: top_ior, "
-                         "name)", source=source)
+                         "name, energy_compensation)", source=source)
     top_ior = _real(ctx, "stack.top_ior", stack.get("top_ior", 1.0), lo=0.0, hi=_MAX_IOR,
                     lo_open=True)
     name = stack.get("name", default_name)
@@ -512,9 +537,13 @@ def _parse_scene(data: Mapping[str, Any], source: str | None, default_name: str)
     if not isinstance(raw_layers, (list, tuple)) or not raw_layers:
         raise SceneError("'layer' must be a non-empty list of [[layer]] tables", source=source)
 
+    compensation = stack.get("energy_compensation", "none")
+    if compensation not in COMPENSATIONS:
+        raise SceneError(f"[stack] energy_compensation: unknown compensation {compensation!r}; "
+                         "expected one of " + ", ".join(COMPENSATIONS), source=source)
     per_layer = []
     for i, raw in enumerate(raw_layers):
-        per_layer.append(_parse_layer(_Ctx(source, layer=i), raw))
+        per_layer.append(_parse_layer(_Ctx(source, layer=i), raw, compensation))
 
     for i, versions in enumerate(per_layer):
         if versions[0].opaque and i != len(per_layer) - 1:

@@ -18,6 +18,7 @@ from .bsdf import BSDF, channel_pairs
 from .config import settings
 from .errors import InfeasibleError
 from .ingredients import diffuse_operator, interface_operator, medium_operator
+from .ingredients.compensation import compensate
 from .ingredients.aniso_microfacet import AnisoProjectionStats, aniso_interface_operator
 from .ingredients.microfacet import ProjectionStats
 from .ingredients.numeric import numeric_interface_operator
@@ -76,7 +77,10 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
                                             device=device)
         else:
             op = interface_operator(grid, plan.md, layer, eta_above, stats)
+        # the compensation fills what the (energy-limited) single-scattering operator loses
         notes += _check_energy(op, i, layer, plan)
+        op, note = compensate(op, layer, eta_above)
+        notes += [f"layer {i}: {note}"] if note else []
         return op
     if isinstance(layer, Medium):
         return medium_operator(grid, plan.md, layer.albedo, layer.g, layer.tau, eta_above,
@@ -337,6 +341,11 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
         "nnz": sum(op.nnz() for op in stacks),
         "memory_bytes": sum(op.memory_bytes() for op in stacks),
         "notes": notes,
+        # rough interfaces with a compensation term (layersim.compensation), JSON-stable
+        "energy_compensation": [
+            {"layer": i, "kind": layer.kind, "mode": layer.energy_compensation}
+            for i, layer in enumerate(scene.channel(0).layers)
+            if getattr(layer, "energy_compensation", "none") != "none" and not layer.smooth],
     }
     if verbose:
         s = info["seconds"]

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..compensation.walk import append_tables
 from ..kernels import walk
 from ..kernels.physics import DISTRIBUTION_CODES
 from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
@@ -36,9 +37,10 @@ class StackArrays:
     ----------
     bnd_i : ndarray of int32, shape (2 * (n_slabs + 1),)
         Per boundary: kind code (``walk.NULL`` ...), distribution code.
-    bnd_f : ndarray of float32, shape (8 * (n_slabs + 1),)
+    bnd_f : ndarray of float32, shape (8 * (n_slabs + 1) + tables,)
         Per boundary: eta, k (relative to the medium above), alpha_u, alpha_v, cos and sin of the
-        tangent-frame rotation, Lambertian albedo, unused.
+        tangent-frame rotation, Lambertian albedo, offset of its energy-compensation tables
+        (0: none), followed by those tables (:mod:`layersim.compensation.walk`).
     slab_f : ndarray of float32, shape (3 * max(n_slabs, 1),)
         Per slab: tau (along the normal), single-scattering albedo, HG g (padded when empty).
     n_slabs : int
@@ -73,23 +75,27 @@ def _boundary(scene: Scene, i: int | None):
 
 def flatten(scene: Scene) -> StackArrays:
     """Boundary and slab records of a monochromatic, validated scene (no re-validation)."""
-    boundaries, slabs = [], []
+    boundaries, slabs, owners = [], [], []
     last = None                      # what was appended last: "boundary" or "slab"
     for i, layer in enumerate(scene.layers):
         if isinstance(layer, Medium):
             if last != "boundary":       # top of the stack, or a medium right below a medium
                 boundaries.append(_boundary(scene, None))
+                owners.append(None)
             slabs.append([layer.tau, layer.albedo, layer.g])
             last = "slab"
         else:
             if last == "boundary":       # two interfaces in a row: zero-thickness clear gap
                 slabs.append([0.0, 1.0, 0.0])
             boundaries.append(_boundary(scene, i))
+            owners.append(i)
             last = "boundary"
     if last == "slab":
         boundaries.append(_boundary(scene, None))
+        owners.append(None)
     bnd_i = np.array([x for b in boundaries for x in b[0]], dtype=np.int32)
-    bnd_f = np.array([x for b in boundaries for x in b[1]], dtype=np.float32)
+    bnd_f = append_tables(scene, owners, np.array([x for b in boundaries for x in b[1]],
+                                                  dtype=np.float32), walk.BND_F)
     slab_f = np.array([x for s in slabs for x in s] or [0.0, 1.0, 0.0], dtype=np.float32)
     assert len(boundaries) == len(slabs) + 1
     return StackArrays(bnd_i, bnd_f, slab_f, len(slabs), scene.opaque)

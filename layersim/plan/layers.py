@@ -122,7 +122,8 @@ def _interface(scene: Scene, i: int, layer, survey: Survey) -> None:
     else:
         survey.layers.append(LayerPlan(i, kind, "project",
                                        f"{layer.distribution} alpha={layer.alpha_u:g}, relative "
-                                       f"index {_fmt_eta(eta_rel)}", width=width))
+                                       f"index {_fmt_eta(eta_rel)}"
+                                       + compensation_text(layer), width=width))
 
 
 def _medium(scene: Scene, i: int, layer, survey: Survey) -> None:
@@ -252,6 +253,14 @@ def _near_specular(scene: Scene, i: int, layer, survey: Survey) -> bool:
     if (not isinstance(layer, Dielectric) or i != 0 or lo > NEAR_SPECULAR_ALPHA
             or hi > NEAR_SPECULAR_WIDE_MAX or not wide_base):
         return False
+    if layer.energy_compensation != "none":
+        # the split's lobe has no compensation term, and the exact projection of so narrow a
+        # lobe is far over the memory limit
+        raise InfeasibleError(
+            f"layer {i} (dielectric): field 'energy_compensation': a near-specular coat (alpha "
+            f"<= {NEAR_SPECULAR_ALPHA:g}) is solved by the smooth split, which has no "
+            "compensation term; set energy_compensation = \"none\" on this layer (at alpha "
+            "0.03 the hemispherical single-scattering loss is 4e-4)")
     try:
         _smooth(scene, i, layer, survey)
     except InfeasibleError:
@@ -314,6 +323,16 @@ def _near_specular_conductor(scene: Scene, i: int, layer, survey: Survey) -> boo
         f"scaled to the rough reflected energy; {where}"))
     survey.near_specular = (*survey.near_specular, i)
     return True
+
+
+def compensation_text(layer) -> str:
+    """The plan's words for a rough interface's energy compensation (empty for none)."""
+    mode = layer.energy_compensation
+    if mode == "none":
+        return ""
+    what = {"multiple-scattering": "Kulla & Conty 2017 multiple-scattering lobe",
+            "layerlab": "layerlab's near-diffuse correction"}[mode]
+    return f"; energy compensation {mode!r} ({what}, order 0, solver and Monte Carlo)"
 
 
 def interface_width(layer, eta_rel: complex) -> tuple[float, str]:
