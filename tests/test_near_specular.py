@@ -182,3 +182,12 @@ def test_near_specular_conductor_under_a_rough_coat_agrees_with_monte_carlo():
     populated = (est > 0) | (bins > 1e-12)
     z = (np.abs(bins - est) / np.maximum(sig, 1e-15))[populated]
     assert z.size > 50 and np.mean(z <= 3.0) >= 0.97, np.sort(z)[-5:]
+
+
+def test_near_specular_conductor_with_energy_compensation_is_refused():
+    """The mirror and its lobe have no compensation term: asking for one is an error naming
+    the layer and the field, not a silent omission."""
+    scene = {"stack": {"energy_compensation": "multiple-scattering"},
+             "layer": [{"kind": "conductor", "ior": GOLD, "roughness": 0.005}]}
+    with pytest.raises(layersim.InfeasibleError, match="layer 0.*energy_compensation"):
+        layersim.solve(scene)
