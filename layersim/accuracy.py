@@ -10,14 +10,15 @@ distance to the companion at ``s / sqrt 2`` is ``2^(p/2) - 1`` times the error (
 though: a narrow lobe moves across bin edges and between ordinates as ``n`` changes, and two
 neighbouring discretisations can agree by accident. The estimate is therefore
 :data:`SAFETY` times the larger of the distance to the ``s / sqrt 2`` companion and a third of
-the distance to the ``s / 2`` one; ``benchmarks/accuracy.py`` measures how it compares with the
-error against solves at twice ``n`` and ``md``.
+the distance to the ``s / 2`` one (:data:`SINGLE` times the first where the second is not
+solved); ``benchmarks/accuracy.py`` measures how it compares with the error against solves at
+twice ``n`` and ``md``.
 
 A solve to a tolerance (:func:`solve_to_tolerance`) climbs a ladder of scales of the planner's
 ``n`` and ``md`` (:data:`LADDER`, a factor ``sqrt 2`` apart, so that the two rungs below are
-each rung's companions) and stops at the first rung whose estimate is at most ``tol``; a rung
-the memory or time limits refuse ends the ladder with a refusal that says the best estimate
-reached.
+each rung's companions) and stops at the first rung from the second on whose estimate is at
+most ``tol``; a rung the memory or time limits refuse ends the ladder with a refusal that says
+the best estimate reached.
 """
 
 from __future__ import annotations
@@ -46,8 +47,12 @@ COMPANIONS = ((1.0 / math.sqrt(2.0), 1.0), (0.5, 1.0 / 3.0))
 #: Estimate = SAFETY x the largest weighted distance to a companion (module docstring).
 SAFETY = 1.5
 
+#: Factor on an estimate that rests on the first companion alone (the second too coarse to
+#: solve, or the second rung of a ladder).
+SINGLE = 2.0
+
 #: Scales of the planner's ``n`` and ``md`` that a solve to a tolerance climbs; a rung is
-#: accepted from the third on (both companions solved).
+#: accepted from the second solved on.
 LADDER = tuple(0.25 * 2.0 ** (k / 2.0) for k in range(1, 8))
 
 
@@ -96,9 +101,11 @@ def estimate(bsdf, companions: list) -> dict:
     """
     table = bin_table(bsdf)
     per_angle = np.zeros(len(ANGLES))
+    # one companion cannot tell an accidental agreement: its distance counts twice
+    alone = SINGLE if len(companions) == 1 else 1.0
     for (_, weight), companion in zip(COMPANIONS, companions):
         d = relative_errors(table, bin_table(companion))
-        per_angle = np.maximum(per_angle, SAFETY * weight * d)
+        per_angle = np.maximum(per_angle, SAFETY * alone * weight * d)
     return {"estimate": float(per_angle.max()), "per_angle": [float(x) for x in per_angle],
             "angles": list(ANGLES), "bins": list(BINS), "safety": SAFETY,
             "companions": [{"n": c.info.get("n"), "md": c.info.get("md")} for c in companions]}
@@ -177,8 +184,8 @@ def solve_to_tolerance(scene: Scene, tol: float, solve, log=None):
                 "seconds": time.perf_counter() - t0, "estimate": None}
         ladder.append(step)
         solved.append(bsdf)
-        if len(solved) >= 3:
-            acc = estimate(bsdf, [solved[-2], solved[-3]])
+        if len(solved) >= 2:
+            acc = estimate(bsdf, solved[-2::-1])
             step["estimate"] = acc["estimate"]
             if log is not None:
                 log(f"n = {step['n']}, md = {step['md']}: estimated error "
@@ -188,7 +195,7 @@ def solve_to_tolerance(scene: Scene, tol: float, solve, log=None):
             if acc["estimate"] <= tol:
                 bsdf.info["accuracy"] = {**acc, "tol": tol, "met": True, "ladder": ladder}
                 return bsdf
-            del solved[0]
+            del solved[:-2]
     bsdf, est = best
     raise InfeasibleError(
         f"tol = {tol:g} not reached within {LADDER[-1]:.2g} times the planned n and md: the "
