@@ -20,7 +20,7 @@ import numpy as np
 import scipy.fft
 import warp as wp
 
-from . import physics
+from . import physics, tabulated
 from .runtime import device_for, ensure_init, host_array
 
 
@@ -469,3 +469,57 @@ def microfacet_values_ds(mu_i, mu_o, phi_d, phi_s, eta, alpha_u, alpha_v,
     return _launch_pairs_ds(_microfacet_eval_ds_kernel, mu_i, mu_o, phi_d, phi_s,
                             _interface_params(eta, alpha_u, alpha_v, distribution), 1,
                             device)[0]
+
+
+# ---------------------------------------------------------------------------------------------
+# Tabulated NDFs (layersim.kernels.tabulated): the BSDF on a uniform (phi_d, phi_s) grid
+# ---------------------------------------------------------------------------------------------
+
+@wp.kernel
+def _tabulated_ds_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
+                         eta: wp.float64, k: wp.float64, tab: wp.array(dtype=wp.float64),
+                         f: wp.array3d(dtype=wp.float64)):
+    """f[p, a, b] = BSDF at phi_d = 2 pi a / Nd, phi_s = 2 pi b / Ns."""
+    p, a, b = wp.tid()
+    two_pi = wp.float64(6.283185307179586)
+    phi_d = two_pi * wp.float64(a) / wp.float64(f.shape[1])
+    phi_s = two_pi * wp.float64(b) / wp.float64(f.shape[2])
+    wi, wo = _pair_directions_ds(mu_i[p], mu_o[p], phi_d, phi_s)
+    f[p, a, b] = tabulated.microfacet_eval_tabulated(wi, wo, eta, k, tab, 0)
+
+
+def tabulated_ds_samples(mu_i, mu_o, eta, table: np.ndarray, n_d: int, n_s: int,
+                         device=None) -> np.ndarray:
+    """BSDF of a tabulated-NDF interface (:func:`tabulated.microfacet_eval_tabulated`) for
+    ordinate pairs on the uniform azimuth grid ``phi_d = 2 pi a / n_d``, ``phi_s = 2 pi b / n_s``
+    (interface frame, geometry of :func:`microfacet_split_ds`).
+
+    Parameters
+    ----------
+    mu_i, mu_o : ndarray, shape (P,)
+        Signed ordinates (solver convention, see module doc).
+    eta : complex
+        Relative index below/above (``eta + i k`` for a conductor).
+    table : ndarray of float64
+        Packed table (:meth:`layersim.ndf.table.NDFTable.packed`).
+
+    Returns
+    -------
+    ndarray, shape (P, n_d, n_s)
+        BSDF values (1/sr).
+    """
+    ensure_init()
+    dev = device_for(device)
+    mu_i = np.ascontiguousarray(mu_i, dtype=np.float64)
+    if mu_i.size == 0:
+        return np.zeros((0, n_d, n_s))
+    f = wp.empty((mu_i.size, n_d, n_s), dtype=wp.float64, device=dev)
+    wp.launch(_tabulated_ds_kernel, dim=f.shape, device=dev,
+              inputs=[wp.array(mu_i, dtype=wp.float64, device=dev),
+                      wp.array(np.ascontiguousarray(mu_o, dtype=np.float64), dtype=wp.float64,
+                               device=dev),
+                      wp.float64(complex(eta).real), wp.float64(complex(eta).imag),
+                      wp.array(np.ascontiguousarray(table, dtype=np.float64),
+                               dtype=wp.float64, device=dev)],
+              outputs=[f])
+    return f.numpy()

@@ -24,7 +24,10 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
+
 from .errors import SceneError
+from .ndf import table as ndf_table
 
 __all__ = [
     "Layer", "Dielectric", "Conductor", "Medium", "Diffuse", "Discretization", "Scene",
@@ -32,7 +35,7 @@ __all__ = [
 ]
 
 #: Microfacet normal distributions understood by the solver and the random walk.
-DISTRIBUTIONS = ("beckmann", "ggx")
+DISTRIBUTIONS = ("beckmann", "ggx", "tabulated")
 #: Quadrature rules on mu in [-1, 1] (see :mod:`layersim.quadrature`).
 QUADRATURES = ("gauss-lobatto", "gauss-legendre", "simpson38")
 
@@ -75,6 +78,9 @@ class _Interface(Layer):
     rotation: float = 0.0
     """Rotation of the tangent frame (radians) about the normal: alpha_u acts along
     ``(cos rotation, sin rotation, 0)``."""
+    ndf: Any = field(default=None, compare=False)
+    """The :class:`layersim.ndf.NDFTable` of ``distribution = "tabulated"`` (its ``alpha_u``,
+    ``alpha_v`` are then the table's equivalent Beckmann roughness, which sizes the plan)."""
 
     @property
     def smooth(self) -> bool:
@@ -82,7 +88,8 @@ class _Interface(Layer):
 
     @property
     def anisotropic(self) -> bool:
-        return self.alpha_u != self.alpha_v
+        # a table is projected with coupled modes whatever its shape (it may depend on phi)
+        return self.alpha_u != self.alpha_v or self.ndf is not None
 
     @property
     def alpha(self) -> float:
@@ -318,6 +325,8 @@ def _describe_layer(per_channel: tuple[Layer, ...]) -> str:
         else:
             ior = vals(lambda x: f"{x.ior.real:g}")
         extra = f", {layer.distribution}" if not layer.smooth else ""
+        if layer.ndf is not None:
+            rough, extra = layer.ndf.describe(), ""
         if layer.rotation:
             extra += f", rotated {math.degrees(layer.rotation):g} deg"
         return f"{layer.kind} ior={ior}, {rough}{extra}"
@@ -334,8 +343,8 @@ def _describe_layer(per_channel: tuple[Layer, ...]) -> str:
 # --------------------------------------------------------------------------------------------
 
 _LAYER_FIELDS = {
-    "dielectric": {"kind", "ior", "roughness", "distribution", "rotation"},
-    "conductor": {"kind", "ior", "roughness", "distribution", "rotation"},
+    "dielectric": {"kind", "ior", "roughness", "distribution", "rotation", "ndf"},
+    "conductor": {"kind", "ior", "roughness", "distribution", "rotation", "ndf"},
     "medium": {"kind", "albedo", "g", "tau"},
     "diffuse": {"kind", "albedo"},
 }
@@ -440,20 +449,23 @@ def _parse_layer(ctx: _Ctx, raw: Any) -> list[Layer]:
         if dist not in DISTRIBUTIONS:
             raise ctx.error("distribution", f"unknown distribution {dist!r}; expected one of "
                                             + ", ".join(DISTRIBUTIONS))
+        table = _ndf_field(ctx, raw, dist)
+        if table is not None:
+            au, av = table.equivalent_alpha()
         rot = math.radians(_real(ctx, "rotation", raw.get("rotation", 0.0), lo=-360.0, hi=360.0))
         if kind == "dielectric":
             iors = _per_channel(ctx, "ior", raw["ior"], lambda c, f, v: complex(
                 _real(c, f, v, lo=0.0, hi=_MAX_IOR, lo_open=True)))
-            return [Dielectric(ior=e, alpha_u=au, alpha_v=av, distribution=dist, rotation=rot)
-                    for e in iors]
+            return [Dielectric(ior=e, alpha_u=au, alpha_v=av, distribution=dist, rotation=rot,
+                               ndf=table) for e in iors]
         value = raw["ior"]
         if (isinstance(value, (list, tuple)) and len(value) == 3
                 and all(isinstance(v, (list, tuple, complex)) for v in value)):
             iors = [_conductor_ior(ctx, f"ior[{c}]", v) for c, v in enumerate(value)]
         else:
             iors = [_conductor_ior(ctx, "ior", value)]
-        return [Conductor(ior=e, alpha_u=au, alpha_v=av, distribution=dist, rotation=rot)
-                for e in iors]
+        return [Conductor(ior=e, alpha_u=au, alpha_v=av, distribution=dist, rotation=rot,
+                          ndf=table) for e in iors]
 
     if kind == "medium":
         albedos = _per_channel(ctx, "albedo", raw["albedo"],
@@ -469,6 +481,46 @@ def _parse_layer(ctx: _Ctx, raw: Any) -> list[Layer]:
     albedos = _per_channel(ctx, "albedo", raw["albedo"],
                            lambda c, f, v: _real(c, f, v, lo=0.0, hi=1.0))
     return [Diffuse(albedo=a) for a in albedos]
+
+
+def _ndf_field(ctx: _Ctx, raw: Mapping[str, Any], dist: str):
+    """The NDF table of ``distribution = "tabulated"`` (None otherwise): ``ndf`` is the path
+    of an ``.npz`` file (relative to the scene file) or an inline table ``{theta, phi, D}``
+    with angles in degrees (:mod:`layersim.ndf.table`)."""
+    if dist != "tabulated":
+        if "ndf" in raw:
+            raise ctx.error("ndf", 'is only used with distribution = "tabulated"')
+        return None
+    if "roughness" in raw:
+        raise ctx.error("roughness", 'a tabulated NDF takes no roughness (the table is the '
+                                     "distribution); remove it")
+    value = raw.get("ndf")
+    if value is None:
+        raise ctx.error("ndf", 'is required with distribution = "tabulated": the path of an '
+                               ".npz file (theta, phi, D) or an inline table {theta, phi, D}")
+    if isinstance(value, str):
+        path = Path(value)
+        if not path.is_absolute() and ctx.source is not None:
+            path = Path(ctx.source).parent / path
+        return ndf_table.load_ndf(path, layer=ctx.layer, kind=ctx.kind)
+    if isinstance(value, Mapping):
+        unknown = set(value) - {"theta", "phi", "D"}
+        if unknown or len(value) != 3:
+            raise ctx.error("ndf", "an inline table has exactly the keys theta, phi (degrees) "
+                                   "and D (1/sr, one row per theta)")
+        return ndf_table.from_arrays(np.radians(_array(ctx, value["theta"])),
+                                     np.radians(_array(ctx, value["phi"])),
+                                     _array(ctx, value["D"]), source="inline table",
+                                     layer=ctx.layer, kind=ctx.kind)
+    raise ctx.error("ndf", f"must be a file path or an inline table, got {type(value).__name__}")
+
+
+def _array(ctx: _Ctx, value):
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ctx.error("ndf", "inline table values must be numbers (rows of equal length)") \
+            from None
 
 
 def _parse_int(ctx: _Ctx, fld: str, value: Any, lo: int, hi: int) -> int:

@@ -21,6 +21,7 @@ from .ingredients.aniso_microfacet import AnisoProjectionStats, aniso_interface_
 from .ingredients.microfacet import ProjectionStats
 from .ingredients.numeric import numeric_interface_operator
 from .ingredients.smooth import boundary_reflector, smooth_conductor_operator
+from .ingredients import tabulated
 from .lobe import NearSpecularLobe
 from .kernels.runtime import device_for
 from .operator import IsoOperator, Operator, common_representation
@@ -63,7 +64,9 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     if isinstance(layer, (Dielectric, Conductor)) and layer.anisotropic:
         lp = next(lp for lp in plan.layers if lp.index == i)
         op = aniso_interface_operator(grid, plan.md, lp.ms, layer, eta_above, stats,
-                                      relerr=COUPLED_RELERR, workspace=workspace)
+                                      relerr=COUPLED_RELERR, workspace=workspace,
+                                      projector=None if layer.ndf is None else
+                                      tabulated.projector(layer, eta_above, device))
         notes += _check_energy(op, i, layer, plan)
         return op
     if isinstance(layer, (Dielectric, Conductor)):

@@ -18,6 +18,7 @@ from ..operator import Grid
 from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
 from .model import LayerPlan
 from .ordinates import N_PER_WIDTH
+from .tabulated import tabulated_plan
 
 #: Legendre moments a delta-M scaled medium needs (the accuracy target that sets its share of
 #: ``n``): for g = 0.99, tau 5, albedo 0.95 the albedo at normal incidence moves by 3e-5 from
@@ -107,7 +108,9 @@ def _interface(scene: Scene, i: int, layer, survey: Survey) -> None:
     eta_rel = scene.channel(0).relative_ior(i)
     width, what = interface_width(layer, eta_rel)
     survey.widths.append((width, i, kind, what))
-    if layer.anisotropic:
+    if layer.ndf is not None:
+        survey.layers.append(tabulated_plan(i, layer, eta_rel, width))
+    elif layer.anisotropic:
         ms = aplan.ms_for_layer(layer)
         rot = f", rotated {math.degrees(layer.rotation):g} deg" if layer.rotation else ""
         survey.layers.append(LayerPlan(
@@ -242,6 +245,8 @@ def _near_specular(scene: Scene, i: int, layer, survey: Survey) -> bool:
     needs an opaque base that scatters wider than that blur: diffuse, or a conductor rougher
     than :data:`~layersim.lobe.NEAR_SPECULAR_ALPHA`)."""
     lo, hi = min(layer.alpha_u, layer.alpha_v), max(layer.alpha_u, layer.alpha_v)
+    if layer.ndf is not None:       # the lobe of layersim.lobe is analytic
+        return False
     base = scene.channel(0).layers[-1]
     wide_base = isinstance(base, Diffuse) or (
         isinstance(base, Conductor) and min(base.alpha_u, base.alpha_v) > NEAR_SPECULAR_ALPHA)

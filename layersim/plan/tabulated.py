@@ -1,0 +1,51 @@
+"""Planning a tabulated-NDF interface (Wang et al. 2008): it is sized as its equivalent
+Beckmann lobe, and the report says what the table's grid implies.
+
+The table's equivalent roughness (:meth:`layersim.ndf.NDFTable.equivalent_alpha`: the Beckmann
+``alpha_u, alpha_v`` with the same median slopes) stands in for the lobe everywhere the planner
+reads a roughness: the ordinates ``n`` (lobe width), the orders ``md`` (series lengths of that
+Beckmann lobe, :mod:`.orders`) and the coupling ``ms`` (its roughness ratio, at least 1: a table
+may depend on azimuth whatever its median slopes say). The table's grid bounds what it can
+hold: no feature of D is narrower than its elevation spacing, so a lobe of equivalent width
+``alpha`` is resolved by the table when the spacing is well below ``alpha``; the report line
+states both.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from ..aniso import plan as aplan
+from .model import LayerPlan
+
+
+def equivalent_lobe(layer):
+    """The analytic Beckmann layer with the table's equivalent roughness (what the series-length
+    pre-pass measures); other layers unchanged."""
+    if layer.ndf is None:
+        return layer
+    return replace(layer, distribution="beckmann", ndf=None)
+
+
+def tabulated_plan(i: int, layer, eta_rel: complex, width: float) -> LayerPlan:
+    """The plan line of a tabulated-NDF interface: coupled-mode projection with ``ms`` of its
+    equivalent Beckmann lobe (at least 1), and the table's grid against that lobe's width."""
+    table = layer.ndf
+    ms = max(1, aplan.ms_for_layer(equivalent_lobe(layer)))
+    d_theta = float(np.max(np.diff(table.theta)))
+    d_phi = float(np.max(np.diff(np.append(table.phi, table.phi[0] + 2 * math.pi))))
+    alpha = min(layer.alpha_u, layer.alpha_v)
+    fine = ("resolves" if d_theta <= 0.25 * alpha else
+            "coarsely resolves (D is bilinear between nodes)")
+    rot = f", rotated {math.degrees(layer.rotation):g} deg" if layer.rotation else ""
+    eta = (f"{eta_rel.real:.4g}" if eta_rel.imag == 0
+           else f"{eta_rel.real:.4g}+{eta_rel.imag:.4g}i")
+    return LayerPlan(
+        i, layer.kind, "project (coupled modes, sampled)",
+        f"{table.describe()}{rot}, relative index {eta}; grid spacing "
+        f"{math.degrees(d_theta):.3g} x {math.degrees(d_phi):.3g} deg {fine} its equivalent "
+        f"width {math.degrees(alpha):.3g} deg; n and md as for that Beckmann lobe, ms = {ms}",
+        width=width, ms=ms)
