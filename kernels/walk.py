@@ -13,7 +13,8 @@ the top of slab ``b``, boundary ``S`` the bottom of the stack. Boundary records 
 ``bnd_f``: :data:`BND_F` floats each) hold the kind (:data:`NULL` index-matched pass-through,
 :data:`DIELECTRIC`, :data:`CONDUCTOR`, :data:`DIFFUSE`), the distribution code, the relative index
 ``eta`` and ``k``, ``alpha_u``, ``alpha_v``, ``cos``/``sin`` of the tangent-frame rotation and the
-Lambertian albedo. Slab records (``slab_f``: :data:`SLAB_F` floats each) hold the optical thickness
+Lambertian albedo; a tabulated NDF (:mod:`.tabulated`) keeps its table after the records. Slab
+records (``slab_f``: :data:`SLAB_F` floats each) hold the optical thickness
 ``tau`` along the normal, the single-scattering albedo and the HG ``g`` (``tau = 0``: clear).
 
 Walk
@@ -49,7 +50,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from . import rng, sampling
+from . import rng, sampling, tabulated
 
 wp.set_module_options({"enable_backward": False})
 
@@ -104,6 +105,10 @@ def boundary_scatter(d: wp.vec3, b: int, bnd_i: wp.array(dtype=wp.int32),
     cr = bnd_f[o + 4]
     sr = bnd_f[o + 5]
     wl = sampling.to_tangent_frame(wi, cr, sr)
+    if dist == tabulated.TABULATED:     # alpha_u's slot holds the table's offset in bnd_f
+        wt, wt_weight = tabulated.sample_microfacet_tabulated(wl, eta, k, bnd_f, int(au), u0,
+                                                              u1, u3)
+        return sampling.from_tangent_frame(wt, cr, sr), wt_weight
     wo, weight = sampling.sample_microfacet(wl, eta, k, au, av, dist, u0, u1, u2, u3)
     return sampling.from_tangent_frame(wo, cr, sr), weight
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..kernels import walk
+from ..kernels import tabulated, walk
 from ..kernels.physics import DISTRIBUTION_CODES
 from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
 
@@ -36,9 +36,12 @@ class StackArrays:
     ----------
     bnd_i : ndarray of int32, shape (2 * (n_slabs + 1),)
         Per boundary: kind code (``walk.NULL`` ...), distribution code.
-    bnd_f : ndarray of float32, shape (8 * (n_slabs + 1),)
+    bnd_f : ndarray of float32, shape (8 * (n_slabs + 1) + tables,)
         Per boundary: eta, k (relative to the medium above), alpha_u, alpha_v, cos and sin of the
-        tangent-frame rotation, Lambertian albedo, unused.
+        tangent-frame rotation, Lambertian albedo, unused; a tabulated-NDF boundary (distribution
+        code :data:`layersim.kernels.tabulated.TABULATED`) holds in place of ``alpha_u`` the
+        offset of its packed table (:meth:`layersim.ndf.NDFTable.packed`), which follows the
+        records.
     slab_f : ndarray of float32, shape (3 * max(n_slabs, 1),)
         Per slab: tau (along the normal), single-scattering albedo, HG g (padded when empty).
     n_slabs : int
@@ -68,7 +71,25 @@ def _boundary(scene: Scene, i: int | None):
     kind = walk.CONDUCTOR if isinstance(layer, Conductor) else walk.DIELECTRIC
     floats[:6] = [eta.real, eta.imag if kind == walk.CONDUCTOR else 0.0, layer.alpha_u,
                   layer.alpha_v, math.cos(layer.rotation), math.sin(layer.rotation)]
+    if layer.ndf is not None:       # alpha_u's slot gets the table's offset in flatten()
+        return [kind, tabulated.TABULATED], floats, layer.ndf
     return [kind, DISTRIBUTION_CODES[layer.distribution]], floats
+
+
+def _append_tables(boundaries: list, bnd_f: np.ndarray) -> np.ndarray:
+    """``bnd_f`` followed by the packed tables of the tabulated-NDF boundaries, each record
+    pointing at its table (float32 holds the offsets exactly below 2^24)."""
+    parts = [bnd_f]
+    size = bnd_f.size
+    for b, record in enumerate(boundaries):
+        if len(record) == 3:
+            packed = record[2].packed(np.float32)
+            bnd_f[walk.BND_F * b + 2] = size
+            parts.append(packed)
+            size += packed.size
+    if size >= 1 << 24:
+        raise ValueError(f"the NDF tables take {size} floats; the walk addresses at most 2^24")
+    return np.concatenate(parts)
 
 
 def flatten(scene: Scene) -> StackArrays:
@@ -90,6 +111,7 @@ def flatten(scene: Scene) -> StackArrays:
         boundaries.append(_boundary(scene, None))
     bnd_i = np.array([x for b in boundaries for x in b[0]], dtype=np.int32)
     bnd_f = np.array([x for b in boundaries for x in b[1]], dtype=np.float32)
+    bnd_f = _append_tables(boundaries, bnd_f)
     slab_f = np.array([x for s in slabs for x in s] or [0.0, 1.0, 0.0], dtype=np.float32)
     assert len(boundaries) == len(slabs) + 1
     return StackArrays(bnd_i, bnd_f, slab_f, len(slabs), scene.opaque)
