@@ -104,7 +104,7 @@ def ndf_lookup(tab: Any, off: int, theta: Any, phi: Any):
 
 @wp.func
 def shadow_lookup(tab: Any, off: int, w: Any):
-    """Tabulated ``S(w)`` (Wang et al. 2008, eq. (5)), bilinear on its uniform grid; uses
+    """Tabulated ``S(w)`` (Wang et al. 2008, eq. (5)), bilinear on its grid; uses
     ``|w.z|`` (the microsurface seen from below has the same normals)."""
     n_t = int(tab[off])
     n_p = int(tab[off + 1])
@@ -112,7 +112,10 @@ def shadow_lookup(tab: Any, off: int, w: Any):
     n_sp = int(tab[off + 3])
     s0 = off + HEAD + n_t + n_p + n_t * n_p
     theta, phi = angles(w)
-    x = theta * type(theta)(n_st - 1) / type(theta)(1.5707963267948966)
+    # the grid is uniform in 1 - sqrt(1 - theta / (pi/2)) (layersim.ndf.table.shadow_grid)
+    one = type(theta)(1.0)
+    x = (one - wp.sqrt(wp.max(one - theta / type(theta)(1.5707963267948966),
+                              type(theta)(0.0)))) * type(theta)(n_st - 1)
     i = wp.min(int(wp.floor(x)), n_st - 2)
     ti = wp.clamp(x - type(theta)(i), type(theta)(0.0), type(theta)(1.0))
     y = phi * type(theta)(n_sp) / type(theta)(6.283185307179586)
@@ -121,7 +124,6 @@ def shadow_lookup(tab: Any, off: int, w: Any):
     j1 = j + 1
     if j1 >= n_sp:
         j1 = 0
-    one = type(theta)(1.0)
     r0 = s0 + i * n_sp
     r1 = r0 + n_sp
     return ((one - ti) * ((one - tj) * tab[r0 + j] + tj * tab[r0 + j1])

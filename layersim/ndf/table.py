@@ -34,10 +34,11 @@ from ..errors import SceneError
 
 __all__ = ["NDFTable", "load_ndf", "from_arrays", "theta_weights", "sampled_table"]
 
-#: Shadowing grid: elevations (uniform in [0, pi/2], both ends included) and azimuths (uniform,
-#: periodic). 0.5 deg x 5 deg keeps the bilinear interpolation of S within ~1e-3 of its nodes
-#: for Beckmann lobes with alpha >= 0.1 up to 89 deg.
-SHADOW_THETA, SHADOW_PHI = 181, 72
+#: Shadowing grid (:func:`shadow_grid`): elevations (crowding toward the horizon, both ends
+#: included) and azimuths (uniform, periodic, 3 deg; an even count). Interpolated S of a
+#: Beckmann (0.3, 0.15) table is within 4e-4 of Smith's closed form up to 89.5 deg
+#: (tests/test_tabulated_ndf.py).
+SHADOW_THETA, SHADOW_PHI = 181, 120
 #: Layout of :meth:`NDFTable.packed`: four counts, then the arrays in this order.
 HEADER = ("n_theta", "n_phi", "n_shadow_theta", "n_shadow_phi")
 #: Largest table (nodes) accepted: the shadowing pass is O(nodes x shadow nodes).
@@ -126,7 +127,7 @@ class NDFTable:
         th = np.arctan2(np.hypot(k[..., 0], k[..., 1]), np.abs(k[..., 2]))
         ph = np.arctan2(k[..., 1], k[..., 0]) % (2.0 * np.pi)
         tg, pg = shadow_grid()
-        return _bilinear(tg, pg, self.shadow, th, ph)
+        return _bilinear(_shadow_x(tg), pg, self.shadow, _shadow_x(th), ph)
 
     def cell_probabilities(self) -> np.ndarray:
         """Projected-area share ``P[i, j]`` of cell (theta_i..theta_{i+1}, phi_j..phi_{j+1})
@@ -177,9 +178,18 @@ class NDFTable:
 
 
 def shadow_grid() -> tuple[np.ndarray, np.ndarray]:
-    """Nodes ``(theta_k, phi_k)`` of the shadowing table (radians)."""
-    return (np.linspace(0.0, 0.5 * np.pi, SHADOW_THETA),
+    """Nodes ``(theta_k, phi_k)`` of the shadowing table (radians): uniform in azimuth, and
+    uniform in ``x = 1 - sqrt(1 - theta / (pi/2))`` in elevation, so that the nodes crowd
+    toward the horizon, where S falls to 0 within a few degrees (``theta = (pi/2)(1 -
+    (1 - x)^2)``, spacing 1 deg at the normal and 0.003 deg at the horizon for 181 nodes)."""
+    x = np.linspace(0.0, 1.0, SHADOW_THETA)
+    return (0.5 * np.pi * (1.0 - (1.0 - x) ** 2),
             np.arange(SHADOW_PHI) * (2.0 * np.pi / SHADOW_PHI))
+
+
+def _shadow_x(theta):
+    """Elevation coordinate of the shadowing grid (:func:`shadow_grid`)."""
+    return 1.0 - np.sqrt(np.maximum(1.0 - theta / (0.5 * np.pi), 0.0))
 
 
 def _bilinear(theta, phi, values, th, ph):
@@ -205,21 +215,25 @@ def _shadow_table(theta, phi, D) -> np.ndarray:
     H = np.stack([(st * np.cos(phi)[None, :]).ravel(), (st * np.sin(phi)[None, :]).ravel(),
                   np.broadcast_to(ct, D.shape).ravel()], axis=1)
     tg, pg = shadow_grid()
+    # D is symmetric under a rotation by pi (from_arrays), hence so is S: half the azimuths
+    pg = pg[:SHADOW_PHI // 2]
     K = np.stack([(np.sin(tg)[:, None] * np.cos(pg)[None, :]).ravel(),
                   (np.sin(tg)[:, None] * np.sin(pg)[None, :]).ravel(),
                   np.broadcast_to(np.cos(tg)[:, None], (tg.size, pg.size)).ravel()], axis=1)
     keep = wts != 0.0
-    H, wts = H[keep], wts[keep]
+    # float32 products (S to ~1e-6, far below the interpolation error), float64 sums
+    H, wts = H[keep].astype(np.float32), wts[keep]
     den = np.empty(K.shape[0])
     step = max(1, (1 << 22) // max(H.shape[0], 1))
     for a in range(0, K.shape[0], step):
-        dots = H @ K[a:a + step].T
+        dots = H @ K[a:a + step].T.astype(np.float32)
         np.maximum(dots, 0.0, out=dots)
         den[a:a + step] = wts @ dots
     S = np.where(den > 0, K[:, 2] / np.maximum(den, 1e-300), 0.0)
     # S > 1 would mean the visible projected area is below the geometric one (a distribution
     # whose mean slope is not zero); the product S(i) S(o) must not create energy
-    return np.minimum(S, 1.0).reshape(tg.size, pg.size)
+    S = np.minimum(S, 1.0).reshape(tg.size, pg.size)
+    return np.concatenate([S, S], axis=1)
 
 
 def _dphi_nodes(phi: np.ndarray) -> np.ndarray:

@@ -44,8 +44,9 @@ def tabulated_plan(i: int, layer, eta_rel: complex, width: float) -> LayerPlan:
     eta = (f"{eta_rel.real:.4g}" if eta_rel.imag == 0
            else f"{eta_rel.real:.4g}+{eta_rel.imag:.4g}i")
     return LayerPlan(
-        i, layer.kind, "project (coupled modes, sampled)",
-        f"{table.describe()}{rot}, relative index {eta}; grid spacing "
+        i, layer.kind, "project (coupled modes)",
+        f"{table.describe()}{rot}, relative index {eta}, sampled in (phi_d, phi_s); grid "
+        f"spacing "
         f"{math.degrees(d_theta):.3g} x {math.degrees(d_phi):.3g} deg {fine} its equivalent "
         f"width {math.degrees(alpha):.3g} deg; n and md as for that Beckmann lobe, ms = {ms}",
         width=width, ms=ms)
