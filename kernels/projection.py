@@ -20,7 +20,7 @@ import numpy as np
 import scipy.fft
 import warp as wp
 
-from . import physics, tabulated
+from . import measured, physics, tabulated
 from .runtime import device_for, ensure_init, host_array
 
 
@@ -523,3 +523,43 @@ def tabulated_ds_samples(mu_i, mu_o, eta, table: np.ndarray, n_d: int, n_s: int,
                                dtype=wp.float64, device=dev)],
               outputs=[f])
     return f.numpy()
+
+
+# ---------------------------------------------------------------------------------------------
+# Measured BRDFs (layersim.kernels.measured): cosine series of an isotropic table
+# ---------------------------------------------------------------------------------------------
+
+@wp.kernel
+def _measured_uniform_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
+                             tab: wp.array(dtype=wp.float64), f: wp.array2d(dtype=wp.float64)):
+    """f[p, j] = BRDF at phi_j = pi j / M (M + 1 = f.shape[1])."""
+    p, j = wp.tid()
+    phi = wp.float64(wp.pi) * wp.float64(j) / wp.float64(f.shape[1] - 1)
+    wi, wo = _pair_directions(mu_i[p], mu_o[p], phi)
+    f[p, j] = measured.measured_eval(wi, wo, tab, 0)
+
+
+def measured_cosine_series(mu_i, mu_o, table: np.ndarray, half: int, orders: int,
+                           device=None) -> np.ndarray:
+    """Cosine coefficients ``f_0 .. f_{orders-1}`` (1/sr) of a measured BRDF
+    (:func:`measured.measured_eval`, one channel's flat ``table``) for ordinate pairs (solver
+    convention, reflection: ``mu_i > 0 > mu_o``), from ``half + 1`` uniform azimuths on
+    [0, pi] (trapezoidal rule, a DCT-I); orders past ``half`` are zero. Shape (P, orders)."""
+    ensure_init()
+    dev = device_for(device)
+    mu_i = np.ascontiguousarray(mu_i, dtype=np.float64)
+    if mu_i.size == 0:
+        return np.zeros((0, orders))
+    f = wp.empty((mu_i.size, half + 1), dtype=wp.float64, device=dev)
+    wp.launch(_measured_uniform_kernel, dim=f.shape, device=dev,
+              inputs=[wp.array(mu_i, dtype=wp.float64, device=dev),
+                      wp.array(np.ascontiguousarray(mu_o, dtype=np.float64), dtype=wp.float64,
+                               device=dev),
+                      wp.array(np.ascontiguousarray(table, dtype=np.float64), dtype=wp.float64,
+                               device=dev)], outputs=[f])
+    y = scipy.fft.dct(f.numpy(), type=1, axis=1) / half
+    y[:, 0] *= 0.5
+    out = np.zeros((mu_i.size, orders))
+    n = min(orders, half + 1)
+    out[:, :n] = y[:, :n]
+    return out

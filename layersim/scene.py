@@ -26,11 +26,13 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from . import merl
 from .errors import SceneError
 from .ndf import table as ndf_table
 
 __all__ = [
-    "Layer", "Dielectric", "Conductor", "Medium", "Diffuse", "Discretization", "Scene",
+    "Layer", "Dielectric", "Conductor", "Medium", "Diffuse", "Measured", "Discretization",
+    "Scene",
     "QUADRATURES", "DISTRIBUTIONS", "as_scene",
 ]
 
@@ -138,6 +140,31 @@ class Diffuse(Layer):
     @property
     def opaque(self) -> bool:
         return True
+
+
+@dataclass(frozen=True)
+class Measured(Layer):
+    """Opaque base with a measured isotropic BRDF (MERL layout, :mod:`layersim.merl`): channel
+    ``channel`` of ``data``. ``alpha`` is the width (radians) of its specular lobe
+    (:meth:`layersim.merl.MERLTable.equivalent_alpha`), which sizes the plan as a Beckmann
+    lobe of that roughness would."""
+
+    kind = "measured"
+    data: Any = field(default=None, compare=False)
+    channel: int = 0
+    alpha: float = 0.5 * math.pi
+
+    @property
+    def opaque(self) -> bool:
+        return True
+
+    @property
+    def alpha_u(self) -> float:
+        return self.alpha
+
+    @property
+    def alpha_v(self) -> float:
+        return self.alpha
 
 
 @dataclass(frozen=True)
@@ -335,6 +362,11 @@ def _describe_layer(per_channel: tuple[Layer, ...]) -> str:
                 f"g={vals(lambda x: f'{x.g:g}')}")
     if isinstance(layer, Diffuse):
         return f"diffuse albedo={vals(lambda x: f'{x.albedo:g}')}"
+    if isinstance(layer, Measured):
+        return (f"measured BRDF {layer.data.source} (MERL layout, 3 channels, lobe width "
+                f"{math.degrees(layer.alpha):.3g} deg"
+                + (f", {layer.data.missing} unmeasured samples read as 0" if layer.data.missing
+                   else "") + ")")
     return layer.kind
 
 
@@ -347,12 +379,14 @@ _LAYER_FIELDS = {
     "conductor": {"kind", "ior", "roughness", "distribution", "rotation", "ndf"},
     "medium": {"kind", "albedo", "g", "tau"},
     "diffuse": {"kind", "albedo"},
+    "measured": {"kind", "file"},
 }
 _REQUIRED = {
     "dielectric": {"ior"},
     "conductor": {"ior"},
     "medium": {"albedo", "tau"},
     "diffuse": {"albedo"},
+    "measured": {"file"},
 }
 _TOP_FIELDS = {"layer", "stack", "discretization"}
 _STACK_FIELDS = {"top_ior", "name"}
@@ -477,6 +511,17 @@ def _parse_layer(ctx: _Ctx, raw: Any) -> list[Layer]:
         channels = max(len(albedos), len(gs))
         return [Medium(albedo=albedos[c % len(albedos)], g=gs[c % len(gs)], tau=tau)
                 for c in range(channels)]
+
+    if kind == "measured":
+        value = raw["file"]
+        if not isinstance(value, (str, os.PathLike)):
+            raise ctx.error("file", f"must be the path of a MERL binary file, got {value!r}")
+        path = Path(value)
+        if not path.is_absolute() and ctx.source is not None:
+            path = Path(ctx.source).parent / path
+        data = merl.read_merl(path, layer=ctx.layer, kind=kind)
+        alpha = data.equivalent_alpha()
+        return [Measured(data=data, channel=c, alpha=alpha) for c in range(3)]
 
     albedos = _per_channel(ctx, "albedo", raw["albedo"],
                            lambda c, f, v: _real(c, f, v, lo=0.0, hi=1.0))

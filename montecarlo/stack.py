@@ -23,7 +23,7 @@ import numpy as np
 
 from ..kernels import tabulated, walk
 from ..kernels.physics import DISTRIBUTION_CODES
-from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
+from ..scene import Conductor, Dielectric, Diffuse, Measured, Medium, Scene
 
 __all__ = ["StackArrays", "flatten"]
 
@@ -41,7 +41,8 @@ class StackArrays:
         tangent-frame rotation, Lambertian albedo, unused; a tabulated-NDF boundary (distribution
         code :data:`layersim.kernels.tabulated.TABULATED`) holds in place of ``alpha_u`` the
         offset of its packed table (:meth:`layersim.ndf.NDFTable.packed`), which follows the
-        records.
+        records; so does a measured base (:data:`layersim.kernels.walk.MEASURED`: one channel
+        of its MERL table, :meth:`layersim.merl.MERLTable.packed`).
     slab_f : ndarray of float32, shape (3 * max(n_slabs, 1),)
         Per slab: tau (along the normal), single-scattering albedo, HG g (padded when empty).
     n_slabs : int
@@ -65,6 +66,8 @@ def _boundary(scene: Scene, i: int | None):
     if isinstance(layer, Diffuse):
         floats[6] = layer.albedo
         return [walk.DIFFUSE, 0], floats
+    if isinstance(layer, Measured):     # its table follows the records, like an NDF's
+        return [walk.MEASURED, 0], floats, _MeasuredChannel(layer.data, layer.channel)
     eta = scene.relative_ior(i)
     if isinstance(layer, Dielectric) and eta.real == 1.0:
         return [walk.NULL, 0], floats
@@ -74,6 +77,17 @@ def _boundary(scene: Scene, i: int | None):
     if layer.ndf is not None:       # alpha_u's slot gets the table's offset in flatten()
         return [kind, tabulated.TABULATED], floats, layer.ndf
     return [kind, DISTRIBUTION_CODES[layer.distribution]], floats
+
+
+@dataclass(frozen=True)
+class _MeasuredChannel:
+    """One channel of a measured BRDF, packed like an NDF table for :func:`_append_tables`."""
+
+    data: object
+    channel: int
+
+    def packed(self, dtype):
+        return self.data.packed(self.channel, dtype)
 
 
 def _append_tables(boundaries: list, bnd_f: np.ndarray) -> np.ndarray:

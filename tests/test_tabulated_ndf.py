@@ -195,6 +195,7 @@ def _eval_error(a, b, upper_only):
     return np.linalg.norm((fa - fb)[big]) / np.linalg.norm(fa[big])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dist", ["beckmann", "ggx"])
 def test_solver_matches_the_analytic_conductor(tables, dist):
     analytic = layersim.solve({"layer": [layer("conductor", GOLD, dist)],
@@ -262,6 +263,7 @@ def test_solver_and_monte_carlo_agree_on_a_coated_tabulated_conductor(tables):
     assert abs(R - est[0]) <= 4 * se[0] + 1e-3     # 1e-3: the discretisation's energy error
 
 
+@pytest.mark.slow
 def test_opencl_walk_samples_the_table_as_warp_does(tables, cl_device):
     scene = layersim.Scene.from_dict({"layer": [layer("conductor", GOLD, "beckmann", tables)]})
     wi = unit(40.0, 10.0)

@@ -15,10 +15,10 @@ from ..errors import InfeasibleError
 from ..ingredients.medium import G_EXACT_MAX, hg_scaling
 from ..lobe import NEAR_SPECULAR_ALPHA, NEAR_SPECULAR_WIDE_MAX, near_specular_error
 from ..operator import Grid
-from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
+from ..scene import Conductor, Dielectric, Diffuse, Measured, Medium, Scene
 from .model import LayerPlan
 from .ordinates import N_PER_WIDTH
-from .tabulated import tabulated_plan
+from .tabulated import measured_plan, tabulated_plan
 
 #: Legendre moments a delta-M scaled medium needs (the accuracy target that sets its share of
 #: ``n``): for g = 0.99, tau 5, albedo 0.95 the albedo at normal incidence moves by 3e-5 from
@@ -83,6 +83,9 @@ def survey_layers(scene: Scene) -> Survey:
             _medium(scene, i, layer, survey)
         elif isinstance(layer, Diffuse):
             survey.layers.append(LayerPlan(i, layer.kind, "diffuse", "order 0 only"))
+        elif isinstance(layer, Measured):
+            survey.widths.append((layer.alpha, i, layer.kind, "measured lobe"))
+            survey.layers.append(measured_plan(i, layer))
     if scene.opaque:
         survey.left_out.append("transmission blocks (Ttb, Tbt) and bottom reflection: the "
                                "base is opaque")
@@ -248,7 +251,7 @@ def _near_specular(scene: Scene, i: int, layer, survey: Survey) -> bool:
     if layer.ndf is not None:       # the lobe of layersim.lobe is analytic
         return False
     base = scene.channel(0).layers[-1]
-    wide_base = isinstance(base, Diffuse) or (
+    wide_base = isinstance(base, (Diffuse, Measured)) or (
         isinstance(base, Conductor) and min(base.alpha_u, base.alpha_v) > NEAR_SPECULAR_ALPHA)
     if (not isinstance(layer, Dielectric) or i != 0 or lo > NEAR_SPECULAR_ALPHA
             or hi > NEAR_SPECULAR_WIDE_MAX or not wide_base):

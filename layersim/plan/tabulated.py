@@ -19,15 +19,30 @@ from dataclasses import replace
 import numpy as np
 
 from ..aniso import plan as aplan
+from ..scene import Conductor, Measured
 from .model import LayerPlan
 
 
 def equivalent_lobe(layer):
     """The analytic Beckmann layer with the table's equivalent roughness (what the series-length
-    pre-pass measures); other layers unchanged."""
-    if layer.ndf is None:
+    pre-pass measures): for a tabulated NDF its own interface, for a measured base a conductor
+    (an index with the Fresnel factor of a metal: its value does not change the series lengths
+    much) with the lobe width as roughness; other layers unchanged."""
+    if isinstance(layer, Measured):
+        return Conductor(ior=complex(1.0, 3.0), alpha_u=layer.alpha, alpha_v=layer.alpha)
+    if getattr(layer, "ndf", None) is None:
         return layer
     return replace(layer, distribution="beckmann", ndf=None)
+
+
+def measured_plan(i: int, layer) -> LayerPlan:
+    """The plan line of a measured base: projected numerically (cosine series, isotropic),
+    sized as a Beckmann lobe as wide as its specular peak."""
+    return LayerPlan(
+        i, layer.kind, "project (measured, sampled)",
+        f"{layer.data.source}: MERL layout 90 x 90 x 180 (theta_h, theta_d, phi_d), lobe "
+        f"width {math.degrees(layer.alpha):.3g} deg; n and md as for a Beckmann lobe of that "
+        "roughness", width=layer.alpha)
 
 
 def tabulated_plan(i: int, layer, eta_rel: complex, width: float) -> LayerPlan:
