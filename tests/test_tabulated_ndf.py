@@ -326,3 +326,9 @@ def test_npz_without_the_arrays_is_refused(tmp_path):
     np.savez(tmp_path / "x.npz", theta=[0.0, 1.0])
     with pytest.raises(SceneError, match=r"x.npz: missing array\(s\) phi, D"):
         load_ndf(tmp_path / "x.npz")
+
+
+def test_plot_of_a_table_is_written(tables, tmp_path):
+    from layersim.ndf.plot import plot_ndf
+    path = plot_ndf(tables["beckmann"][0], tmp_path / "ndf.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 10_000
