@@ -58,8 +58,8 @@ class MERLTable:
     def equivalent_alpha(self) -> float:
         """Width (radians) of the brightest channel's lobe in ``theta_h`` near
         ``theta_d = 0``: where its mean over ``phi_d``, less its minimum, first falls to 1/e of
-        its value at the specular peak; ``pi/2`` when it never does (diffuse). The planner sizes ``n`` and
-        ``md`` as for a Beckmann lobe of that roughness."""
+        its value at the specular peak; ``pi/2`` when it never does (diffuse). The planner
+        sizes ``n`` and ``md`` as for a Beckmann lobe of that roughness."""
         prof = self.values[:, :, :10, :].mean(axis=(2, 3))
         prof = prof[int(np.argmax(prof[:, 0]))]
         prof = prof - prof.min()        # the lobe above the floor that diffuse reflection makes

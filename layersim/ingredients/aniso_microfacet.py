@@ -564,7 +564,8 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
     projector : callable, optional
         Projects the blocks instead of the analytic path: ``projector(grid, name, md, ms,
         triangle, stats, relerr, out)`` appends the real entries ``(rows, cols, values)`` of
-        block ``name`` to ``out`` (a tabulated NDF: :func:`layersim.ingredients.tabulated.projector`).
+        block ``name`` to ``out`` (a tabulated NDF:
+        :func:`layersim.ingredients.tabulated.projector`).
     """
     if layer.smooth:
         raise ValueError("aniso_interface_operator needs a rough interface")

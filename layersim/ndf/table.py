@@ -13,7 +13,7 @@ walk, which both interpolate the same nodes, see one distribution.
 * Shadowing (Wang et al. 2008, eq. (4)-(5), after Ashikhmin et al. 2000): ``G(i, o) = S(i) S(o)``
   with ``S(k) = (k.n) / int_{h.k > 0} (h.k) D(h) dw_h``. For a distribution with the Smith
   microsurface profile this is Smith's ``G1 = 1 / (1 + Lambda)``; it is tabulated once on a
-  uniform (theta_k, phi_k) grid and interpolated bilinearly.
+  (theta_k, phi_k) grid (:func:`shadow_grid`) and interpolated bilinearly.
 * Sampling: cells are chosen with probability ``P_ij`` (their share of the projected area);
   within a cell ``sin^2 theta`` and ``phi`` are uniform, so the density of normals is
   ``P_ij 2 cos(theta) / ((sin^2 theta_{i+1} - sin^2 theta_i) dphi_j)`` per steradian, close to
@@ -147,7 +147,8 @@ class NDFTable:
         P = self.cell_probabilities().ravel()
         t = np.tan(th)[:, None]
         out = []
-        for slope in (np.abs(t * np.cos(ph)[None, :]).ravel(), np.abs(t * np.sin(ph)[None, :]).ravel()):
+        for trig in (np.cos(ph), np.sin(ph)):
+            slope = np.abs(t * trig[None, :]).ravel()
             order = np.argsort(slope)
             c = np.cumsum(P[order])
             med = slope[order][min(np.searchsorted(c, 0.5), slope.size - 1)]
