@@ -61,13 +61,17 @@ def test_file_layout_and_table_round_trip(merl_file):
 
 
 def test_solver_reads_back_the_analytic_brdf(merl_file):
-    # n = 96: at the planner's n = 64 (its minimum) the worst point near the normal is 5 % off
-    # (interpolation between incident ordinates; 0.12 % RMS), as for an analytic lobe
+    # n = 128 and directions within 85 deg of the normal: at the planner's n = 64 (its minimum)
+    # the worst point, within a degree of the normal, is 5 % off (interpolation between
+    # ordinates; 0.3 % RMS), and closer to the horizon the azimuthal truncation of every
+    # projected lobe sets in (benchmarks/tabulated_ndf.txt)
     scene = layersim.Scene.from_dict({"layer": [{"kind": "measured", "file": str(merl_file)}],
-                                      "discretization": {"n": 96}})
+                                      "discretization": {"n": 128}})
     assert scene.channels == 3
     bsdf = layersim.solve(scene)
-    wi, wo = _pairs(seed=1)
+    rng = np.random.default_rng(1)
+    z = np.cos(np.radians(85.0))
+    wi, wo = random_directions(rng, 8000, min_z=z), random_directions(rng, 8000, min_z=z)
     ref = analytic(*half_diff(wi, wo))
     f = np.moveaxis(bsdf.eval(wi, wo), -1, 0)
     assert _worst(f, ref) < 0.02
