@@ -332,3 +332,18 @@ def test_plot_of_a_table_is_written(tables, tmp_path):
     from layersim.ndf.plot import plot_ndf
     path = plot_ndf(tables["beckmann"][0], tmp_path / "ndf.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 10_000
+
+
+def test_cli_plans_a_tabulated_scene_and_refuses_a_bad_table(tables, tmp_path, capsys):
+    from layersim.cli import main as cli_main
+    scene = tmp_path / "s.toml"
+    scene.write_text('[[layer]]\nkind = "conductor"\nior = [0.2, 3.0]\n'
+                     f'distribution = "tabulated"\nndf = "{tables["beckmann"][1]}"\n')
+    assert cli_main(["plan", str(scene)]) == 0
+    assert "tabulated NDF 91 x 180" in capsys.readouterr().out
+    np.savez(tmp_path / "bad.npz", theta=[0.0, 1.0], phi=[0.0, np.pi], D=[[1.0, 1.0]] * 2)
+    scene.write_text('[[layer]]\nkind = "conductor"\nior = [0.2, 3.0]\n'
+                     'distribution = "tabulated"\nndf = "bad.npz"\n')
+    assert cli_main(["plan", str(scene)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bad.npz" in err[0] and "from 0 to pi/2" in err[0]
