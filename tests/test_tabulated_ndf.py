@@ -334,6 +334,7 @@ def test_plot_of_a_table_is_written(tables, tmp_path):
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_cli_plans_a_tabulated_scene_and_refuses_a_bad_table(tables, tmp_path, capsys):
     from layersim.cli import main as cli_main
     scene = tmp_path / "s.toml"
@@ -347,3 +348,35 @@ def test_cli_plans_a_tabulated_scene_and_refuses_a_bad_table(tables, tmp_path, c
     assert cli_main(["plan", str(scene)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bad.npz" in err[0] and "from 0 to pi/2" in err[0]
+
+
+@pytest.fixture(scope="module")
+def rotated(tmp_path_factory):
+    """The Beckmann (0.3, 0.15) table turned by 30 deg in azimuth: not mirror symmetric about
+    its axes (complex coefficients f_{d,s}), only under a rotation by pi."""
+    tab = sampled_table(lambda t, p: beckmann(t, p - np.radians(30.0)), 91, 180)
+    path = tmp_path_factory.mktemp("rot") / "rotated.npz"
+    np.savez(path, theta=tab.theta, phi=tab.phi, D=tab.D)
+    return str(path)
+
+
+def test_a_turned_table_is_planned_as_the_rotated_lobe(rotated):
+    analytic = layersim.make_plan({"layer": [layer("conductor", GOLD, "beckmann",
+                                                   rotation=30.0)]})
+    tab = layersim.make_plan({"layer": [{"kind": "conductor", "ior": GOLD,
+                                         "distribution": "tabulated", "ndf": rotated}]})
+    assert (tab.n, tab.md, tab.ms) == (analytic.n, analytic.md, analytic.ms)
+    assert "alpha=(0.302, 0.15) along 30 deg" in tab.report()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind, ior", [("conductor", GOLD), ("dielectric", 1.5)])
+def test_a_turned_table_matches_the_rotated_analytic_layer(rotated, kind, ior):
+    disc = {"n": 64, "md": 48}
+    analytic = layersim.solve({"layer": [layer(kind, ior, "beckmann", rotation=30.0)],
+                               "discretization": disc})
+    tab = layersim.solve({"layer": [{"kind": kind, "ior": ior, "distribution": "tabulated",
+                                     "ndf": rotated}], "discretization": disc})
+    assert _eval_error(analytic, tab, upper_only=kind == "conductor") < 0.01
+    if kind == "dielectric":
+        assert _eval_error(analytic, tab, upper_only=True) < 0.01

@@ -139,26 +139,38 @@ class NDFTable:
 
     # ---- derived numbers -------------------------------------------------------------
 
-    def equivalent_alpha(self) -> tuple[float, float]:
-        """Beckmann roughness ``(alpha_u, alpha_v)`` with the same median slope along x and y
-        (projected-area weighted): what the planner sizes ``n``, ``md`` and ``ms`` by."""
+    def principal_axes(self) -> tuple[float, float, float]:
+        """``(alpha_u, alpha_v, angle)``: the Beckmann roughness with the same median slope
+        (projected-area weighted) along the axis of largest median slope, at azimuth ``angle``
+        (radians, in [0, pi), 2 deg steps), and along the axis across it. What the planner
+        sizes ``n``, ``md`` and ``ms`` by; a rotated lobe keeps its roughness ratio."""
         th = 0.5 * (self.theta[:-1] + self.theta[1:])
         ph = self.phi + 0.5 * _dphi(self.phi)
         P = self.cell_probabilities().ravel()
         t = np.tan(th)[:, None]
-        out = []
-        for trig in (np.cos(ph), np.sin(ph)):
-            slope = np.abs(t * trig[None, :]).ravel()
+        sx, sy = (t * np.cos(ph)[None, :]).ravel(), (t * np.sin(ph)[None, :]).ravel()
+
+        def median(psi):
+            slope = np.abs(sx * np.cos(psi) + sy * np.sin(psi))
             order = np.argsort(slope)
             c = np.cumsum(P[order])
             med = slope[order][min(np.searchsorted(c, 0.5), slope.size - 1)]
-            out.append(max(float(med) / _BECKMANN_MEDIAN, 1e-3))
-        return out[0], out[1]
+            return max(float(med) / _BECKMANN_MEDIAN, 1e-3)
+
+        angles = np.radians(np.arange(0.0, 180.0, 2.0))
+        meds = np.array([median(a) for a in angles])
+        k = int(np.argmax(meds))
+        return float(meds[k]), float(meds[(k + angles.size // 2) % angles.size]), float(angles[k])
+
+    def equivalent_alpha(self) -> tuple[float, float]:
+        """``(alpha_u, alpha_v)`` of :meth:`principal_axes`."""
+        return self.principal_axes()[:2]
 
     def describe(self) -> str:
-        au, av = self.equivalent_alpha()
+        au, av, angle = self.principal_axes()
+        axis = f" along {np.degrees(angle):.3g} deg" if au != av and angle else ""
         return (f"tabulated NDF {self.theta.size} x {self.phi.size} ({self.source}), "
-                f"equivalent Beckmann alpha=({au:.3g}, {av:.3g})")
+                f"equivalent Beckmann alpha=({au:.3g}, {av:.3g}){axis}")
 
     def packed(self, dtype=np.float32) -> np.ndarray:
         """Flat array for the kernels: the counts of :data:`HEADER`, ``theta``, ``phi``,

@@ -1,8 +1,8 @@
 """Planning a tabulated-NDF interface (Wang et al. 2008): it is sized as its equivalent
 Beckmann lobe, and the report says what the table's grid implies.
 
-The table's equivalent roughness (:meth:`layersim.ndf.NDFTable.equivalent_alpha`: the Beckmann
-``alpha_u, alpha_v`` with the same median slopes) stands in for the lobe everywhere the planner
+The table's equivalent roughness (:meth:`layersim.ndf.NDFTable.principal_axes`: the Beckmann
+``alpha_u, alpha_v`` with the same median slopes along its principal axes) stands in for the lobe everywhere the planner
 reads a roughness: the ordinates ``n`` (lobe width), the orders ``md`` (series lengths of that
 Beckmann lobe, :mod:`.orders`) and the coupling ``ms`` (its roughness ratio, at least 1: a table
 may depend on azimuth whatever its median slopes say). The table's grid bounds what it can
@@ -32,7 +32,9 @@ def equivalent_lobe(layer):
         return Conductor(ior=complex(1.0, 3.0), alpha_u=layer.alpha, alpha_v=layer.alpha)
     if getattr(layer, "ndf", None) is None:
         return layer
-    return replace(layer, distribution="beckmann", ndf=None)
+    au, av, angle = layer.ndf.principal_axes()
+    return replace(layer, distribution="beckmann", ndf=None, alpha_u=au, alpha_v=av,
+                   rotation=layer.rotation + angle)
 
 
 def measured_plan(i: int, layer) -> LayerPlan:
