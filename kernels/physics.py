@@ -196,13 +196,10 @@ def microfacet_smooth_q(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, di
     whenever one exists (it is pure geometry, and the projection reads it at phi = 0 and pi).
     """
     zero = au * type(au)(0.0)
-    one = type(au)(1.0)
     h, eta_i, eta_o = half_vector(wi, wo, eta, k)
     hlen2 = wp.dot(h, h)
     if hlen2 <= zero or h[2] <= zero:
         return zero, zero
-    reflect = wi[2] * wo[2] > zero
-    conductor = k > zero
     hz2 = h[2] * h[2]
     q = (h[0] * h[0] / (au * au) + h[1] * h[1] / (av * av)) / hz2
     m = h / wp.sqrt(hlen2)
@@ -210,19 +207,27 @@ def microfacet_smooth_q(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, di
     if g <= zero:
         return zero, q
     prefactor = hlen2 * hlen2 / (type(au)(wp.pi) * au * av * hz2 * hz2)
+    return microfacet_factor(wi, wo, m, eta_i, eta_o, eta, k) * g * prefactor, q
+
+
+@wp.func
+def microfacet_factor(wi: Any, wo: Any, m: Any, eta_i: Any, eta_o: Any, eta: Any, k: Any):
+    """The microfacet BSDF without ``D(m) G``: ``F / (4 |wi.z wo.z|)`` in reflection and
+    ``|wi.m wo.m| eta_o^2 (1 - F) / (|wi.z wo.z| (eta_i wi.m + eta_o wo.m)^2)`` in refraction
+    (Walter et al. 2007, eq. 20-21; radiance convention), for the unit normal ``m`` of the pair
+    (:func:`half_vector`). Shared by the analytic and the tabulated NDFs
+    (:mod:`layersim.kernels.tabulated`)."""
+    one = type(eta)(1.0)
     ci = wp.dot(wi, m)
     co = wp.dot(wo, m)
     cos_io = wp.abs(wi[2] * wo[2])
-    if reflect:
-        fr = zero
-        if conductor:
-            fr = fresnel_conductor(wp.abs(ci), eta, k)
-        else:
-            fr = fresnel_dielectric(ci, eta)
-        return fr * g * prefactor / (type(au)(4.0) * cos_io), q
+    if wi[2] * wo[2] > type(eta)(0.0):
+        if k > type(eta)(0.0):
+            return fresnel_conductor(wp.abs(ci), eta, k) / (type(eta)(4.0) * cos_io)
+        return fresnel_dielectric(ci, eta) / (type(eta)(4.0) * cos_io)
     ft = one - fresnel_dielectric(ci, eta)
     denom = eta_i * ci + eta_o * co
-    return (wp.abs(ci * co) * eta_o * eta_o * ft * g * prefactor / (cos_io * denom * denom)), q
+    return wp.abs(ci * co) * eta_o * eta_o * ft / (cos_io * denom * denom)
 
 
 @wp.func

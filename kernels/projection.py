@@ -20,7 +20,7 @@ import numpy as np
 import scipy.fft
 import warp as wp
 
-from . import physics
+from . import measured, physics, tabulated
 from .runtime import device_for, ensure_init, host_array
 
 
@@ -469,3 +469,97 @@ def microfacet_values_ds(mu_i, mu_o, phi_d, phi_s, eta, alpha_u, alpha_v,
     return _launch_pairs_ds(_microfacet_eval_ds_kernel, mu_i, mu_o, phi_d, phi_s,
                             _interface_params(eta, alpha_u, alpha_v, distribution), 1,
                             device)[0]
+
+
+# ---------------------------------------------------------------------------------------------
+# Tabulated NDFs (layersim.kernels.tabulated): the BSDF on a uniform (phi_d, phi_s) grid
+# ---------------------------------------------------------------------------------------------
+
+@wp.kernel
+def _tabulated_ds_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
+                         eta: wp.float64, k: wp.float64, tab: wp.array(dtype=wp.float64),
+                         f: wp.array3d(dtype=wp.float64)):
+    """f[p, a, b] = BSDF at phi_d = 2 pi a / Nd, phi_s = 2 pi b / Ns."""
+    p, a, b = wp.tid()
+    two_pi = wp.float64(6.283185307179586)
+    phi_d = two_pi * wp.float64(a) / wp.float64(f.shape[1])
+    phi_s = two_pi * wp.float64(b) / wp.float64(f.shape[2])
+    wi, wo = _pair_directions_ds(mu_i[p], mu_o[p], phi_d, phi_s)
+    f[p, a, b] = tabulated.microfacet_eval_tabulated(wi, wo, eta, k, tab, 0)
+
+
+def tabulated_ds_samples(mu_i, mu_o, eta, table: np.ndarray, n_d: int, n_s: int,
+                         device=None) -> np.ndarray:
+    """BSDF of a tabulated-NDF interface (:func:`tabulated.microfacet_eval_tabulated`) for
+    ordinate pairs on the uniform azimuth grid ``phi_d = 2 pi a / n_d``, ``phi_s = 2 pi b / n_s``
+    (interface frame, geometry of :func:`microfacet_split_ds`).
+
+    Parameters
+    ----------
+    mu_i, mu_o : ndarray, shape (P,)
+        Signed ordinates (solver convention, see module doc).
+    eta : complex
+        Relative index below/above (``eta + i k`` for a conductor).
+    table : ndarray of float64
+        Packed table (:meth:`layersim.ndf.table.NDFTable.packed`).
+
+    Returns
+    -------
+    ndarray, shape (P, n_d, n_s)
+        BSDF values (1/sr).
+    """
+    ensure_init()
+    dev = device_for(device)
+    mu_i = np.ascontiguousarray(mu_i, dtype=np.float64)
+    if mu_i.size == 0:
+        return np.zeros((0, n_d, n_s))
+    f = wp.empty((mu_i.size, n_d, n_s), dtype=wp.float64, device=dev)
+    wp.launch(_tabulated_ds_kernel, dim=f.shape, device=dev,
+              inputs=[wp.array(mu_i, dtype=wp.float64, device=dev),
+                      wp.array(np.ascontiguousarray(mu_o, dtype=np.float64), dtype=wp.float64,
+                               device=dev),
+                      wp.float64(complex(eta).real), wp.float64(complex(eta).imag),
+                      wp.array(np.ascontiguousarray(table, dtype=np.float64),
+                               dtype=wp.float64, device=dev)],
+              outputs=[f])
+    return f.numpy()
+
+
+# ---------------------------------------------------------------------------------------------
+# Measured BRDFs (layersim.kernels.measured): cosine series of an isotropic table
+# ---------------------------------------------------------------------------------------------
+
+@wp.kernel
+def _measured_uniform_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
+                             tab: wp.array(dtype=wp.float64), f: wp.array2d(dtype=wp.float64)):
+    """f[p, j] = BRDF at phi_j = pi j / M (M + 1 = f.shape[1])."""
+    p, j = wp.tid()
+    phi = wp.float64(wp.pi) * wp.float64(j) / wp.float64(f.shape[1] - 1)
+    wi, wo = _pair_directions(mu_i[p], mu_o[p], phi)
+    f[p, j] = measured.measured_eval(wi, wo, tab, 0)
+
+
+def measured_cosine_series(mu_i, mu_o, table: np.ndarray, half: int, orders: int,
+                           device=None) -> np.ndarray:
+    """Cosine coefficients ``f_0 .. f_{orders-1}`` (1/sr) of a measured BRDF
+    (:func:`measured.measured_eval`, one channel's flat ``table``) for ordinate pairs (solver
+    convention, reflection: ``mu_i > 0 > mu_o``), from ``half + 1`` uniform azimuths on
+    [0, pi] (trapezoidal rule, a DCT-I); orders past ``half`` are zero. Shape (P, orders)."""
+    ensure_init()
+    dev = device_for(device)
+    mu_i = np.ascontiguousarray(mu_i, dtype=np.float64)
+    if mu_i.size == 0:
+        return np.zeros((0, orders))
+    f = wp.empty((mu_i.size, half + 1), dtype=wp.float64, device=dev)
+    wp.launch(_measured_uniform_kernel, dim=f.shape, device=dev,
+              inputs=[wp.array(mu_i, dtype=wp.float64, device=dev),
+                      wp.array(np.ascontiguousarray(mu_o, dtype=np.float64), dtype=wp.float64,
+                               device=dev),
+                      wp.array(np.ascontiguousarray(table, dtype=np.float64), dtype=wp.float64,
+                               device=dev)], outputs=[f])
+    y = scipy.fft.dct(f.numpy(), type=1, axis=1) / half
+    y[:, 0] *= 0.5
+    out = np.zeros((mu_i.size, orders))
+    n = min(orders, half + 1)
+    out[:, :n] = y[:, :n]
+    return out

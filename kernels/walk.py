@@ -11,9 +11,11 @@ Stack model
 The stack is a column of ``S`` slabs between ``S + 1`` boundaries, top to bottom: boundary ``b`` is
 the top of slab ``b``, boundary ``S`` the bottom of the stack. Boundary records (``bnd_i``: 2 ints,
 ``bnd_f``: :data:`BND_F` floats each) hold the kind (:data:`NULL` index-matched pass-through,
-:data:`DIELECTRIC`, :data:`CONDUCTOR`, :data:`DIFFUSE`), the distribution code, the relative index
-``eta`` and ``k``, ``alpha_u``, ``alpha_v``, ``cos``/``sin`` of the tangent-frame rotation and the
-Lambertian albedo. Slab records (``slab_f``: :data:`SLAB_F` floats each) hold the optical thickness
+:data:`DIELECTRIC`, :data:`CONDUCTOR`, :data:`DIFFUSE`, :data:`MEASURED`), the distribution code,
+the relative index ``eta`` and ``k``, ``alpha_u``, ``alpha_v``, ``cos``/``sin`` of the
+tangent-frame rotation and the Lambertian albedo; a tabulated NDF (:mod:`.tabulated`) and a
+measured base (:mod:`.measured`) keep their tables after the records. Slab records (``slab_f``:
+:data:`SLAB_F` floats each) hold the optical thickness
 ``tau`` along the normal, the single-scattering albedo and the HG ``g`` (``tau = 0``: clear).
 
 Walk
@@ -49,7 +51,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from . import compensation, rng, sampling
+from . import compensation, measured, rng, sampling, tabulated
 
 wp.set_module_options({"enable_backward": False})
 
@@ -58,6 +60,7 @@ NULL = wp.constant(0)
 DIELECTRIC = wp.constant(1)
 CONDUCTOR = wp.constant(2)
 DIFFUSE = wp.constant(3)
+MEASURED = wp.constant(4)
 #: ints per boundary record: kind, distribution
 BND_I = wp.constant(2)
 #: floats per boundary record: eta, k, alpha_u, alpha_v, cos(rot), sin(rot), albedo, offset of
@@ -99,6 +102,9 @@ def boundary_scatter(d: wp.vec3, b: int, bnd_i: wp.array(dtype=wp.int32),
         if wi[2] <= wp.float32(0.0):
             return d, wp.float32(0.0)
         return sampling.sample_cosine_hemisphere(u0, u1), bnd_f[o + 6]
+    if kind == MEASURED:                # alpha_u's slot holds the table's offset in bnd_f
+        wm, wm_weight = measured.sample_measured(wi, bnd_f, int(au), u0, u1)
+        return wm, wm_weight
     if au == wp.float32(0.0):
         ws, fs = sampling.sample_smooth(wi, eta, k, u0)
         return ws, fs
@@ -113,6 +119,10 @@ def boundary_scatter(d: wp.vec3, b: int, bnd_i: wp.array(dtype=wp.int32),
     cr = bnd_f[o + 4]
     sr = bnd_f[o + 5]
     wl = sampling.to_tangent_frame(wi, cr, sr)
+    if dist == tabulated.TABULATED:     # alpha_u's slot holds the table's offset in bnd_f
+        wt, wt_weight = tabulated.sample_microfacet_tabulated(wl, eta, k, bnd_f, int(au), v0,
+                                                              u1, u3)
+        return sampling.from_tangent_frame(wt, cr, sr), wt_weight * scale
     wo, weight = sampling.sample_microfacet(wl, eta, k, au, av, dist, v0, u1, u2, u3)
     return sampling.from_tangent_frame(wo, cr, sr), weight * scale
 

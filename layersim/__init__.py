@@ -9,7 +9,7 @@ Public entry points (see docs/conventions.md)::
     stack = layersim.add(top, bottom); layer = layersim.subtract(stack, known, side="top")
 """
 from .errors import LayersimError, SceneError, InfeasibleError, OperatorError, FileFormatError
-from .scene import Scene, Dielectric, Conductor, Medium, Diffuse, Discretization
+from .scene import Scene, Dielectric, Conductor, Medium, Diffuse, Measured, Discretization
 from .plan import Plan, make_plan
 from .operator import IsoOperator, Operator
 from .aniso import AnisoOperator

@@ -24,15 +24,19 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
+
+from . import merl
 from .errors import SceneError
+from .ndf import table as ndf_table
 
 __all__ = [
-    "Layer", "Dielectric", "Conductor", "Medium", "Diffuse", "Discretization", "Scene",
-    "QUADRATURES", "DISTRIBUTIONS", "COMPENSATIONS", "as_scene",
+    "Layer", "Dielectric", "Conductor", "Medium", "Diffuse", "Measured", "Discretization",
+    "Scene", "QUADRATURES", "DISTRIBUTIONS", "COMPENSATIONS", "as_scene",
 ]
 
 #: Microfacet normal distributions understood by the solver and the random walk.
-DISTRIBUTIONS = ("beckmann", "ggx")
+DISTRIBUTIONS = ("beckmann", "ggx", "tabulated")
 #: Energy-loss compensation terms of rough interfaces (``energy_compensation``, in [stack] or
 #: per layer; :mod:`layersim.compensation`).
 COMPENSATIONS = ("none", "layerlab", "multiple-scattering")
@@ -81,6 +85,9 @@ class _Interface(Layer):
     energy_compensation: str = "none"
     """Energy-loss compensation of a rough interface (:data:`COMPENSATIONS`;
     :mod:`layersim.compensation`), applied by the solver and the Monte Carlo walk alike."""
+    ndf: Any = field(default=None, compare=False)
+    """The :class:`layersim.ndf.NDFTable` of ``distribution = "tabulated"`` (its ``alpha_u``,
+    ``alpha_v`` are then the table's equivalent Beckmann roughness, which sizes the plan)."""
 
     @property
     def smooth(self) -> bool:
@@ -88,7 +95,8 @@ class _Interface(Layer):
 
     @property
     def anisotropic(self) -> bool:
-        return self.alpha_u != self.alpha_v
+        # a table is projected with coupled modes whatever its shape (it may depend on phi)
+        return self.alpha_u != self.alpha_v or self.ndf is not None
 
     @property
     def alpha(self) -> float:
@@ -137,6 +145,31 @@ class Diffuse(Layer):
     @property
     def opaque(self) -> bool:
         return True
+
+
+@dataclass(frozen=True)
+class Measured(Layer):
+    """Opaque base with a measured isotropic BRDF (MERL layout, :mod:`layersim.merl`): channel
+    ``channel`` of ``data``. ``alpha`` is the width (radians) of its specular lobe
+    (:meth:`layersim.merl.MERLTable.equivalent_alpha`), which sizes the plan as a Beckmann
+    lobe of that roughness would."""
+
+    kind = "measured"
+    data: Any = field(default=None, compare=False)
+    channel: int = 0
+    alpha: float = 0.5 * math.pi
+
+    @property
+    def opaque(self) -> bool:
+        return True
+
+    @property
+    def alpha_u(self) -> float:
+        return self.alpha
+
+    @property
+    def alpha_v(self) -> float:
+        return self.alpha
 
 
 @dataclass(frozen=True)
@@ -329,6 +362,8 @@ def _describe_layer(per_channel: tuple[Layer, ...]) -> str:
         else:
             ior = vals(lambda x: f"{x.ior.real:g}")
         extra = f", {layer.distribution}" if not layer.smooth else ""
+        if layer.ndf is not None:
+            rough, extra = layer.ndf.describe(), ""
         if layer.rotation:
             extra += f", rotated {math.degrees(layer.rotation):g} deg"
         if layer.energy_compensation != "none" and not layer.smooth:
@@ -339,6 +374,11 @@ def _describe_layer(per_channel: tuple[Layer, ...]) -> str:
                 f"g={vals(lambda x: f'{x.g:g}')}")
     if isinstance(layer, Diffuse):
         return f"diffuse albedo={vals(lambda x: f'{x.albedo:g}')}"
+    if isinstance(layer, Measured):
+        return (f"measured BRDF {layer.data.source} (MERL layout, 3 channels, lobe width "
+                f"{math.degrees(layer.alpha):.3g} deg"
+                + (f", {layer.data.missing} unmeasured samples read as 0" if layer.data.missing
+                   else "") + ")")
     return layer.kind
 
 
@@ -347,18 +387,20 @@ def _describe_layer(per_channel: tuple[Layer, ...]) -> str:
 # --------------------------------------------------------------------------------------------
 
 _LAYER_FIELDS = {
-    "dielectric": {"kind", "ior", "roughness", "distribution", "rotation",
+    "dielectric": {"kind", "ior", "roughness", "distribution", "rotation", "ndf",
                    "energy_compensation"},
-    "conductor": {"kind", "ior", "roughness", "distribution", "rotation",
+    "conductor": {"kind", "ior", "roughness", "distribution", "rotation", "ndf",
                   "energy_compensation"},
     "medium": {"kind", "albedo", "g", "tau"},
     "diffuse": {"kind", "albedo"},
+    "measured": {"kind", "file"},
 }
 _REQUIRED = {
     "dielectric": {"ior"},
     "conductor": {"ior"},
     "medium": {"albedo", "tau"},
     "diffuse": {"albedo"},
+    "measured": {"file"},
 }
 _TOP_FIELDS = {"layer", "stack", "discretization"}
 _STACK_FIELDS = {"top_ior", "name", "energy_compensation"}
@@ -468,14 +510,22 @@ def _parse_layer(ctx: _Ctx, raw: Any, compensation: str = "none") -> list[Layer]
         if dist not in DISTRIBUTIONS:
             raise ctx.error("distribution", f"unknown distribution {dist!r}; expected one of "
                                             + ", ".join(DISTRIBUTIONS))
+        table = _ndf_field(ctx, raw, dist)
+        if table is not None:
+            au, av = table.equivalent_alpha()
         rot = math.radians(_real(ctx, "rotation", raw.get("rotation", 0.0), lo=-360.0, hi=360.0))
         comp = _compensation(ctx, "energy_compensation",
                              raw.get("energy_compensation", compensation), au, av)
+        if table is not None and comp != "none":
+            raise ctx.error("energy_compensation",
+                            f"{comp!r} is not available for a tabulated NDF (its albedo tables "
+                            "are those of Beckmann and GGX interfaces): set "
+                            "energy_compensation = \"none\" on this layer")
         if kind == "dielectric":
             iors = _per_channel(ctx, "ior", raw["ior"], lambda c, f, v: complex(
                 _real(c, f, v, lo=0.0, hi=_MAX_IOR, lo_open=True)))
             return [Dielectric(ior=e, alpha_u=au, alpha_v=av, distribution=dist, rotation=rot,
-                               energy_compensation=comp) for e in iors]
+                               energy_compensation=comp, ndf=table) for e in iors]
         value = raw["ior"]
         if (isinstance(value, (list, tuple)) and len(value) == 3
                 and all(isinstance(v, (list, tuple, complex)) for v in value)):
@@ -483,7 +533,7 @@ def _parse_layer(ctx: _Ctx, raw: Any, compensation: str = "none") -> list[Layer]
         else:
             iors = [_conductor_ior(ctx, "ior", value)]
         return [Conductor(ior=e, alpha_u=au, alpha_v=av, distribution=dist, rotation=rot,
-                          energy_compensation=comp) for e in iors]
+                          energy_compensation=comp, ndf=table) for e in iors]
 
     if kind == "medium":
         albedos = _per_channel(ctx, "albedo", raw["albedo"],
@@ -496,9 +546,60 @@ def _parse_layer(ctx: _Ctx, raw: Any, compensation: str = "none") -> list[Layer]
         return [Medium(albedo=albedos[c % len(albedos)], g=gs[c % len(gs)], tau=tau)
                 for c in range(channels)]
 
+    if kind == "measured":
+        value = raw["file"]
+        if not isinstance(value, (str, os.PathLike)):
+            raise ctx.error("file", f"must be the path of a MERL binary file, got {value!r}")
+        path = Path(value)
+        if not path.is_absolute() and ctx.source is not None:
+            path = Path(ctx.source).parent / path
+        data = merl.read_merl(path, layer=ctx.layer, kind=kind)
+        alpha = data.equivalent_alpha()
+        return [Measured(data=data, channel=c, alpha=alpha) for c in range(3)]
+
     albedos = _per_channel(ctx, "albedo", raw["albedo"],
                            lambda c, f, v: _real(c, f, v, lo=0.0, hi=1.0))
     return [Diffuse(albedo=a) for a in albedos]
+
+
+def _ndf_field(ctx: _Ctx, raw: Mapping[str, Any], dist: str):
+    """The NDF table of ``distribution = "tabulated"`` (None otherwise): ``ndf`` is the path
+    of an ``.npz`` file (relative to the scene file) or an inline table ``{theta, phi, D}``
+    with angles in degrees (:mod:`layersim.ndf.table`)."""
+    if dist != "tabulated":
+        if "ndf" in raw:
+            raise ctx.error("ndf", 'is only used with distribution = "tabulated"')
+        return None
+    if "roughness" in raw:
+        raise ctx.error("roughness", 'a tabulated NDF takes no roughness (the table is the '
+                                     "distribution); remove it")
+    value = raw.get("ndf")
+    if value is None:
+        raise ctx.error("ndf", 'is required with distribution = "tabulated": the path of an '
+                               ".npz file (theta, phi, D) or an inline table {theta, phi, D}")
+    if isinstance(value, str):
+        path = Path(value)
+        if not path.is_absolute() and ctx.source is not None:
+            path = Path(ctx.source).parent / path
+        return ndf_table.load_ndf(path, layer=ctx.layer, kind=ctx.kind)
+    if isinstance(value, Mapping):
+        unknown = set(value) - {"theta", "phi", "D"}
+        if unknown or len(value) != 3:
+            raise ctx.error("ndf", "an inline table has exactly the keys theta, phi (degrees) "
+                                   "and D (1/sr, one row per theta)")
+        return ndf_table.from_arrays(np.radians(_array(ctx, value["theta"])),
+                                     np.radians(_array(ctx, value["phi"])),
+                                     _array(ctx, value["D"]), source="inline table",
+                                     layer=ctx.layer, kind=ctx.kind)
+    raise ctx.error("ndf", f"must be a file path or an inline table, got {type(value).__name__}")
+
+
+def _array(ctx: _Ctx, value):
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ctx.error("ndf", "inline table values must be numbers (rows of equal length)") \
+            from None
 
 
 def _parse_int(ctx: _Ctx, fld: str, value: Any, lo: int, hi: int) -> int:

@@ -23,13 +23,15 @@ from .ingredients.aniso_microfacet import AnisoProjectionStats, aniso_interface_
 from .ingredients.microfacet import ProjectionStats
 from .ingredients.numeric import numeric_interface_operator
 from .ingredients.smooth import boundary_reflector, smooth_conductor_operator
+from .ingredients import tabulated
+from .ingredients.measured import measured_operator
 from .lobe import NearSpecularLobe
 from .kernels.runtime import device_for
 from .operator import IsoOperator, Operator, common_representation
 from .outofcore import memory
 from .outofcore.workspace import Workspace
 from .plan import Plan, make_plan
-from .scene import Conductor, Dielectric, Diffuse, Medium, Scene, as_scene
+from .scene import Conductor, Dielectric, Diffuse, Measured, Medium, Scene, as_scene
 
 
 #: Discrete energy excess (R + T - 1) beyond which an interface operator is refused as
@@ -68,7 +70,9 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     if isinstance(layer, (Dielectric, Conductor)) and layer.anisotropic:
         lp = next(lp for lp in plan.layers if lp.index == i)
         op = aniso_interface_operator(grid, plan.md, lp.ms, layer, eta_above, stats,
-                                      relerr=COUPLED_RELERR, workspace=workspace)
+                                      relerr=COUPLED_RELERR, workspace=workspace,
+                                      projector=None if layer.ndf is None else
+                                      tabulated.projector(layer, eta_above, device))
         notes += _check_energy(op, i, layer, plan)
         return op
     if isinstance(layer, (Dielectric, Conductor)):
@@ -87,6 +91,10 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
                                name=f"layer {i} (medium)")
     if isinstance(layer, Diffuse):
         return diffuse_operator(grid, layer.albedo, eta_above)
+    if isinstance(layer, Measured):
+        op = measured_operator(grid, plan.md, layer, eta_above, device=device)
+        notes += _check_energy(op, i, layer, plan)
+        return op
     raise TypeError(f"layer {i}: no operator for kind {layer.kind!r}")  # pragma: no cover
 
 

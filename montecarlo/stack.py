@@ -22,9 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..compensation.walk import append_tables
-from ..kernels import walk
+from ..kernels import tabulated, walk
 from ..kernels.physics import DISTRIBUTION_CODES
-from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
+from ..scene import Conductor, Dielectric, Diffuse, Measured, Medium, Scene
 
 __all__ = ["StackArrays", "flatten"]
 
@@ -40,7 +40,12 @@ class StackArrays:
     bnd_f : ndarray of float32, shape (8 * (n_slabs + 1) + tables,)
         Per boundary: eta, k (relative to the medium above), alpha_u, alpha_v, cos and sin of the
         tangent-frame rotation, Lambertian albedo, offset of its energy-compensation tables
-        (0: none), followed by those tables (:mod:`layersim.compensation.walk`).
+        (0: none); a tabulated-NDF boundary (distribution code
+        :data:`layersim.kernels.tabulated.TABULATED`) holds in place of ``alpha_u`` the offset of
+        its packed table (:meth:`layersim.ndf.NDFTable.packed`), and so does a measured base
+        (:data:`layersim.kernels.walk.MEASURED`: one channel of its MERL table,
+        :meth:`layersim.merl.MERLTable.packed`). The NDF and MERL tables follow the records,
+        then the compensation tables (:mod:`layersim.compensation.walk`).
     slab_f : ndarray of float32, shape (3 * max(n_slabs, 1),)
         Per slab: tau (along the normal), single-scattering albedo, HG g (padded when empty).
     n_slabs : int
@@ -64,13 +69,44 @@ def _boundary(scene: Scene, i: int | None):
     if isinstance(layer, Diffuse):
         floats[6] = layer.albedo
         return [walk.DIFFUSE, 0], floats
+    if isinstance(layer, Measured):     # its table follows the records, like an NDF's
+        return [walk.MEASURED, 0], floats, _MeasuredChannel(layer.data, layer.channel)
     eta = scene.relative_ior(i)
     if isinstance(layer, Dielectric) and eta.real == 1.0:
         return [walk.NULL, 0], floats
     kind = walk.CONDUCTOR if isinstance(layer, Conductor) else walk.DIELECTRIC
     floats[:6] = [eta.real, eta.imag if kind == walk.CONDUCTOR else 0.0, layer.alpha_u,
                   layer.alpha_v, math.cos(layer.rotation), math.sin(layer.rotation)]
+    if layer.ndf is not None:       # alpha_u's slot gets the table's offset in flatten()
+        return [kind, tabulated.TABULATED], floats, layer.ndf
     return [kind, DISTRIBUTION_CODES[layer.distribution]], floats
+
+
+@dataclass(frozen=True)
+class _MeasuredChannel:
+    """One channel of a measured BRDF, packed like an NDF table for :func:`_append_tables`."""
+
+    data: object
+    channel: int
+
+    def packed(self, dtype):
+        return self.data.packed(self.channel, dtype)
+
+
+def _append_tables(boundaries: list, bnd_f: np.ndarray) -> np.ndarray:
+    """``bnd_f`` followed by the packed tables of the tabulated-NDF boundaries, each record
+    pointing at its table (float32 holds the offsets exactly below 2^24)."""
+    parts = [bnd_f]
+    size = bnd_f.size
+    for b, record in enumerate(boundaries):
+        if len(record) == 3:
+            packed = record[2].packed(np.float32)
+            bnd_f[walk.BND_F * b + 2] = size
+            parts.append(packed)
+            size += packed.size
+    if size >= 1 << 24:
+        raise ValueError(f"the NDF tables take {size} floats; the walk addresses at most 2^24")
+    return np.concatenate(parts)
 
 
 def flatten(scene: Scene) -> StackArrays:
@@ -94,8 +130,8 @@ def flatten(scene: Scene) -> StackArrays:
         boundaries.append(_boundary(scene, None))
         owners.append(None)
     bnd_i = np.array([x for b in boundaries for x in b[0]], dtype=np.int32)
-    bnd_f = append_tables(scene, owners, np.array([x for b in boundaries for x in b[1]],
-                                                  dtype=np.float32), walk.BND_F)
+    bnd_f = np.array([x for b in boundaries for x in b[1]], dtype=np.float32)
+    bnd_f = append_tables(scene, owners, _append_tables(boundaries, bnd_f), walk.BND_F)
     slab_f = np.array([x for s in slabs for x in s] or [0.0, 1.0, 0.0], dtype=np.float32)
     assert len(boundaries) == len(slabs) + 1
     return StackArrays(bnd_i, bnd_f, slab_f, len(slabs), scene.opaque)

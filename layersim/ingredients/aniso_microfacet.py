@@ -530,7 +530,8 @@ def _entries(grid: Grid, md: int, ms: int, o, i, F):
 def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: float,
                              stats: AnisoProjectionStats | None = None,
                              reciprocity: bool = True, relerr: float = RELERR,
-                             workspace: Workspace | None = None) -> AnisoOperator:
+                             workspace: Workspace | None = None,
+                             projector=None) -> AnisoOperator:
     """Operator of an anisotropic (or rotated) rough interface in the slot basis.
 
     Parameters
@@ -560,6 +561,11 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
         energy check), for a caller that hands the operator to an adding step that consumes
         it: the blocks of a coating wait on disk while the others are projected. Default: in
         memory, nothing parked.
+    projector : callable, optional
+        Projects the blocks instead of the analytic path: ``projector(grid, name, md, ms,
+        triangle, stats, relerr, out)`` appends the real entries ``(rows, cols, values)`` of
+        block ``name`` to ``out`` (a tabulated NDF:
+        :func:`layersim.ingredients.tabulated.projector`).
     """
     if layer.smooth:
         raise ValueError("aniso_interface_operator needs a rough interface")
@@ -575,6 +581,9 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
 
     def project(name, triangle=False):
         """The block's matrix from its (triangle of) pairs, assembled batch by batch."""
+        if projector is not None:
+            return from_parts(projector(grid, name, md, ms, triangle, stats, relerr,
+                                        workspace.spool()), (N, N))
         parts = _project_block(grid, name, md, ms, eta, au, av, dist, stats, triangle=triangle,
                                relerr=relerr, convert=lambda o, i, F: _entries(grid, md, ms,
                                                                                o, i, F),

@@ -16,9 +16,10 @@ from ..ingredients.medium import G_EXACT_MAX, hg_scaling
 from ..lobe import (NEAR_SPECULAR_ALPHA, NEAR_SPECULAR_BASE_ALPHA, NEAR_SPECULAR_WIDE_MAX,
                     near_specular_conductor_error, near_specular_error)
 from ..operator import Grid
-from ..scene import Conductor, Dielectric, Diffuse, Medium, Scene
+from ..scene import Conductor, Dielectric, Diffuse, Measured, Medium, Scene
 from .model import LayerPlan
 from .ordinates import N_PER_WIDTH
+from .tabulated import measured_plan, tabulated_plan
 
 #: Legendre moments a delta-M scaled medium needs (the accuracy target that sets its share of
 #: ``n``): for g = 0.99, tau 5, albedo 0.95 the albedo at normal incidence moves by 3e-5 from
@@ -86,6 +87,9 @@ def survey_layers(scene: Scene) -> Survey:
             _medium(scene, i, layer, survey)
         elif isinstance(layer, Diffuse):
             survey.layers.append(LayerPlan(i, layer.kind, "diffuse", "order 0 only"))
+        elif isinstance(layer, Measured):
+            survey.widths.append((layer.alpha, i, layer.kind, "measured lobe"))
+            survey.layers.append(measured_plan(i, layer))
     if scene.opaque:
         survey.left_out.append("transmission blocks (Ttb, Tbt) and bottom reflection: the "
                                "base is opaque")
@@ -111,7 +115,9 @@ def _interface(scene: Scene, i: int, layer, survey: Survey) -> None:
     eta_rel = scene.channel(0).relative_ior(i)
     width, what = interface_width(layer, eta_rel)
     survey.widths.append((width, i, kind, what))
-    if layer.anisotropic:
+    if layer.ndf is not None:
+        survey.layers.append(tabulated_plan(i, layer, eta_rel, width))
+    elif layer.anisotropic:
         ms = aplan.ms_for_layer(layer)
         rot = f", rotated {math.degrees(layer.rotation):g} deg" if layer.rotation else ""
         survey.layers.append(LayerPlan(
@@ -247,8 +253,10 @@ def _near_specular(scene: Scene, i: int, layer, survey: Survey) -> bool:
     needs an opaque base that scatters wider than that blur: diffuse, or a conductor rougher
     than :data:`~layersim.lobe.NEAR_SPECULAR_ALPHA`)."""
     lo, hi = min(layer.alpha_u, layer.alpha_v), max(layer.alpha_u, layer.alpha_v)
+    if layer.ndf is not None:       # the lobe of layersim.lobe is analytic
+        return False
     base = scene.channel(0).layers[-1]
-    wide_base = isinstance(base, Diffuse) or (
+    wide_base = isinstance(base, (Diffuse, Measured)) or (
         isinstance(base, Conductor) and min(base.alpha_u, base.alpha_v) > NEAR_SPECULAR_ALPHA)
     if (not isinstance(layer, Dielectric) or i != 0 or lo > NEAR_SPECULAR_ALPHA
             or hi > NEAR_SPECULAR_WIDE_MAX or not wide_base):

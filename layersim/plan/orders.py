@@ -22,6 +22,7 @@ from ..errors import InfeasibleError
 from ..ingredients import aniso_microfacet, microfacet
 from ..operator import Grid
 from ..scene import MAX_ORDERS, Discretization, Scene
+from .tabulated import equivalent_lobe
 
 #: Lobes with both elevations within this angle (degrees) of the normal keep all their
 #: Fourier orders.
@@ -42,7 +43,7 @@ def interface_lengths(grid: Grid, mono: Scene, layers: list,
     for lp in layers:
         if not lp.action.startswith("project"):
             continue
-        layer, eta_above = mono.layers[lp.index], mono.ior_above(lp.index)
+        layer, eta_above = equivalent_lobe(mono.layers[lp.index]), mono.ior_above(lp.index)
         if lp.ms:
             lengths, mu_min = aniso_microfacet.series_lengths(grid, layer, eta_above, lp.ms,
                                                               aplan.COUPLED_RELERR)
