@@ -194,7 +194,8 @@ def layer_lobes(layer, eta_above: float) -> Lobes | None:
     """The compensation term of a validated interface ``layer`` (its ``energy_compensation``)
     under a medium of absolute index ``eta_above``; None for ``"none"`` and smooth interfaces
     (which lose nothing)."""
-    if layer.energy_compensation == "none" or layer.smooth:
+    # bases without a microfacet model (measured, diffuse) have no compensation field
+    if getattr(layer, "energy_compensation", "none") == "none" or layer.smooth:
         return None
     return lobes_for(layer.energy_compensation, complex(layer.ior) / eta_above, layer.alpha,
                      layer.distribution)
