@@ -66,19 +66,16 @@ class PartialNDF:
         return bool(np.all(self.w > 0))
 
 
-def _shadow_fn(grid, d, constrained, n_k=(46, 72)):
-    """S(k) of eq. (5) from D (NaN -> 0), tabulated on a coarse grid of k; with ``constrained``,
-    its minimum over the azimuth of k (Wang et al. 2008 sec. 5.1)."""
-    kg = HalfGrid(*n_k)
-    theta_k = np.minimum(kg.theta, np.radians(89.5))
-    t, p = np.meshgrid(theta_k, kg.phi, indexing="ij")
-    k = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
-    s = mf.shadowing_table(grid, np.nan_to_num(d), k.reshape(-1, 3)).reshape(t.shape)
-    s = np.clip(s, 1e-6, 1.0)
+def _shadow_fn(grid, d, constrained, n_theta_k=46):
+    """S(k) of eq. (5) from D (NaN -> 0), tabulated on rings of k (the grid's azimuths); with
+    ``constrained``, its minimum over the azimuth of k (Wang et al. 2008 sec. 5.1)."""
+    theta_k = np.minimum(np.linspace(0.0, 0.5 * np.pi, n_theta_k), np.radians(89.5))
+    s = np.clip(mf.shadowing_rings(grid, np.nan_to_num(d), theta_k), 1e-6, 1.0)
     if constrained:
         s_theta = s.min(axis=1)
         return lambda v: np.interp(np.arccos(np.clip(v[..., 2], 0, 1)), theta_k, s_theta)
-    return lambda v: kg.lookup(s, v)
+    ring = HalfGrid(n_theta_k, grid.n_phi)          # its last row holds S at 89.5 degrees
+    return lambda v: ring.lookup(s, v)
 
 
 def _data_on_grid(meas: Measurements, grid: HalfGrid, max_light_theta: float, eta):

@@ -165,3 +165,30 @@ def shadowing_table(grid: HalfGrid, d: np.ndarray, k: np.ndarray, chunk: int = 1
         away = np.maximum(-(kb @ hs.T), 0.0) @ wd
         out[a:a + chunk] = 1.0 / (1.0 + away / np.maximum(kb[:, 2] * mass, 1e-300))
     return out
+
+
+def shadowing_rings(grid: HalfGrid, d: np.ndarray, theta_k: np.ndarray) -> np.ndarray:
+    """S(k) of :func:`shadowing_table` for k on rings theta_k x grid.phi, by FFT along phi.
+
+    The weight <-h . k>_+ depends on the azimuths of h and k only through their difference, so
+    B(k) on a ring of k is a circular convolution of D's rows with a kernel, O(n log n) per ring.
+
+    Parameters
+    ----------
+    grid : HalfGrid of the NDF
+    d : array (n_theta, n_phi), D (any scale; 0 where unknown)
+    theta_k : array (m,), polar angles of k in radians, below pi/2
+
+    Returns
+    -------
+    S : array (m, n_phi), S at (theta_k[a], grid.phi[b])
+    """
+    th, dp = grid.theta, grid.phi
+    tk = np.asarray(theta_k, float)[:, None, None]
+    kern = np.maximum(-(np.sin(tk) * np.sin(th)[None, :, None] * np.cos(dp)[None, None, :]
+                        + np.cos(tk) * np.cos(th)[None, :, None]), 0.0)
+    wd = grid.weights * d
+    spec = np.einsum("ktm,tm->km", np.fft.rfft(kern, axis=-1), np.fft.rfft(wd, axis=-1))
+    away = np.fft.irfft(spec, n=grid.n_phi, axis=-1)
+    mass = np.sum(wd * np.cos(th)[:, None])
+    return 1.0 / (1.0 + np.maximum(away, 0.0) / np.maximum(np.cos(tk[:, :, 0]) * mass, 1e-300))
