@@ -2,7 +2,7 @@
 
 Each panel is the orthographic projection of the hemisphere of normals, (h_x, h_y) = sin(theta)
 (cos(phi), sin(phi)), as in Wang et al. 2008 Fig. 5: D (linear or logarithmic), the confidence W,
-and, when given, a reference NDF and the relative difference. Undetermined nodes are grey.
+and, when given, a reference NDF and the relative difference. Undetermined nodes (NaN in D, W = 0) are grey.
 """
 
 from __future__ import annotations
@@ -40,12 +40,13 @@ def plot_ndf(path, grid: HalfGrid, d, w=None, reference=None, log: bool = False,
     ----------
     path : output file
     grid : HalfGrid of the tables
-    d : array (n_theta, n_phi), the NDF in 1/sr (NaN where undetermined)
+    d : array (n_theta, n_phi), the NDF in 1/sr (NaN where undetermined; a filled table shows
+        its filled part, which W marks with 0)
     w : array (n_theta, n_phi) or None, the confidence of eq. (12)
     reference : array (n_theta, n_phi) or None, e.g. the analytic NDF of synthetic data
     log : draw log10 D
     """
-    d = np.where(np.asarray(w) > 0, d, np.nan) if w is not None else np.asarray(d, float)
+    d = np.asarray(d, float)
     show = (lambda a: np.log10(np.maximum(a, 1e-6))) if log else (lambda a: a)
     panels = [(show(d), "log10 D [1/sr]" if log else "D [1/sr]", "viridis", None, None)]
     if w is not None:
