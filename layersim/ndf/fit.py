@@ -44,6 +44,7 @@ class PartialNDF:
     channel_scale : array (C,), least-squares scale of each channel relative to the fitted model
     channels : tuple of channel names
     notes : list of str, what the fit did (iterations, coverage, excluded data)
+    shadow_view : S(o) of the view at convergence (nan when not fitted from a view)
     """
 
     grid: HalfGrid
@@ -53,6 +54,7 @@ class PartialNDF:
     channel_scale: np.ndarray = field(default_factory=lambda: np.ones(1))
     channels: tuple = ("value",)
     notes: list = field(default_factory=list)
+    shadow_view: float = float("nan")
 
     @property
     def coverage(self) -> float:
@@ -142,7 +144,7 @@ def fit_partial_ndf(meas: Measurements, grid: HalfGrid | None = None, constraine
     notes = [f"{'constrained' if constrained else 'unconstrained'} shadowing, {it} iterations "
              f"(last relative change of S {change:.1e})",
              f"{int(keep.sum())} of {len(meas.lights)} lights used (theta <= {max_light_theta_deg:g} deg)"]
-    part = PartialNDF(grid, d, w, residual, scale, meas.channels, notes)
+    part = PartialNDF(grid, d, w, residual, scale, meas.channels, notes, s_o)
     part.notes.append(f"coverage {100 * part.coverage:.1f} % of the hemisphere, relative RMS "
                       f"residual {residual:.2e}")
     return part
