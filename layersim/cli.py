@@ -624,7 +624,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_fit_ndf(sub) -> None:
-    from .ndf.complete import SYMMETRIES
+    from .ndf.halfgrid import SYMMETRIES
     sp = _subparser(sub, "fit-ndf", "fit a tabulated NDF to single-view measurements (Wang et "
                                     "al. 2008): partial NDF, completion, table")
     sp.add_argument("measurements", help="measurement file (.npz or .csv), one view")
@@ -633,7 +633,9 @@ def _add_fit_ndf(sub) -> None:
                     help="measurement files of rotated samples or other views to complete from")
     sp.add_argument("--symmetry", choices=SYMMETRIES, help="a symmetry of the surface to use "
                                                            "for completion (stated, not tested)")
-    sp.add_argument("--fill", action="store_true", help="interpolate what stays undetermined")
+    sp.add_argument("--fill", nargs="?", const="flat", choices=("flat", "zero"), default=False,
+                    help="interpolate what stays undetermined; at the horizon flat (default, "
+                         "GGX-like tails) or zero (fast-falling tails, e.g. Beckmann)")
     sp.add_argument("--partial", action="store_true", help="write the partial table as is")
     sp.add_argument("--unconstrained", action="store_true",
                     help="shadowing from the partial NDF alone (biased; for comparison)")

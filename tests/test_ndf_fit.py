@@ -120,8 +120,9 @@ def test_completion_from_four_rotated_partial_ndfs_recovers_the_full_ndf():
     for note in merged:                 # the rotation found is a true one (GGX: mod 180 deg)
         j, ang = int(note.split()[3]), float(note.split()[6])
         off = (ang - (rots[j] - rots[0])) % 180.0
-        assert min(off, 180.0 - off) < 2.0, note
-    assert done.coverage > 1.8 * parts[0].coverage
+        assert min(off, 180.0 - off) < 2.5, note
+    assert done.coverage > 1.5 * parts[0].coverage      # GGX is point-symmetric: some merges
+                                                        # land on covered ground
     d, filled = cp.fill_uncovered(done)
     d /= g.projected_area(d)
     truth = _truth(g, rots[0])
@@ -162,6 +163,11 @@ def test_fill_reproduces_a_constant_and_a_full_table_is_normalised(tmp_path):
                       channels=("r", "g"))
     filled, frac = cp.fill_uncovered(part)
     np.testing.assert_allclose(filled, 3.0)
+    zero = cp.fill_uncovered(part, "zero")[0]
+    np.testing.assert_allclose(zero[-1], 0.0)
+    assert np.all(np.diff(zero[9:, 0]) < 0)              # falls from the data to the horizon
+    with pytest.raises(ValueError, match="horizon"):
+        cp.fill_uncovered(part, "cubic")
     assert frac == pytest.approx(np.sum(g.weights[10:]) / np.sum(g.weights))
     with pytest.raises(InfeasibleError, match="--fill"):
         save_ndf(tmp_path / "x.npz", part)

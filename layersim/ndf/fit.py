@@ -161,3 +161,4 @@ def _residual(meas, keep, grid, d, shadow, eta):
     res = float(np.sqrt(np.sum((f[ok] - yi[ok]) ** 2) / np.sum(yi[ok] ** 2)))
     scale = (vals[ok] * f[ok, None]).sum(axis=0) / max(np.sum(f[ok] ** 2), 1e-300)
     return res, scale
+

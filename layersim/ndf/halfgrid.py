@@ -13,6 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# symmetries of an NDF a user may state for completion (Wang et al. 2008 need none: they merge
+# other surface points); the maps they induce on the grid are in complete.symmetry_images
+SYMMETRIES = ("point", "mirror-x", "mirror-y", "isotropic")
+
 
 @dataclass(frozen=True)
 class HalfGrid:

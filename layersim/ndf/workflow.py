@@ -24,7 +24,7 @@ def parse_grid(text: str) -> HalfGrid:
 
 
 def fit_files(measurements, output, others=(), grid: HalfGrid | None = None,
-              constrained: bool = True, symmetry: str | None = None, fill: bool = False,
+              constrained: bool = True, symmetry: str | None = None, fill: bool | str = False,
               partial: bool = False, max_light_theta_deg: float = 80.0, plot=None) -> list:
     """Fit ``measurements`` (a file), complete it from ``others`` (files of rotated samples or
     other views) and/or a stated ``symmetry``, and write ``output`` (.npz).
@@ -42,12 +42,14 @@ def fit_files(measurements, output, others=(), grid: HalfGrid | None = None,
     part = complete_ndf(parts[0], parts[1:]) if len(parts) > 1 else parts[0]
     if symmetry:
         part = apply_symmetry(part, symmetry)
-    lines += [n for n in part.notes if n.startswith(("merged", "no candidate", "widened"))
-              or "left unmerged" in n or "symmetry" in n]
+    lines += [n for n in part.notes if n.startswith("merged") or "left unmerged" in n
+              or "symmetry" in n]
     out = save_ndf(output, part, fill=fill, partial=partial)
     lines.append(f"coverage {100 * part.coverage:.1f} %; " + (
         "partial table written (D = NaN where undetermined)" if partial else
-        f"filled by interpolation: {100 * out['filled']:.1f} % of the solid angle"))
+        f"filled by interpolation: {100 * out['filled']:.1f} % of the solid angle, holding "
+        f"{100 * out['filled_area']:.1f} % of the projected area" if out["filled"] else
+        "complete"))
     if not partial:
         ks = ", ".join(f"{c} {v:.4g}" for c, v in zip(part.channels, out["ks"]))
         lines.append(f"specular coefficient k_s (F = 1): {ks}")
