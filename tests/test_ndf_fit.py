@@ -194,3 +194,25 @@ def test_cli_fit_ndf_refuses_an_incomplete_table_and_writes_a_partial_one(tmp_pa
     assert z["D"].shape == (19, 36) and bool(z["partial"])
     assert np.all(np.isnan(z["D"]) == (z["W"] == 0)) and np.isnan(z["D"]).any()
     assert main(["fit-ndf", str(tmp_path / "view.npz"), "-o", str(out), "--grid", "19"]) == 2
+
+
+@pytest.mark.slow
+def test_cli_fit_ndf_completes_from_rotated_samples_and_plots(tmp_path, capsys):
+    g = HalfGrid(31, 60)
+    view, lights = sy.direction(40, 0), sy.fibonacci_lights(600, 85)
+    files = []
+    for k, rot in enumerate([15.0, 100.0, 190.0, 280.0]):
+        files.append(tmp_path / f"m{k}.csv")
+        sy.measure(view, lights, "beckmann", 0.2, 0.4, rot, noise=0.01, seed=k,
+                   channel_scale=(0.8, 0.4)).save(files[-1])
+    out, png = tmp_path / "ndf.npz", tmp_path / "ndf.png"
+    assert main(["fit-ndf", str(files[0]), "-o", str(out), "--complete", *map(str, files[1:]),
+                 "--fill", "zero", "--grid", "31x60", "--plot", str(png)]) == 0
+    text = capsys.readouterr().out
+    assert text.count("merged partial NDF") >= 2 and "projected area" in text
+    z = np.load(out)
+    assert g.projected_area(z["D"]) == pytest.approx(1.0)
+    assert _rel_l2(g, z["D"], sy.analytic_ndf("beckmann", 0.2, 0.4, 15.0)[0](
+        g.directions())) < 0.03
+    np.testing.assert_allclose(z["ks"], [0.8, 0.4], rtol=0.03)   # Beckmann: nothing beyond
+    assert png.stat().st_size > 10_000                           # the reach of the views

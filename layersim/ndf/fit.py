@@ -88,9 +88,9 @@ def _data_on_grid(meas: Measurements, grid: HalfGrid, max_light_theta: float, et
     cos_max = np.cos(max_light_theta)
     keep = lights[:, 2] > cos_max
     if keep.sum() < 16:
-        raise ValueError(f"{meas.source}: only {int(keep.sum())} light directions above "
-                         f"{np.degrees(max_light_theta):.0f} degrees from the horizon limit; "
-                         "fitting needs at least 16")
+        raise ValueError(f"{meas.source}: field 'lights': only {int(keep.sum())} light "
+                         f"directions within {np.degrees(max_light_theta):.0f} degrees of the "
+                         "normal; fitting needs at least 16 (raise --max-light-theta?)")
     li, yi = lights[keep], y[keep]
     hq = mf.half_vector(li, o)
     fres = 1.0 if eta is None else mf.fresnel_unpolarized(np.sum(li * hq, -1), eta)
@@ -143,7 +143,8 @@ def fit_partial_ndf(meas: Measurements, grid: HalfGrid | None = None, constraine
     residual, scale = _residual(meas, keep, grid, d, shadow, eta)
     notes = [f"{'constrained' if constrained else 'unconstrained'} shadowing, {it} iterations "
              f"(last relative change of S {change:.1e})",
-             f"{int(keep.sum())} of {len(meas.lights)} lights used (theta <= {max_light_theta_deg:g} deg)"]
+             f"{int(keep.sum())} of {len(meas.lights)} lights used "
+             f"(theta <= {max_light_theta_deg:g} deg)"]
     part = PartialNDF(grid, d, w, residual, scale, meas.channels, notes, s_o)
     part.notes.append(f"coverage {100 * part.coverage:.1f} % of the hemisphere, relative RMS "
                       f"residual {residual:.2e}")
