@@ -513,6 +513,16 @@ command exits with status 2, as 'layersim solve' would refuse it.""",
   layersim plot coated_gold.lsim --wi 30,0 -o slices.png --log
   layersim plot coated_gold.lsim --blocks -o blocks.png
   layersim plot coated_gold.lsim --blocks --order 2 -o order2.png""",
+    "fit-ndf": """examples:
+  layersim fit-ndf view.npz -o ndf.npz --complete rot1.npz rot2.npz rot3.npz --fill
+  layersim fit-ndf view.csv -o partial.npz --partial --plot partial.png
+  layersim fit-ndf view.npz -o ndf.npz --symmetry point --fill
+
+MEASUREMENTS holds one view, many light directions and the specular BRDF per channel (.npz:
+view, lights, values[, channels]; .csv: light_x,light_y,light_z,view_x,view_y,view_z,CHANNEL...;
+see docs/conventions.md). A single view determines D only over part of the hemisphere: the
+table is written only when it is complete, when --fill is given (the rest is interpolated and
+reported) or with --partial.""",
     "subtract": """examples:
   layersim solve stack.toml                                # stack.lsim
   layersim solve lacquer.toml --like stack.lsim            # lacquer.lsim, same discretisation
@@ -631,7 +641,40 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--noise", type=float, help="relative noise level of the stack (default: "
                                                 "estimated from its reciprocity defect)")
     sp.set_defaults(func=cmd_subtract)
+    _add_fit_ndf(sub)
     return p
+
+
+def _add_fit_ndf(sub) -> None:
+    from .ndf.halfgrid import SYMMETRIES
+    sp = _subparser(sub, "fit-ndf", "fit a tabulated NDF to single-view measurements (Wang et "
+                                    "al. 2008): partial NDF, completion, table")
+    sp.add_argument("measurements", help="measurement file (.npz or .csv), one view")
+    sp.add_argument("-o", "--output", required=True, help="NDF table to write (.npz)")
+    sp.add_argument("--complete", nargs="+", default=(), metavar="OTHER",
+                    help="measurement files of rotated samples or other views to complete from")
+    sp.add_argument("--symmetry", choices=SYMMETRIES, help="a symmetry of the surface to use "
+                                                           "for completion (stated, not tested)")
+    sp.add_argument("--fill", nargs="?", const="flat", choices=("flat", "zero"), default=False,
+                    help="interpolate what stays undetermined; at the horizon flat (default, "
+                         "GGX-like tails) or zero (fast-falling tails, e.g. Beckmann)")
+    sp.add_argument("--partial", action="store_true", help="write the partial table as is")
+    sp.add_argument("--unconstrained", action="store_true",
+                    help="shadowing from the partial NDF alone (biased; for comparison)")
+    sp.add_argument("--grid", default="91x180", help="N_THETA x N_PHI of the table")
+    sp.add_argument("--max-light-theta", type=float, default=80.0,
+                    help="exclude lights farther than this from the normal (degrees)")
+    sp.add_argument("--plot", metavar="PNG", help="also draw the NDF and its confidence")
+    sp.set_defaults(func=cmd_fit_ndf)
+
+
+def cmd_fit_ndf(args) -> int:
+    from .ndf.workflow import fit_files, parse_grid
+    for line in fit_files(args.measurements, args.output, args.complete, parse_grid(args.grid),
+                          not args.unconstrained, args.symmetry, args.fill, args.partial,
+                          args.max_light_theta, args.plot):
+        print(line)
+    return 0
 
 
 def _attach_negative_values(argv: list) -> list:
