@@ -216,3 +216,31 @@ def test_cli_fit_ndf_completes_from_rotated_samples_and_plots(tmp_path, capsys):
         g.directions())) < 0.03
     np.testing.assert_allclose(z["ks"], [0.8, 0.4], rtol=0.03)   # Beckmann: nothing beyond
     assert png.stat().st_size > 10_000                           # the reach of the views
+
+
+@pytest.mark.slow
+def test_fitted_table_is_a_layer_the_planner_takes(tmp_path, capsys):
+    """The measured-microstructure workflow end to end: four rotated single-view samples ->
+    fit-ndf (point symmetry stated, uncovered normals filled) -> a tabulated conductor under a
+    coat that the scene reader validates and the planner sizes like the analytic lobe."""
+    view, lights = sy.direction(40, 0), sy.fibonacci_lights(600, 85)
+    files = []
+    for k, rot in enumerate([15.0, 100.0, 190.0, 280.0]):
+        files.append(tmp_path / f"m{k}.csv")
+        sy.measure(view, lights, "beckmann", 0.2, 0.4, rot, noise=0.01, seed=k).save(files[-1])
+    out = tmp_path / "ndf.npz"
+    assert main(["fit-ndf", str(files[0]), "-o", str(out), "--complete", *map(str, files[1:]),
+                 "--fill", "zero", "--symmetry", "point"]) == 0
+    capsys.readouterr()
+    import layersim
+    from layersim.plan import make_plan
+    coat = {"kind": "dielectric", "ior": 1.5, "roughness": 0.1}
+    gold = {"kind": "conductor", "ior": [0.143552, 3.98397]}
+    fitted = make_plan({"layer": [coat, {**gold, "distribution": "tabulated", "ndf": str(out)}]})
+    analytic = make_plan({"layer": [coat, {**gold, "roughness": [0.2, 0.4],
+                                           "rotation": 15.0}]})
+    assert fitted.representation == "anisotropic" and fitted.ms >= 1
+    assert abs(fitted.n - analytic.n) <= 0.25 * analytic.n
+    with pytest.raises(layersim.SceneError, match="ndf"):
+        make_plan({"layer": [coat, {**gold, "distribution": "tabulated",
+                                    "ndf": str(tmp_path / "missing.npz")}]})
