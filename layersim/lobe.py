@@ -97,8 +97,14 @@ NEAR_SPECULAR_BASE_ALPHA = 0.015
 #: Measured error of a near-specular conductor base (a mirror with the rough reflectance)
 #: under a coat, against Monte Carlo (``benchmarks/near_specular_conductors.txt``), as
 #: :data:`MEASURED_ERROR`: ``(wider alpha of the conductor, largest |albedo difference|,
-#: smallest fraction of populated bins within 3 sigma)``.
-MEASURED_CONDUCTOR_ERROR = ()
+#: smallest fraction of populated bins within 3 sigma)``, 1e7 paths per direction at 5-80 deg,
+#: gold under coats of alpha 0.1 and 0.3 (eta 1.5). Part of it is the coats' own plan: smooth gold
+#: under the 0.1 coat, exact in both, is within 4.7e-4 with 97 % of bins within 3 sigma.
+MEASURED_CONDUCTOR_ERROR = (
+    (0.001, 7.3e-4, 0.985),
+    (0.005, 2.0e-3, 0.921),
+    (0.01, 1.4e-3, 0.931),
+)
 
 
 def near_specular_conductor_error(alpha: float) -> str:
