@@ -66,20 +66,17 @@ def test_plan_splits_near_specular_coats_and_projects_rougher_ones():
     assert make_plan(mirror, refuse=False).near_specular == ()
 
 
-def test_near_specular_coat_agrees_with_monte_carlo_and_survives_save(tmp_path):
-    """alpha 0.005 over rough gold at 40 degrees: albedo within 4 standard errors of 1e6
-    paths plus the split's measured error at this roughness (benchmarks/near_specular.txt:
-    5e-5), bins within 3 sigma in >= 97 % of the populated 9 x 12 bins."""
+def _agrees_with_monte_carlo(scene, bsdf, wi, seed: int, slack: float,
+                             paths: int = 1_000_000) -> float:
+    """Albedo within 4 standard errors of ``paths`` walks plus ``slack`` (the split's measured
+    error), bins within 3 sigma in >= 97 % of the populated 9 x 12 bins, bins summing to the
+    albedo; returns the albedo."""
     import layersim.montecarlo as mc
-    scene = _scene(0.005)
-    bsdf = layersim.solve(scene)
-    wi = _dir(40.0)
     mu_edges, phi_edges = np.linspace(0, 1, 10), np.linspace(0, 2 * np.pi, 13)
-    paths = 1_000_000
     res = mc.simulate(scene, wi, paths, mu_edges=mu_edges, phi_edges=phi_edges,
-                      backend="warp-cpu", seed=7)
+                      backend="warp-cpu", seed=seed)
     R = float(bsdf.albedo(wi)[0])
-    assert abs(R - res.reflectance) <= 4 * res.reflectance_stderr + 1e-4
+    assert abs(R - res.reflectance) <= 4 * res.reflectance_stderr + slack
     bins = bsdf.bin_energies(wi, mu_edges, phi_edges)["top"]
     assert abs(bins.sum() - R) < 2e-3
     est = res.bins["top"]
@@ -87,6 +84,17 @@ def test_near_specular_coat_agrees_with_monte_carlo_and_survives_save(tmp_path):
     populated = (est > 0) | (bins > 1e-12)
     z = (np.abs(bins - est) / np.maximum(sig, 1e-15))[populated]
     assert z.size > 50 and np.mean(z <= 3.0) >= 0.97, np.sort(z)[-5:]
+    return R
+
+
+def test_near_specular_coat_agrees_with_monte_carlo_and_survives_save(tmp_path):
+    """alpha 0.005 over rough gold at 40 degrees: albedo within 4 standard errors of 1e6
+    paths plus the split's measured error at this roughness (benchmarks/near_specular.txt:
+    5e-5), bins within 3 sigma in >= 97 % of the populated 9 x 12 bins."""
+    scene = _scene(0.005)
+    bsdf = layersim.solve(scene)
+    wi = _dir(40.0)
+    R = _agrees_with_monte_carlo(scene, bsdf, wi, seed=7, slack=1e-4)
     back = layersim.BSDF.load(bsdf.save(tmp_path / "ns.npz"))
     assert back.operators[0].lobes == bsdf.operators[0].lobes
     assert np.allclose(back.albedo(wi)[0], R, atol=1e-14)
@@ -165,23 +173,9 @@ def test_near_specular_conductor_under_a_rough_coat_agrees_with_monte_carlo():
     """Gold of alpha 0.005 under a coat of alpha 0.1 at 30 degrees: albedo within 4 standard
     errors of 1e6 paths (plus 2e-4: the mirror's measured error, benchmarks/near_specular.txt),
     bins within 3 sigma in >= 97 % of the populated 9 x 12 bins."""
-    import layersim.montecarlo as mc
     scene = _gold(0.005, coat=0.1)
     assert make_plan(scene).near_specular == (1,)
-    bsdf = layersim.solve(scene)
-    wi = _dir(30.0)
-    mu_edges, phi_edges = np.linspace(0, 1, 10), np.linspace(0, 2 * np.pi, 13)
-    paths = 1_000_000
-    res = mc.simulate(scene, wi, paths, mu_edges=mu_edges, phi_edges=phi_edges,
-                      backend="warp-cpu", seed=11)
-    R = float(bsdf.albedo(wi)[0])
-    assert abs(R - res.reflectance) <= 4 * res.reflectance_stderr + 2e-4
-    bins = bsdf.bin_energies(wi, mu_edges, phi_edges)["top"]
-    est = res.bins["top"]
-    sig = np.sqrt(res.bins_stderr["top"] ** 2 + np.maximum(bins, 0) / paths)
-    populated = (est > 0) | (bins > 1e-12)
-    z = (np.abs(bins - est) / np.maximum(sig, 1e-15))[populated]
-    assert z.size > 50 and np.mean(z <= 3.0) >= 0.97, np.sort(z)[-5:]
+    _agrees_with_monte_carlo(scene, layersim.solve(scene), _dir(30.0), seed=11, slack=2e-4)
 
 
 def test_near_specular_conductor_with_energy_compensation_is_refused():
