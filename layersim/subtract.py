@@ -60,12 +60,16 @@ result reports what was chosen: ``result.info["subtract"]`` (``eps``, ``method``
 from __future__ import annotations
 
 import math
+from contextlib import nullcontext
 
 import numpy as np
 import scipy.sparse as sps
+from threadpoolctl import threadpool_limits
 
+from .adding import BLAS_SINGLE_BELOW
 from .adding import add as iso_add
 from .adding import refuse_boundary
+from . import determined
 from .aniso import basis
 from .aniso.adding import add as coupled_add
 from .aniso.banded import banded_solve
@@ -86,6 +90,9 @@ EPS_MIN_ANISO = 1e-5
 EPS_DECADES = 0.2
 #: Smallest noise level assumed by the automatic choice.
 NOISE_FLOOR = 1e-9
+#: Largest noise level at which the recovered layer is corrected for light returned through
+#: hidden directions (layersim.determined.correct).
+CORRECT_NOISE = 1e-6
 #: Negative lobes allowed (fraction of the peak) regardless of noise (see negativity).
 NEG_FLOOR = 1e-4
 #: Orders of the Fejer means used to detect oscillation.
@@ -197,6 +204,14 @@ def _subtract_op(stack, known, side, eps, noise):
             raise OperatorError(f"index mismatch: the stack ends in a medium of index "
                                 f"{stack.eta_bottom:g}, the known bottom layer in "
                                 f"{known.eta_bottom:g}")
+    # small dense per-order products and SVDs run faster on one BLAS thread (as in adding)
+    with (threadpool_limits(1, user_api="blas") if stack.grid.h < BLAS_SINGLE_BELOW
+          else nullcontext()):
+        return _subtract_checked(stack, known, side, eps, noise)
+
+
+def _subtract_checked(stack, known, side, eps, noise):
+    """:func:`_subtract_op` after the operands have been checked."""
     alg = _ALGEBRAS[common_representation(stack, known)](stack, known)
 
     t_names = ("Ttb", "Tbt")
@@ -222,8 +237,34 @@ def _subtract_op(stack, known, side, eps, noise):
     if vis < VISIBLE_MIN:
         _raise_diffusing(side, vis, max(e, VISIBLE_EPS), noise_level, source, alg.h)
     op = alg.to_operator(rec, side)
+    det, op = _determine(known, op, side, e, noise_level, getattr(alg, "svd", None))
+    info["determined"] = det.as_dict()
+    info["residual_filled"] = alg.residual_of(op, side)
     info["energy_max"] = alg.energy_max(op)
     return op, info
+
+
+def _determine(known, op, side: str, eps: float, noise_level: float, svd: dict | None):
+    """What the stack determines of the recovered ``op``, and ``op`` with its hidden directions
+    filled (and corrected, if isotropic): :mod:`layersim.determined`. The estimate runs on the
+    rotational averages (the azimuthal mean) of anisotropic operators. ``svd``: the SVD cache of
+    the known layer's isotropic algebra, if any."""
+    known_iso = known.rotational_average()
+
+    def round_trip(layer):
+        again = iso_add(known_iso, layer) if side == "top" else iso_add(layer, known_iso)
+        alg = _IsoAlgebra(again, known_iso, svd)
+        return alg.to_operator(alg.recover(side, eps), side)
+
+    iso = op.representation == "isotropic"
+    det, filled, corrected = determined.assess(
+        known_iso, op.rotational_average(), side, eps, round_trip,
+        tolerance=max(determined.TOLERANCE, noise_level),
+        correct_hidden=iso and noise_level <= CORRECT_NOISE)
+    if iso:
+        det.corrected = corrected is not None
+        return det, corrected if det.corrected else filled
+    return det, determined.fill(op, det.reached, side)
 
 
 def _choose_eps(alg, side: str, eps: float | None, noise_level: float):
@@ -420,14 +461,15 @@ class _IsoAlgebra:
     #: Smallest eps of the automatic search, and the floor applied to a given eps.
     eps_min, eps_floor = EPS_RANGE[0], 0.0
 
-    def __init__(self, stack: IsoOperator, known: IsoOperator):
+    def __init__(self, stack: IsoOperator, known: IsoOperator, svd: dict | None = None):
+        # svd: the SVDs of the known blocks, shared by algebras with the same known layer
         self.stack, self.known = stack, known
         self.grid = stack.grid
         self.h = stack.h
         self.m = max(stack.m, known.m)
         sw = np.sqrt(self.grid.flux_weight)
         self.sw = sw
-        self._svd = {}
+        self.svd = {} if svd is None else svd
 
         def hat(op, name):
             if op.blocks[name] is None:
@@ -441,9 +483,9 @@ class _IsoAlgebra:
     # -- linear algebra per order
     def _svd_of(self, name, l):
         key = (name, l)
-        if key not in self._svd:
-            self._svd[key] = np.linalg.svd(self.K[name][l])
-        return self._svd[key]
+        if key not in self.svd:
+            self.svd[key] = np.linalg.svd(self.K[name][l])
+        return self.svd[key]
 
     def pinv(self, name, l, eps):
         """Tikhonov-regularised inverse of the known block ``name`` at order ``l``."""
@@ -528,7 +570,10 @@ class _IsoAlgebra:
         return IsoOperator.from_dense(self.grid, blocks, eta_top, eta_bottom, delta)
 
     def residual(self, rec, side) -> float:
-        op = self.to_operator(rec, side)
+        return self.residual_of(self.to_operator(rec, side), side)
+
+    def residual_of(self, op, side) -> float:
+        """Relative re-adding residual of a recovered operator (energy basis)."""
         again = iso_add(self.known, op) if side == "top" else iso_add(op, self.known)
         sw = self.sw
         num = den = 0.0
@@ -669,7 +714,11 @@ class _AnisoAlgebra:
                              _delta_quotient(self.stack, self.known))
 
     def residual(self, rec, side) -> float:
-        op = self.to_operator(rec, side)
+        return self.residual_of(self.to_operator(rec, side), side)
+
+    def residual_of(self, op, side) -> float:
+        """Relative re-adding residual of a recovered operator (energy basis)."""
+        op = op.as_coupled(self.md)
         again = coupled_add(self.known, op) if side == "top" else coupled_add(op, self.known)
         num = den = 0.0
         for name in BLOCKS:
