@@ -104,6 +104,8 @@ class Determined:
     corrected: bool = False
     estimates: list = field(default_factory=list)
     reached: np.ndarray = field(default=None, repr=False)
+    #: Estimated error over the directions with ordinate index >= k, for every k; shape (h,).
+    errors: np.ndarray = field(default=None, repr=False)
 
     def as_dict(self) -> dict:
         """JSON-friendly form for ``info["subtract"]["determined"]``."""
@@ -116,24 +118,24 @@ class Determined:
                 "other_side": "all directions", "fill": FILL_RULE,
                 "estimates": [list(p) for p in self.estimates]}
 
-    def describe(self) -> str:
-        """One paragraph for the command line."""
-        d = self.as_dict()
-        where = f"on its {self.side} side, in the medium of index {self.ior:g}"
-        if self.mu_min is None:
-            det = (f"no direction is determined to {self.tolerance:.2g} {where} (estimated "
-                   f"error {self.error:.2g} over the reached directions)")
-        else:
-            det = (f"determined: theta < {d['theta_max_deg']:.1f} deg (mu >= {self.mu_min:.3f}) "
-                   f"{where}, all directions on the other side (estimated error "
-                   f"{self.error:.2g}, tolerance {self.tolerance:.2g})")
-        if self.mu_reached is None:
-            reach = "no direction is reached through the known layer"
-        else:
-            reach = (f"reached through the known layer: theta < {d['theta_reached_deg']:.1f} deg; "
-                     + FILL_RULE)
-        corr = "; corrected for light returned through hidden directions" if self.corrected else ""
-        return f"{det}; {reach}{corr}"
+
+def describe(d: dict) -> str:
+    """One paragraph for the command line from :meth:`Determined.as_dict`."""
+    where = f"on its {d['side']} side, in the medium of index {d['ior']:g}"
+    if d["mu_min"] is None:
+        det = (f"no direction is determined to {d['tolerance']:.2g} {where} (estimated error "
+               f"{d['error']:.2g} over the reached directions)")
+    else:
+        det = (f"determined: theta < {d['theta_max_deg']:.1f} deg (mu >= {d['mu_min']:.3f}) "
+               f"{where}, all directions on the other side (estimated error {d['error']:.2g}, "
+               f"tolerance {d['tolerance']:.2g})")
+    if d["mu_reached"] is None:
+        reach = "no direction is reached through the known layer"
+    else:
+        reach = (f"reached through the known layer: theta < {d['theta_reached_deg']:.1f} deg; "
+                 + d["fill"])
+    corr = "; corrected for light returned through hidden directions" if d["corrected"] else ""
+    return f"{det}; {reach}{corr}"
 
 
 def visibility(known: IsoOperator, side: str, eps: float) -> np.ndarray:
@@ -199,29 +201,47 @@ def _fill_matrix(mat, src: tuple, fw: np.ndarray, delta=None):
     return out if D is None else (out + D).tocsr()
 
 
-def _fill_iso(op, reached, facing):
-    fw = op.grid.flux_weight
-    blocks = {k: None if v is None else
-              [_fill_matrix(b, continuation(reached, facing[k]), fw, op.delta.get(k)) for b in v]
-              for k, v in op.blocks.items()}
+def _map_iso(op, fn):
+    blocks = {k: None if v is None else [fn(b, k) for b in v] for k, v in op.blocks.items()}
     return IsoOperator(op.grid, blocks, op.eta_top, op.eta_bottom, op.delta)
 
 
-def _fill_coupled(op, reached, facing):
-    fw = op.grid.flux_weight
-    blocks = {k: None if v is None else
-              _fill_matrix(v, continuation(reached, facing[k]), fw, op.delta.get(k))
-              for k, v in op.blocks.items()}
+def _map_coupled(op, fn):
+    blocks = {k: None if v is None else fn(v, k) for k, v in op.blocks.items()}
     return AnisoOperator(op.grid, op.md, blocks, op.eta_top, op.eta_bottom, op.delta, ms=op.ms)
 
 
-_FILL = {"isotropic": _fill_iso, "anisotropic": _fill_coupled}
+#: Block by block map of an operator, ``fn(matrix, block name)`` on each order's matrix
+#: (isotropic) or the whole coupled matrix.
+_MAP = {"isotropic": _map_iso, "anisotropic": _map_coupled}
 
 
 def fill(op, reached: np.ndarray, side: str):
     """``op`` with its hidden ordinates (``~reached``, on ``side``) filled by constant
     continuation of the BSDF coefficients (module docstring)."""
-    return _FILL[op.representation](op, reached, FACING[side])
+    fw, facing = op.grid.flux_weight, FACING[side]
+    return _MAP[op.representation](op, lambda mat, name: _fill_matrix(
+        mat, continuation(reached, facing[name]), fw, op.delta.get(name)))
+
+
+def restrict(op, mu_min: float | None, side: str):
+    """``op`` with the entries of the directions below ``mu_min`` on ``side`` set to zero (all
+    of its facing entries if ``mu_min`` is None): the determined part, e.g. to judge its
+    negative lobes."""
+    h = op.grid.h
+    keep = np.zeros(h) if mu_min is None else (op.grid.mu >= mu_min).astype(float)
+    facing = FACING[side]
+
+    def mask(mat, name):
+        S = mat.shape[0] // h
+        k = np.tile(keep, S)
+        out = mat.tocsr()
+        if "rows" in facing[name]:
+            out = out.multiply(k[:, None]).tocsr()
+        if "cols" in facing[name]:
+            out = out.multiply(k[None, :]).tocsr()
+        return out
+    return _MAP[op.representation](op, mask)
 
 
 def _suffix_sums(E2: np.ndarray, where: tuple) -> np.ndarray:
@@ -235,6 +255,20 @@ def _suffix_sums(E2: np.ndarray, where: tuple) -> np.ndarray:
         A = np.cumsum(A[:, ::-1], axis=1)[:, ::-1]
         return np.diagonal(A).copy() if "rows" in where else A[0].copy()
     return A[:, 0].copy() if "rows" in where else np.full(E2.shape[0], E2.sum())
+
+
+def norm_by_cut(a: IsoOperator, side: str) -> np.ndarray:
+    """L2 norm (energy basis, all orders and blocks) of ``a`` over the directions with ordinate
+    index ``>= k`` on ``side`` (all on the other side), for every ``k``; shape (h,)."""
+    sw = np.sqrt(a.grid.flux_weight)
+    total = 0.0
+    for name in BLOCKS:
+        if a.blocks[name] is None:
+            continue
+        for l in range(a.m):
+            A = sw[:, None] * a.block(name, l).toarray() / sw[None, :]
+            total = total + _suffix_sums(A * A, FACING[side][name])
+    return np.sqrt(total)
 
 
 def error_by_cut(a: IsoOperator, b: IsoOperator, side: str) -> np.ndarray:
@@ -256,7 +290,7 @@ def error_by_cut(a: IsoOperator, b: IsoOperator, side: str) -> np.ndarray:
 
 
 def assess(known: IsoOperator, recovered: IsoOperator, side: str, eps: float, round_trip,
-           tolerance: float = TOLERANCE, correct_hidden: bool = False):
+           tolerance: float = TOLERANCE, correct_hidden: bool = False, spread=None):
     """Reached, determined and hidden ordinates of a recovered layer (module docstring).
 
     Parameters
@@ -273,6 +307,8 @@ def assess(known: IsoOperator, recovered: IsoOperator, side: str, eps: float, ro
         known layer added to ``layer``.
     tolerance : float
         Relative L2 error (energy basis) up to which directions count as determined.
+    spread : ndarray, optional
+        The noise part of the error per cut (shape (h,)), added in quadrature to the estimate.
     correct_hidden : bool
         Also return the layer corrected for light returned through hidden directions
         (:func:`correct`).
@@ -293,6 +329,8 @@ def assess(known: IsoOperator, recovered: IsoOperator, side: str, eps: float, ro
         return Determined(side, ior, None, None, np.inf, tolerance, reached=reached), filled, None
     again = round_trip(filled)
     est = error_by_cut(again, filled, side)
+    if spread is not None:
+        est = np.hypot(est, spread)
     lowest = int(np.argmax(reached))
     ok = est <= tolerance
     ok[:lowest] = False
@@ -302,7 +340,7 @@ def assess(known: IsoOperator, recovered: IsoOperator, side: str, eps: float, ro
     det = Determined(side, ior, float(mu[lowest]), None if k is None else float(mu[k]),
                      float(est[lowest] if k is None else est[k]), tolerance,
                      estimates=[(float(mu[j]), float(est[j])) for j in range(lowest, grid.h)],
-                     reached=reached)
+                     reached=reached, errors=est)
     corrected = correct(recovered, reached, side, round_trip, again) if correct_hidden else None
     return det, filled, corrected
 

@@ -59,6 +59,7 @@ result reports what was chosen: ``result.info["subtract"]`` (``eps``, ``method``
 
 from __future__ import annotations
 
+import copy
 import math
 from contextlib import nullcontext
 
@@ -90,6 +91,11 @@ EPS_MIN_ANISO = 1e-5
 EPS_DECADES = 0.2
 #: Smallest noise level assumed by the automatic choice.
 NOISE_FLOOR = 1e-9
+#: Seed of the independent noise that estimates how noise propagates into the result.
+PERTURB_SEED = 12345
+#: With noise, directions count as determined where the estimated error is at most this many
+#: times the noise level (or layersim.determined.TOLERANCE, whichever is larger).
+NOISE_TOLERANCE = 2.0
 #: Largest noise level at which the recovered layer is corrected for light returned through
 #: hidden directions (layersim.determined.correct).
 CORRECT_NOISE = 1e-6
@@ -230,25 +236,31 @@ def _subtract_checked(stack, known, side, eps, noise):
     else:
         noise_level, source = float(noise), "given"
     noise_level = max(noise_level, NOISE_FLOOR)
-    rec, resid, e, method, neg = _choose_eps(alg, side, eps, noise_level)
+    if eps is None and noise_level > CORRECT_NOISE:
+        rec, resid, e, method, neg, spread = _choose_eps_by_error(alg, known, side, noise_level)
+    else:
+        (rec, resid, e, method, neg), spread = _choose_eps(alg, side, eps, noise_level), None
     vis, _ = alg.visibility(t_names, max(e, VISIBLE_EPS))
     info = {"eps": e, "method": method, "noise": noise_level, "noise_source": source,
             "residual": resid, "visible": vis, "negative_lobes": neg, "side": side}
     if vis < VISIBLE_MIN:
         _raise_diffusing(side, vis, max(e, VISIBLE_EPS), noise_level, source, alg.h)
     op = alg.to_operator(rec, side)
-    det, op = _determine(known, op, side, e, noise_level, getattr(alg, "svd", None))
+    det, op = _determine(known, op, side, e, noise_level, getattr(alg, "svd", None), spread)
     info["determined"] = det.as_dict()
+    info["negative_lobes_determined"] = alg.negativity(determined.restrict(op, det.mu_min, side))
     info["residual_filled"] = alg.residual_of(op, side)
     info["energy_max"] = alg.energy_max(op)
     return op, info
 
 
-def _determine(known, op, side: str, eps: float, noise_level: float, svd: dict | None):
+def _determine(known, op, side: str, eps: float, noise_level: float, svd: dict | None,
+               spread=None):
     """What the stack determines of the recovered ``op``, and ``op`` with its hidden directions
     filled (and corrected, if isotropic): :mod:`layersim.determined`. The estimate runs on the
     rotational averages (the azimuthal mean) of anisotropic operators. ``svd``: the SVD cache of
-    the known layer's isotropic algebra, if any."""
+    the known layer's isotropic algebra, if any; ``spread``: the noise part of the error per mu
+    cut (:func:`_choose_eps_by_error`), if any."""
     known_iso = known.rotational_average()
 
     def round_trip(layer):
@@ -259,12 +271,62 @@ def _determine(known, op, side: str, eps: float, noise_level: float, svd: dict |
     iso = op.representation == "isotropic"
     det, filled, corrected = determined.assess(
         known_iso, op.rotational_average(), side, eps, round_trip,
-        tolerance=max(determined.TOLERANCE, noise_level),
-        correct_hidden=iso and noise_level <= CORRECT_NOISE)
+        tolerance=max(determined.TOLERANCE, NOISE_TOLERANCE * noise_level),
+        correct_hidden=iso and noise_level <= CORRECT_NOISE, spread=spread)
     if iso:
         det.corrected = corrected is not None
         return det, corrected if det.corrected else filled
     return det, determined.fill(op, det.reached, side)
+
+
+def _choose_eps_by_error(alg, known, side: str, noise_level: float):
+    """Choose eps for noisy data by the smallest estimated error of the recovered layer over the
+    reached directions: ``sqrt(bias^2 + spread^2)``, the bias from the round trip of the
+    recovered layer (:func:`layersim.determined.assess`), the spread from a second recovery of
+    the stack with independent multiplicative noise of the estimated level added, both over the
+    directions reached at ``eps = max(noise, VISIBLE_EPS)`` for every candidate. A grid of
+    half decades from ``noise / 10`` (or the algebra's floor) to 1, refined by quarter decades
+    around its best. Returns ``(recovered blocks, re-adding residual, eps, method, negativity,
+    spread per mu cut)``."""
+    noisy = alg.perturbed(noise_level, PERTURB_SEED)
+    svd = getattr(alg, "svd", None)
+    seen = {}
+
+    def total(le):
+        if le not in seen:
+            e = 10.0 ** le
+            rec = alg.recover(side, e)
+            op = alg.to_operator(rec, side)
+            again = noisy.to_operator(noisy.recover(side, e), side)
+            spread = determined.error_by_cut(again.rotational_average(),
+                                             op.rotational_average(), side)
+            det, filled = _determine(known, op, side, e, noise_level, svd, spread)
+            if det.errors is None:
+                err = math.inf
+            else:
+                # absolute errors, on the scale of the layer recovered at eps ~ noise: a
+                # relative error would hide a result inflated by amplified noise
+                norm = determined.norm_by_cut(filled.rotational_average(), side)[common]
+                err = det.errors[common] * norm / reference
+            seen[le] = (err, rec, e, spread)
+        return seen[le][0]
+
+    # every eps is judged on the same directions: those reached at eps ~ the noise level
+    reached = determined.visibility(known.rotational_average(), side,
+                                    max(noise_level, VISIBLE_EPS)) >= determined.REACHED
+    common = int(np.argmax(reached))
+    reference = 1.0
+    e_ref = max(noise_level, VISIBLE_EPS)
+    reference = determined.norm_by_cut(
+        alg.to_operator(alg.recover(side, e_ref), side).rotational_average(), side)[common]
+
+    lo = math.log10(max(alg.eps_min, noise_level / 10.0, EPS_RANGE[0]))
+    grid = list(np.arange(lo, math.log10(EPS_RANGE[1]) + 1e-9, 0.5))
+    best = min(grid, key=total)
+    best = min([best - 0.25, best, best + 0.25], key=total)
+    err, rec, e, spread = seen[best]
+    neg = alg.negativity(alg.to_operator(rec, side))
+    return rec, alg.residual(rec, side), e, "estimated error", neg, spread
 
 
 def _choose_eps(alg, side: str, eps: float | None, noise_level: float):
@@ -521,6 +583,16 @@ class _IsoAlgebra:
                 den += float(np.sum(off * off))
         return math.sqrt(num / (2.0 * den)) if den > 0 else 0.0
 
+    def perturbed(self, level: float, seed: int):
+        """This algebra with independent multiplicative Gaussian noise of relative standard
+        deviation ``level`` on every entry of the stack."""
+        rng = np.random.default_rng(seed)
+        other = copy.copy(self)
+        other.S = {k: None if v is None else
+                   [B * (1.0 + level * rng.standard_normal(B.shape)) for B in v]
+                   for k, v in self.S.items()}
+        return other
+
     def recover(self, side, eps):
         I = np.eye(self.h)
         S, K = self.S, self.K
@@ -675,6 +747,20 @@ class _AnisoAlgebra:
             num += _frob2([sps.csr_matrix(off - off.T)])
             den += _frob2([sps.csr_matrix(off)])
         return math.sqrt(num / (2.0 * den)) if den > 0 else 0.0
+
+    def perturbed(self, level: float, seed: int):
+        """This algebra with independent multiplicative Gaussian noise of relative standard
+        deviation ``level`` on every stored entry of the stack."""
+        rng = np.random.default_rng(seed)
+        other = copy.copy(self)
+
+        def noisy(mat):
+            out = mat.copy()
+            out.data = out.data * (1.0 + level * rng.standard_normal(out.data.size))
+            return out
+
+        other.S = {k: None if v is None else noisy(v) for k, v in self.S.items()}
+        return other
 
     def recover(self, side, eps):
         I = sps.identity(self.N, format="csr")
