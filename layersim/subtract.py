@@ -26,7 +26,8 @@ operators), where a clear layer is the identity, singular values of a transmissi
 below which components of the hidden layer are damped (filter factors
 ``s^2 / (s^2 + eps^2)``). The paper used 5e-4 for synthetic and 0.06-0.09 for measured data.
 
-With ``eps=None`` it is chosen automatically, in two steps:
+With ``eps=None`` it is chosen automatically. For a stack without noise (noise level at most
+:data:`CORRECT_NOISE`) in two steps:
 
 1. **Discrepancy principle**: the largest ``eps`` (bisection in ``log eps``) for which
    re-adding the known layer to the recovered one reproduces the stack to ``TAU`` times the
@@ -39,10 +40,23 @@ With ``eps=None`` it is chosen automatically, in two steps:
    solution without oscillatory behavior"): if the recovered BSDF has negative lobes deeper
    than ``max(TAU * noise, NEG_FLOOR)`` of its peak (Fejer means of the low orders at every
    ordinate pair, :func:`negativity`), eps is increased (bisection) to the smallest value
-   without them. This matters where the data
-   do not determine the unknown layer: below a dielectric coating, directions beyond the
-   critical angle are reached only by multiple scattering, and their tiny singular values
-   would otherwise be inverted.
+   without them.
+
+With noise the discrepancy principle over-regularises by a decade or more: the adding map from
+the four blocks of the unknown layer to the four blocks of the stack is square, so the noise
+is fitted at any small eps, and the residual reaches the noise level only where the
+regularisation has already biased the result. There eps minimises the **estimated error** of the
+result (:func:`_choose_eps_by_error`): the bias from the round trip of
+:mod:`layersim.determined` and the spread from a second recovery with independent noise of the
+estimated level, on common directions.
+
+What the stack determines
+-------------------------
+The result reports the directions that the data determine (``info["subtract"]["determined"]``,
+:mod:`layersim.determined`): the ordinates reached through the known layer, those among them
+where the estimated error is within the tolerance (1e-3, or twice the noise level), and the rule
+that fills the hidden ones (a continuation of the BSDF coefficients; for isotropic data without
+noise also a correction for the light that returns through them).
 
 Ill-posed problems
 ------------------
@@ -54,7 +68,9 @@ than :data:`VISIBLE_MIN` of the angular components (effective rank
 ``e = max(eps, VISIBLE_EPS)``: a thick scattering slab transmits a few diffuse components and a
 direct beam attenuated below ``VISIBLE_EPS``). The
 result reports what was chosen: ``result.info["subtract"]`` (``eps``, ``method``, ``noise``,
-``noise_source``, ``residual``, ``visible``, ``energy_max``).
+``noise_source``, ``residual`` of the regularised solution and ``residual_filled`` of the
+returned one, ``visible``, ``negative_lobes`` and ``negative_lobes_determined``, ``determined``,
+``energy_max``).
 """
 
 from __future__ import annotations
