@@ -244,47 +244,58 @@ def restrict(op, mu_min: float | None, side: str):
     return _MAP[op.representation](op, mask)
 
 
-def _suffix_sums(E2: np.ndarray, where: tuple) -> np.ndarray:
-    """``sum E2`` over the indices ``>= k`` on the facing axes, for every ``k``; shape (h,)."""
-    A = E2
-    if "rows" in where:
-        A = np.cumsum(A[::-1], axis=0)[::-1]
+def _matrices(op, name: str, orders: int) -> list:
+    """The matrices of block ``name``: one per order (isotropic) or the coupled one."""
+    if op.representation == "isotropic":
+        return [op.block(name, l) for l in range(orders)]
+    return [op.blocks[name]]
+
+
+def _cut_sums(mat, sw: np.ndarray, where: tuple) -> np.ndarray:
+    """``sum`` of the squared energy-basis entries of a sparse block (one order, or all slots)
+    over the ordinates ``>= k`` on the facing axes, for every ``k``; shape (h,)."""
+    h = sw.size
+    coo = sps.coo_matrix(mat)
+    o, i = coo.row % h, coo.col % h
+    v2 = (coo.data * sw[o] / sw[i]) ** 2
+    if "rows" in where and "cols" in where:
+        first = np.minimum(o, i)
+    elif "rows" in where:
+        first = o
+    elif "cols" in where:
+        first = i
     else:
-        A = np.broadcast_to(A.sum(axis=0, keepdims=True), A.shape)
-    if "cols" in where:
-        A = np.cumsum(A[:, ::-1], axis=1)[:, ::-1]
-        return np.diagonal(A).copy() if "rows" in where else A[0].copy()
-    return A[:, 0].copy() if "rows" in where else np.full(E2.shape[0], E2.sum())
+        first = np.full(o.size, h - 1)
+    hist = np.bincount(first, weights=v2, minlength=h)
+    return np.cumsum(hist[::-1])[::-1]
 
 
-def norm_by_cut(a: IsoOperator, side: str) -> np.ndarray:
-    """L2 norm (energy basis, all orders and blocks) of ``a`` over the directions with ordinate
-    index ``>= k`` on ``side`` (all on the other side), for every ``k``; shape (h,)."""
+def norm_by_cut(a, side: str) -> np.ndarray:
+    """L2 norm (energy basis, all orders or coupled slots, all blocks) of operator ``a`` over
+    the directions with ordinate index ``>= k`` on ``side`` (all on the other side), for every
+    ``k``; shape (h,)."""
     sw = np.sqrt(a.grid.flux_weight)
-    total = 0.0
+    total = np.zeros(a.grid.h)
     for name in BLOCKS:
-        if a.blocks[name] is None:
-            continue
-        for l in range(a.m):
-            A = sw[:, None] * a.block(name, l).toarray() / sw[None, :]
-            total = total + _suffix_sums(A * A, FACING[side][name])
+        if a.blocks[name] is not None:
+            for A in _matrices(a, name, a.m):
+                total += _cut_sums(A, sw, FACING[side][name])
     return np.sqrt(total)
 
 
-def error_by_cut(a: IsoOperator, b: IsoOperator, side: str) -> np.ndarray:
-    """Relative L2 distance (energy basis, all orders and blocks) of ``a`` from ``b`` over the
-    directions with ordinate index ``>= k`` on ``side`` (all on the other side), for every
-    ``k``; shape (h,)."""
+def error_by_cut(a, b, side: str) -> np.ndarray:
+    """Relative L2 distance (energy basis, all orders or coupled slots, all blocks) of operator
+    ``a`` from ``b`` (same representation) over the directions with ordinate index ``>= k`` on
+    ``side`` (all on the other side), for every ``k``; shape (h,)."""
     sw = np.sqrt(a.grid.flux_weight)
-    num = den = 0.0
+    num, den = np.zeros(a.grid.h), np.zeros(a.grid.h)
+    orders = max(a.m, b.m)
     for name in BLOCKS:
         if b.blocks[name] is None:
             continue
-        for l in range(max(a.m, b.m)):
-            A = sw[:, None] * a.block(name, l).toarray() / sw[None, :]
-            B = sw[:, None] * b.block(name, l).toarray() / sw[None, :]
-            num = num + _suffix_sums((A - B) ** 2, FACING[side][name])
-            den = den + _suffix_sums(B * B, FACING[side][name])
+        for A, B in zip(_matrices(a, name, orders), _matrices(b, name, orders)):
+            num += _cut_sums(A - B, sw, FACING[side][name])
+            den += _cut_sums(B, sw, FACING[side][name])
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(den > 0, np.sqrt(num / np.where(den > 0, den, 1.0)), np.inf)
 

@@ -314,8 +314,7 @@ def _choose_eps_by_error(alg, known, side: str, noise_level: float):
             rec = alg.recover(side, e)
             op = alg.to_operator(rec, side)
             again = noisy.to_operator(noisy.recover(side, e), side)
-            spread = determined.error_by_cut(again.rotational_average(),
-                                             op.rotational_average(), side)
+            spread = determined.error_by_cut(again, op, side)
             det, filled = _determine(known, op, side, e, noise_level, svd, spread)
             if det.errors is None:
                 err = math.inf
