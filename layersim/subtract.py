@@ -183,7 +183,11 @@ def subtract(stack, known, side: str = "top", eps: float | None = None,
             infos.append(info)
         meta = {"scene": f"{stack.info.get('scene', 'stack')} - "
                          f"{known.info.get('scene', 'known')} ({side})",
-                "channels": len(ops), "subtract": infos[0] if len(ops) == 1 else infos}
+                "channels": len(ops), "subtract": infos[0] if len(ops) == 1 else infos,
+                # eval, albedo, export and plots show the fill in hidden directions: say so
+                "notes": [f"subtracted layer{'' if len(ops) == 1 else f', channel {c}'}: "
+                          + determined.describe(info["determined"])
+                          for c, info in enumerate(infos)]}
         return BSDF(ops, None, meta)
     op, info = _subtract_op(stack, known, side, eps, noise)
     op.info = {"subtract": info}

@@ -133,6 +133,7 @@ def test_subtract_on_solved_bsdfs_and_the_cli(tmp_path, capsys):
     assert main(["subtract", str(s), str(k), "--side", "top", "-o", str(out)]) == 0
     text = capsys.readouterr().out
     assert "eps = " in text and "discrepancy" in text and "wrote" in text
+    assert "determined: theta <" in text and "continuation" in text
     np.testing.assert_allclose(layersim.BSDF.load(out).albedo(wi), got.albedo(wi), rtol=1e-12)
     assert main(["subtract", str(s), str(k), "--side", "bottom"]) == 2
     assert "side='top'" in capsys.readouterr().err
@@ -185,6 +186,7 @@ def test_dust_over_gold_is_exact_over_the_declared_directions():
     assert d["corrected"] and d["side"] == "top" and d["ior"] == 1.0
     assert d["mu_reached"] < 0.06 and d["mu_min"] is not None and d["mu_min"] < 0.25
     assert d["error"] <= 1e-3
+    assert "determined: theta < 7" in got.info["notes"][0]        # printed by 'layersim info'
     assert _error_over(got.operators[0], truth.operators[0], d["mu_min"]) <= 1e-3
     # the uncorrected Tikhonov result misses by 2e-3 there (the round trip estimates it)
     assert max(e for mu, e in d["estimates"] if mu >= d["mu_min"]) <= 1e-3
