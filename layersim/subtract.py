@@ -54,7 +54,8 @@ What the stack determines
 -------------------------
 The result reports the directions that the data determine (``info["subtract"]["determined"]``,
 :mod:`layersim.determined`): the ordinates reached through the known layer, those among them
-where the estimated error is within the tolerance (1e-3, or twice the noise level), and the rule
+where the estimated error is within the tolerance (1e-3, or twice the noise level) and the
+result has no negative lobes deeper than ``max(TAU * noise, NEG_FLOOR)`` of its peak, and the rule
 that fills the hidden ones (a continuation of the BSDF coefficients; for isotropic data without
 noise also a correction for the light that returns through them).
 
@@ -267,8 +268,9 @@ def _subtract_checked(stack, known, side, eps, noise):
         _raise_diffusing(side, vis, max(e, VISIBLE_EPS), noise_level, source, alg.h)
     op = alg.to_operator(rec, side)
     det, op = _determine(known, op, side, e, noise_level, getattr(alg, "svd", None), spread)
+    neg_tol = max(TAU * noise_level, NEG_FLOOR)
+    info["negative_lobes_determined"] = _without_oscillation(det, op, side, neg_tol)
     info["determined"] = det.as_dict()
-    info["negative_lobes_determined"] = alg.negativity(determined.restrict(op, det.mu_min, side))
     info["residual_filled"] = alg.residual_of(op, side)
     info["energy_max"] = alg.energy_max(op)
     return op, info
@@ -297,6 +299,31 @@ def _determine(known, op, side: str, eps: float, noise_level: float, svd: dict |
         det.corrected = corrected is not None
         return det, corrected if det.corrected else filled
     return det, determined.fill(op, det.reached, side)
+
+
+def _without_oscillation(det, op, side: str, tol: float) -> float:
+    """Raise ``det.mu_min`` (bisection over the ordinates) until the result has no negative
+    lobes deeper than ``tol`` of its peak over the determined directions (amplified noise rings
+    where the data are weakest); returns the depth there."""
+    mu = op.grid.mu
+    if det.mu_min is None:
+        return 0.0
+    depth = negativity(determined.restrict(op, det.mu_min, side))
+    if depth <= tol:
+        return depth
+    lo, hi = int(np.searchsorted(mu, det.mu_min)), mu.size     # lo fails; hi: nothing left
+    found = None
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        d_mid = negativity(determined.restrict(op, float(mu[mid]), side))
+        if d_mid <= tol:
+            hi, found = mid, d_mid
+        else:
+            lo = mid
+    det.mu_min = None if found is None else float(mu[hi])
+    if found is not None:
+        det.error = float(det.errors[hi])
+    return 0.0 if found is None else found
 
 
 def _choose_eps_by_error(alg, known, side: str, noise_level: float):

@@ -90,7 +90,12 @@ def test_automatic_eps_with_one_percent_noise_is_close_to_the_best_in_hindsight(
     best = min(err(layersim.subtract(stack, dust, side="top", eps=e))
                for e in 10 ** np.arange(-3, 0.01, 0.25))
     assert err(got) <= 1.5 * best                          # measured: 1.00x (0.0115)
-    assert 0.0 <= info["negative_lobes_determined"] < 0.05  # measured: 0.029
+    # no negative lobes beyond the noise level over the declared directions (measured: 0.010,
+    # theta < 73 deg; over all directions 0.029, at the grazing ones)
+    d = info["determined"]
+    assert d["mu_min"] is not None and d["mu_min"] < 0.5
+    assert info["negative_lobes_determined"] <= 1.5 * info["noise"]
+    assert _negativity(layersim.determined.restrict(got, d["mu_min"], "top")) <= 0.015
     raw = layersim.subtract(stack, dust, side="top", eps=1e-4)
     assert _negativity(raw) > 0.1 and energy_error(raw, glass) > 1.0
     again = layersim.subtract(stack, dust, side="top", noise=0.01)
