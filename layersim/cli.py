@@ -42,6 +42,7 @@ from .outofcore import memory
 from .plan import make_plan
 from .scene import Scene
 from .solver import solve
+from . import determined
 from .subtract import subtract
 
 EXIT_INPUT = 2
@@ -425,6 +426,7 @@ def cmd_subtract(args) -> int:
               f"{info['noise']:.3g} ({info['noise_source']}); re-adding residual "
               f"{info['residual']:.3g}; visible {100 * info['visible']:.0f} % of the angular "
               f"components; largest R + T {info['energy_max']:.4f}")
+        print(f"{tag}{determined.describe(info['determined'])}")
     print("albedo of the recovered layer (energy fractions):")
     print(_albedo_table(result, TABLE_ANGLES))
     _warn_energy(result, infos if isinstance(infos, list) else [infos])

@@ -26,7 +26,8 @@ operators), where a clear layer is the identity, singular values of a transmissi
 below which components of the hidden layer are damped (filter factors
 ``s^2 / (s^2 + eps^2)``). The paper used 5e-4 for synthetic and 0.06-0.09 for measured data.
 
-With ``eps=None`` it is chosen automatically, in two steps:
+With ``eps=None`` it is chosen automatically. For a stack without noise (noise level at most
+:data:`CORRECT_NOISE`) in two steps:
 
 1. **Discrepancy principle**: the largest ``eps`` (bisection in ``log eps``) for which
    re-adding the known layer to the recovered one reproduces the stack to ``TAU`` times the
@@ -39,10 +40,24 @@ With ``eps=None`` it is chosen automatically, in two steps:
    solution without oscillatory behavior"): if the recovered BSDF has negative lobes deeper
    than ``max(TAU * noise, NEG_FLOOR)`` of its peak (Fejer means of the low orders at every
    ordinate pair, :func:`negativity`), eps is increased (bisection) to the smallest value
-   without them. This matters where the data
-   do not determine the unknown layer: below a dielectric coating, directions beyond the
-   critical angle are reached only by multiple scattering, and their tiny singular values
-   would otherwise be inverted.
+   without them.
+
+With noise the discrepancy principle over-regularises by a decade or more: the adding map from
+the four blocks of the unknown layer to the four blocks of the stack is square, so the noise
+is fitted at any small eps, and the residual reaches the noise level only where the
+regularisation has already biased the result. There eps minimises the **estimated error** of the
+result (:func:`_choose_eps_by_error`): the bias from the round trip of
+:mod:`layersim.determined` and the spread from a second recovery with independent noise of the
+estimated level, on common directions.
+
+What the stack determines
+-------------------------
+The result reports the directions that the data determine (``info["subtract"]["determined"]``,
+:mod:`layersim.determined`): the ordinates reached through the known layer, those among them
+where the estimated error is within the tolerance (1e-3, or twice the noise level) and the
+result has no negative lobes deeper than ``max(TAU * noise, NEG_FLOOR)`` of its peak, and the rule
+that fills the hidden ones (a continuation of the BSDF coefficients; for isotropic data without
+noise also a correction for the light that returns through them).
 
 Ill-posed problems
 ------------------
@@ -54,18 +69,25 @@ than :data:`VISIBLE_MIN` of the angular components (effective rank
 ``e = max(eps, VISIBLE_EPS)``: a thick scattering slab transmits a few diffuse components and a
 direct beam attenuated below ``VISIBLE_EPS``). The
 result reports what was chosen: ``result.info["subtract"]`` (``eps``, ``method``, ``noise``,
-``noise_source``, ``residual``, ``visible``, ``energy_max``).
+``noise_source``, ``residual`` of the regularised solution and ``residual_filled`` of the
+returned one, ``visible``, ``negative_lobes`` and ``negative_lobes_determined``, ``determined``,
+``energy_max``).
 """
 
 from __future__ import annotations
 
+import copy
 import math
+from contextlib import nullcontext
 
 import numpy as np
 import scipy.sparse as sps
+from threadpoolctl import threadpool_limits
 
+from .adding import BLAS_SINGLE_BELOW
 from .adding import add as iso_add
 from .adding import refuse_boundary
+from . import determined
 from .aniso import basis
 from .aniso.adding import add as coupled_add
 from .aniso.banded import banded_solve
@@ -86,6 +108,14 @@ EPS_MIN_ANISO = 1e-5
 EPS_DECADES = 0.2
 #: Smallest noise level assumed by the automatic choice.
 NOISE_FLOOR = 1e-9
+#: Seed of the independent noise that estimates how noise propagates into the result.
+PERTURB_SEED = 12345
+#: With noise, directions count as determined where the estimated error is at most this many
+#: times the noise level (or layersim.determined.TOLERANCE, whichever is larger).
+NOISE_TOLERANCE = 2.0
+#: Largest noise level at which the recovered layer is corrected for light returned through
+#: hidden directions (layersim.determined.correct).
+CORRECT_NOISE = 1e-6
 #: Negative lobes allowed (fraction of the peak) regardless of noise (see negativity).
 NEG_FLOOR = 1e-4
 #: Orders of the Fejer means used to detect oscillation.
@@ -154,7 +184,11 @@ def subtract(stack, known, side: str = "top", eps: float | None = None,
             infos.append(info)
         meta = {"scene": f"{stack.info.get('scene', 'stack')} - "
                          f"{known.info.get('scene', 'known')} ({side})",
-                "channels": len(ops), "subtract": infos[0] if len(ops) == 1 else infos}
+                "channels": len(ops), "subtract": infos[0] if len(ops) == 1 else infos,
+                # eval, albedo, export and plots show the fill in hidden directions: say so
+                "notes": [f"subtracted layer{'' if len(ops) == 1 else f', channel {c}'}: "
+                          + determined.describe(info["determined"])
+                          for c, info in enumerate(infos)]}
         return BSDF(ops, None, meta)
     op, info = _subtract_op(stack, known, side, eps, noise)
     op.info = {"subtract": info}
@@ -197,6 +231,14 @@ def _subtract_op(stack, known, side, eps, noise):
             raise OperatorError(f"index mismatch: the stack ends in a medium of index "
                                 f"{stack.eta_bottom:g}, the known bottom layer in "
                                 f"{known.eta_bottom:g}")
+    # small dense per-order products and SVDs run faster on one BLAS thread (as in adding)
+    with (threadpool_limits(1, user_api="blas") if stack.grid.h < BLAS_SINGLE_BELOW
+          else nullcontext()):
+        return _subtract_checked(stack, known, side, eps, noise)
+
+
+def _subtract_checked(stack, known, side, eps, noise):
+    """:func:`_subtract_op` after the operands have been checked."""
     alg = _ALGEBRAS[common_representation(stack, known)](stack, known)
 
     t_names = ("Ttb", "Tbt")
@@ -215,15 +257,122 @@ def _subtract_op(stack, known, side, eps, noise):
     else:
         noise_level, source = float(noise), "given"
     noise_level = max(noise_level, NOISE_FLOOR)
-    rec, resid, e, method, neg = _choose_eps(alg, side, eps, noise_level)
+    if eps is None and noise_level > CORRECT_NOISE:
+        rec, resid, e, method, neg, spread = _choose_eps_by_error(alg, known, side, noise_level)
+    else:
+        (rec, resid, e, method, neg), spread = _choose_eps(alg, side, eps, noise_level), None
     vis, _ = alg.visibility(t_names, max(e, VISIBLE_EPS))
     info = {"eps": e, "method": method, "noise": noise_level, "noise_source": source,
             "residual": resid, "visible": vis, "negative_lobes": neg, "side": side}
     if vis < VISIBLE_MIN:
         _raise_diffusing(side, vis, max(e, VISIBLE_EPS), noise_level, source, alg.h)
     op = alg.to_operator(rec, side)
+    det, op = _determine(known, op, side, e, noise_level, getattr(alg, "svd", None), spread)
+    neg_tol = max(TAU * noise_level, NEG_FLOOR)
+    info["negative_lobes_determined"] = _without_oscillation(det, op, side, neg_tol)
+    info["determined"] = det.as_dict()
+    info["residual_filled"] = alg.residual_of(op, side)
     info["energy_max"] = alg.energy_max(op)
     return op, info
+
+
+def _determine(known, op, side: str, eps: float, noise_level: float, svd: dict | None,
+               spread=None):
+    """What the stack determines of the recovered ``op``, and ``op`` with its hidden directions
+    filled (and corrected, if isotropic): :mod:`layersim.determined`. The estimate runs on the
+    rotational averages (the azimuthal mean) of anisotropic operators. ``svd``: the SVD cache of
+    the known layer's isotropic algebra, if any; ``spread``: the noise part of the error per mu
+    cut (:func:`_choose_eps_by_error`), if any."""
+    known_iso = known.rotational_average()
+
+    def round_trip(layer):
+        again = iso_add(known_iso, layer) if side == "top" else iso_add(layer, known_iso)
+        alg = _IsoAlgebra(again, known_iso, svd)
+        return alg.to_operator(alg.recover(side, eps), side)
+
+    iso = op.representation == "isotropic"
+    det, filled, corrected = determined.assess(
+        known_iso, op.rotational_average(), side, eps, round_trip,
+        tolerance=max(determined.TOLERANCE, NOISE_TOLERANCE * noise_level),
+        correct_hidden=iso and noise_level <= CORRECT_NOISE, spread=spread)
+    if iso:
+        det.corrected = corrected is not None
+        return det, corrected if det.corrected else filled
+    return det, determined.fill(op, det.reached, side)
+
+
+def _without_oscillation(det, op, side: str, tol: float) -> float:
+    """Raise ``det.mu_min`` (bisection over the ordinates) until the result has no negative
+    lobes deeper than ``tol`` of its peak over the determined directions (amplified noise rings
+    where the data are weakest); returns the depth there."""
+    mu = op.grid.mu
+    if det.mu_min is None:
+        return 0.0
+    depth = negativity(determined.restrict(op, det.mu_min, side))
+    if depth <= tol:
+        return depth
+    lo, hi = int(np.searchsorted(mu, det.mu_min)), mu.size     # lo fails; hi: nothing left
+    found = None
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        d_mid = negativity(determined.restrict(op, float(mu[mid]), side))
+        if d_mid <= tol:
+            hi, found = mid, d_mid
+        else:
+            lo = mid
+    det.mu_min = None if found is None else float(mu[hi])
+    if found is not None:
+        det.error = float(det.errors[hi])
+    return 0.0 if found is None else found
+
+
+def _choose_eps_by_error(alg, known, side: str, noise_level: float):
+    """Choose eps for noisy data by the smallest estimated error of the recovered layer over the
+    reached directions: ``sqrt(bias^2 + spread^2)``, the bias from the round trip of the
+    recovered layer (:func:`layersim.determined.assess`), the spread from a second recovery of
+    the stack with independent multiplicative noise of the estimated level added, both over the
+    directions reached at ``eps = max(noise, VISIBLE_EPS)`` for every candidate. A grid of
+    half decades from ``noise / 10`` (or the algebra's floor) to 1, refined by quarter decades
+    around its best. Returns ``(recovered blocks, re-adding residual, eps, method, negativity,
+    spread per mu cut)``."""
+    noisy = alg.perturbed(noise_level, PERTURB_SEED)
+    svd = getattr(alg, "svd", None)
+    seen = {}
+
+    def total(le):
+        if le not in seen:
+            e = 10.0 ** le
+            rec = alg.recover(side, e)
+            op = alg.to_operator(rec, side)
+            again = noisy.to_operator(noisy.recover(side, e), side)
+            spread = determined.error_by_cut(again, op, side)
+            det, filled = _determine(known, op, side, e, noise_level, svd, spread)
+            if det.errors is None:
+                err = math.inf
+            else:
+                # absolute errors, on the scale of the layer recovered at eps ~ noise: a
+                # relative error would hide a result inflated by amplified noise
+                norm = determined.norm_by_cut(filled.rotational_average(), side)[common]
+                err = det.errors[common] * norm / reference
+            seen[le] = (err, rec, e, spread)
+        return seen[le][0]
+
+    # every eps is judged on the same directions: those reached at eps ~ the noise level
+    reached = determined.visibility(known.rotational_average(), side,
+                                    max(noise_level, VISIBLE_EPS)) >= determined.REACHED
+    common = int(np.argmax(reached))
+    reference = 1.0
+    e_ref = max(noise_level, VISIBLE_EPS)
+    reference = determined.norm_by_cut(
+        alg.to_operator(alg.recover(side, e_ref), side).rotational_average(), side)[common]
+
+    lo = math.log10(max(alg.eps_min, noise_level / 10.0, EPS_RANGE[0]))
+    grid = list(np.arange(lo, math.log10(EPS_RANGE[1]) + 1e-9, 0.5))
+    best = min(grid, key=total)
+    best = min([best - 0.25, best, best + 0.25], key=total)
+    err, rec, e, spread = seen[best]
+    neg = alg.negativity(alg.to_operator(rec, side))
+    return rec, alg.residual(rec, side), e, "estimated error", neg, spread
 
 
 def _choose_eps(alg, side: str, eps: float | None, noise_level: float):
@@ -420,14 +569,15 @@ class _IsoAlgebra:
     #: Smallest eps of the automatic search, and the floor applied to a given eps.
     eps_min, eps_floor = EPS_RANGE[0], 0.0
 
-    def __init__(self, stack: IsoOperator, known: IsoOperator):
+    def __init__(self, stack: IsoOperator, known: IsoOperator, svd: dict | None = None):
+        # svd: the SVDs of the known blocks, shared by algebras with the same known layer
         self.stack, self.known = stack, known
         self.grid = stack.grid
         self.h = stack.h
         self.m = max(stack.m, known.m)
         sw = np.sqrt(self.grid.flux_weight)
         self.sw = sw
-        self._svd = {}
+        self.svd = {} if svd is None else svd
 
         def hat(op, name):
             if op.blocks[name] is None:
@@ -441,9 +591,9 @@ class _IsoAlgebra:
     # -- linear algebra per order
     def _svd_of(self, name, l):
         key = (name, l)
-        if key not in self._svd:
-            self._svd[key] = np.linalg.svd(self.K[name][l])
-        return self._svd[key]
+        if key not in self.svd:
+            self.svd[key] = np.linalg.svd(self.K[name][l])
+        return self.svd[key]
 
     def pinv(self, name, l, eps):
         """Tikhonov-regularised inverse of the known block ``name`` at order ``l``."""
@@ -478,6 +628,16 @@ class _IsoAlgebra:
                 num += float(np.sum((off - off.T) ** 2))
                 den += float(np.sum(off * off))
         return math.sqrt(num / (2.0 * den)) if den > 0 else 0.0
+
+    def perturbed(self, level: float, seed: int):
+        """This algebra with independent multiplicative Gaussian noise of relative standard
+        deviation ``level`` on every entry of the stack."""
+        rng = np.random.default_rng(seed)
+        other = copy.copy(self)
+        other.S = {k: None if v is None else
+                   [B * (1.0 + level * rng.standard_normal(B.shape)) for B in v]
+                   for k, v in self.S.items()}
+        return other
 
     def recover(self, side, eps):
         I = np.eye(self.h)
@@ -528,7 +688,10 @@ class _IsoAlgebra:
         return IsoOperator.from_dense(self.grid, blocks, eta_top, eta_bottom, delta)
 
     def residual(self, rec, side) -> float:
-        op = self.to_operator(rec, side)
+        return self.residual_of(self.to_operator(rec, side), side)
+
+    def residual_of(self, op, side) -> float:
+        """Relative re-adding residual of a recovered operator (energy basis)."""
         again = iso_add(self.known, op) if side == "top" else iso_add(op, self.known)
         sw = self.sw
         num = den = 0.0
@@ -631,6 +794,20 @@ class _AnisoAlgebra:
             den += _frob2([sps.csr_matrix(off)])
         return math.sqrt(num / (2.0 * den)) if den > 0 else 0.0
 
+    def perturbed(self, level: float, seed: int):
+        """This algebra with independent multiplicative Gaussian noise of relative standard
+        deviation ``level`` on every stored entry of the stack."""
+        rng = np.random.default_rng(seed)
+        other = copy.copy(self)
+
+        def noisy(mat):
+            out = mat.copy()
+            out.data = out.data * (1.0 + level * rng.standard_normal(out.data.size))
+            return out
+
+        other.S = {k: None if v is None else noisy(v) for k, v in self.S.items()}
+        return other
+
     def recover(self, side, eps):
         I = sps.identity(self.N, format="csr")
         S, K = self.S, self.K
@@ -669,7 +846,11 @@ class _AnisoAlgebra:
                              _delta_quotient(self.stack, self.known))
 
     def residual(self, rec, side) -> float:
-        op = self.to_operator(rec, side)
+        return self.residual_of(self.to_operator(rec, side), side)
+
+    def residual_of(self, op, side) -> float:
+        """Relative re-adding residual of a recovered operator (energy basis)."""
+        op = op.as_coupled(self.md)
         again = coupled_add(self.known, op) if side == "top" else coupled_add(op, self.known)
         num = den = 0.0
         for name in BLOCKS:
