@@ -27,6 +27,8 @@ variable                   field               meaning (default)
 ``LAYERSIM_ORDER_THREADS`` ``order_threads``   threads for independent Fourier orders of
                                                the isotropic adding (1)
 ``LAYERSIM_WARP_VERBOSE``  ``warp_verbose``    Warp's banner and build messages (off)
+``LAYERSIM_CACHE_DIR``     ``cache_dir``       directory of tables computed once and kept
+                                               (``~/.cache/layersim``; ``off``: none)
 =========================  ==================  ===========================================
 """
 
@@ -75,6 +77,9 @@ class Settings:
         Threads for the Fourier orders of the isotropic adding (>= 1).
     warp_verbose : bool
         Whether Warp prints its banner and kernel build messages.
+    cache_dir : str or None
+        Directory of tables computed once and kept between runs (the FGD tables of
+        :mod:`layersim.statistical.fgd`); None: computed in every process, never written.
     """
 
     device: str = "cpu"
@@ -85,6 +90,8 @@ class Settings:
     threads: int = dataclasses.field(default_factory=lambda: os.cpu_count() or 1)
     order_threads: int = 1
     warp_verbose: bool = False
+    cache_dir: str | None = dataclasses.field(
+        default_factory=lambda: os.path.join(os.path.expanduser("~"), ".cache", "layersim"))
 
     def __post_init__(self):
         for name in ("threads", "order_threads"):
@@ -153,6 +160,7 @@ _VARIABLES = {
     "threads": ("LAYERSIM_THREADS", int),
     "order_threads": ("LAYERSIM_ORDER_THREADS", int),
     "warp_verbose": ("LAYERSIM_WARP_VERBOSE", _flag),
+    "cache_dir": ("LAYERSIM_CACHE_DIR", _park),
 }
 _EXPECTED = {
     "device": "expected a Warp device name ('cpu', 'cuda' or 'cuda:N')",
@@ -163,6 +171,7 @@ _EXPECTED = {
     "threads": "expected an integer >= 1",
     "order_threads": "expected an integer >= 1",
     "warp_verbose": "expected 0 or 1",
+    "cache_dir": "expected a directory or 'off'",
 }
 
 _active: Settings | None = None
