@@ -8,7 +8,7 @@ conductors (two index components per channel, few calls) are integrated on deman
 
 Resolution (:data:`MU`, :data:`ALPHA`, :data:`LOG_ETA`): 32 incidence cosines ``1/32 .. 1``,
 33 roughnesses ``0 .. 1``, 65 relative indices log-spaced over ``[1/4, 4]`` (``eta = 1`` is a
-node); trilinear interpolation. ``mu = 1`` is a node, so the normal-incidence slice used by the
+node); trilinear interpolation of ``sqrt(FGD)``. ``mu = 1`` is a node, so the normal-incidence slice used by the
 inverse design (:mod:`layersim.statistical.design`) is the forward model's exactly. Queries
 outside the grid are refused (``alpha > 1``, ``eta`` outside [1/4, 4]) or clamped (``mu < 1/32``
 takes the value at 1/32).
@@ -86,7 +86,10 @@ def table() -> np.ndarray:
 
 @functools.lru_cache(maxsize=None)
 def _interpolator(cache: str | None) -> RegularGridInterpolator:
-    return RegularGridInterpolator((MU, ALPHA, LOG_ETA), _table_for(cache), method="linear")
+    # sqrt(FGD) is close to |eta - 1| / (eta + 1), piecewise linear in log(eta) with its kink
+    # on the node eta = 1: interpolating it rather than FGD removes most of the error
+    return RegularGridInterpolator((MU, ALPHA, LOG_ETA), np.sqrt(np.maximum(
+        _table_for(cache), 0.0)), method="linear")
 
 
 def _check(alpha, eta):
@@ -125,7 +128,8 @@ def dielectric(mu, alpha, eta) -> np.ndarray:
     path = _cache_path()
     pts = np.stack([np.clip(mu, MU[0], 1.0), np.clip(alpha, 0.0, 1.0),
                     np.clip(np.log(eta), LOG_ETA[0], LOG_ETA[-1])], axis=-1)
-    return _interpolator(str(path) if path else None)(pts.reshape(-1, 3)).reshape(mu.shape)
+    root = _interpolator(str(path) if path else None)(pts.reshape(-1, 3)).reshape(mu.shape)
+    return root * root
 
 
 @functools.lru_cache(maxsize=4096)

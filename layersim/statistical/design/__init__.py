@@ -13,31 +13,50 @@ naming the lobe and the bound.
 
 from __future__ import annotations
 
+import itertools
+
 from ..targets import TargetError, parse_targets
 from .scene_out import Design, to_scene
 from .stacking import design_stack
 
-#: Equivalence-class choices tried, the preferred first.
-CHOICES = ("centre", "low", "high")
+#: Equivalence-class choices tried (positions in each class, see :mod:`.stacking`), the
+#: preferred first: the middle, as Bati et al. 2021 pick for conductors.
+CHOICES = (0.5, 0.0, 1.0, 0.25, 0.75)
+
+
+#: Per-lobe combinations of :data:`CHOICES` tried when no uniform choice succeeds (a lobe's
+#: member of its class changes what the lobes below it can reach, Bati et al. 2021 sec. 8).
+MAX_COMBINATIONS = 40
+
+
+def _choices(lobes: int):
+    yield from CHOICES
+    if lobes > 1:
+        combos = itertools.product(CHOICES, repeat=lobes - 1)
+        for combo in itertools.islice(combos, MAX_COMBINATIONS):
+            yield tuple(combo) + (0.5,)
 
 
 def designs(targets, eta_max: float | None = None) -> list[Design]:
     """The candidate designs (:class:`Design`: scene, lobe groups, choice), preferred first,
     without duplicates."""
     parsed = parse_targets(targets, eta_max)
-    out, seen = [], set()
-    for choice in CHOICES:
+    out, seen, first_error = [], set(), None
+    for choice in _choices(len(parsed.lobes)):
+        if out and not isinstance(choice, float):
+            break
         try:
             stacks, groups = design_stack(parsed, choice)
-        except TargetError:
-            if choice == CHOICES[0]:
-                raise
+        except TargetError as exc:
+            first_error = first_error or exc
             continue
         d = to_scene(stacks, groups, parsed, choice)
         key = d.toml()
         if key not in seen:
             seen.add(key)
             out.append(d)
+    if not out:
+        raise first_error
     return out
 
 

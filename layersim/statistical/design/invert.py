@@ -22,6 +22,8 @@ from ..variance import roughness, variance
 #: Reflectance below which a conductor cannot go: kappa >= eta needs R > 3 - 2 sqrt(2)
 #: (Bati et al. 2021, after eq. 10).
 CONDUCTOR_R_MIN = 3.0 - 2.0 * math.sqrt(2.0)
+#: Largest extinction coefficient a scene accepts (:mod:`layersim.scene`).
+K_MAX = 100.0
 
 
 def base_stats(stacks, energy: np.ndarray, sigma: float, lobe: int):
@@ -86,23 +88,36 @@ def dielectric_limit(alpha: float, eta_above: float, eta_max: float) -> float:
 def conductor_index(r: float, alpha: float, eta_above: float, choice: str, lobe: int):
     """Complex index ``eta + i k`` of a conductor below ``eta_above`` whose FGD at normal
     incidence is ``r``: ``eta`` from the conductor equivalence class of Fresnel reflectance
-    ``r`` (Bati et al. 2021 eq. 9-10; ``choice`` "centre" takes the middle of
-    ``[eta_min, eta_max]`` as the paper does, "edge" the lower bound, Gulbrandsen's largest
-    edge tint), then ``k`` solved so that the rough FGD (not Fresnel) equals ``r``."""
+    ``r`` (Bati et al. 2021 eq. 9-10: ``kappa >= eta`` bounds it by ``eta_max = (1 + r +
+    sqrt(6 r - 1 - r^2)) / (2 (1 - r))``; ``choice`` "edge" takes the lower bound ``(1 - r) /
+    (1 + r)``, Gulbrandsen's largest edge tint, anything else the middle of the class as the
+    paper does), then ``k`` solved so that the rough FGD (not Fresnel) equals ``r``."""
     if not CONDUCTOR_R_MIN < r < 1.0:
         raise TargetError(f"a conductor base needs a reflectance in ({CONDUCTOR_R_MIN:.4f}, 1) "
                           f"at normal incidence under the layers above, this lobe asks for "
                           f"{r:.4g} (kappa >= eta, Bati et al. 2021 eq. 9)", lobe, "energy")
-    eta_hi = (math.sqrt(1 + r * r + 6 * r) - 1 - r) / (2 * (1 - r))
+    eta_hi = (1 + r + math.sqrt(max(6 * r - 1 - r * r, 0.0))) / (2 * (1 - r))
     eta_lo = (1 - r) / (1 + r)
-    eta = 0.5 * (eta_lo + eta_hi) if choice == "centre" else eta_lo
+    eta = eta_lo if choice == "edge" else 0.5 * (eta_lo + eta_hi)
     f = lambda k: fgd.conductor(1.0, alpha, eta, k) - r
-    hi = 2.0
-    while f(hi) < 0.0:
-        hi *= 2.0
-        if hi > 1e4:
-            raise TargetError(f"no conductor index reaches reflectance {r:.4g}", lobe, "energy")
-    k = brentq(f, 1e-6, hi, xtol=1e-12, rtol=1e-12)
+    # start from the smooth interface's k (eq. 8) and widen the bracket geometrically; the
+    # rough FGD is not monotonic in k where eta << 1 (total reflection off tilted facets)
+    k0 = math.sqrt(max(r * (eta + 1) ** 2 - (eta - 1) ** 2, 1e-12) / (1 - r))
+    k_max = K_MAX / eta_above
+    if f(k_max) < 0.0:
+        raise TargetError(f"a conductor of roughness {alpha:.4g} reflects at most "
+                          f"{f(k_max) + r:.4g} (k <= {K_MAX:g}; single-scattering GGX loses the "
+                          f"rest to shadowing), this lobe asks for {r:.4g}", lobe, "energy")
+    lo, hi = min(k0, k_max), min(k0, k_max)
+    for _ in range(40):
+        if f(lo) <= 0.0 <= f(hi):
+            break
+        lo, hi = max(lo / 1.5, 1e-6), min(hi * 1.5, k_max)
+    else:
+        raise TargetError(f"no conductor index of this class (eta = {eta * eta_above:.4g}) "
+                          f"reaches reflectance {r:.4g} at roughness {alpha:.4g}", lobe,
+                          "energy")
+    k = brentq(f, lo, hi, xtol=1e-12, rtol=1e-12) if lo < hi else k0
     return complex(eta * eta_above, k * eta_above)
 
 

@@ -36,11 +36,12 @@ class Design:
     data: dict
     scene: Scene
     groups: list
-    choice: str
+    choice: object
 
     def toml(self) -> str:
         """The scene as TOML text (``layersim solve`` reads it)."""
-        lines = [f"# designed by layersim design (Bati et al. 2021), choice: {self.choice}",
+        lines = [f"# designed by layersim design (Bati et al. 2021), position {self.choice} in "
+                 "the equivalence classes (0: low end, 0.5: middle, 1: high end)",
                  "[stack]", f"name = \"{self.data['stack']['name']}\"", ""]
         for layer in self.data["layer"]:
             lines.append("[[layer]]")
@@ -58,7 +59,7 @@ def _toml(value) -> str:
     return repr(float(value))
 
 
-def to_scene(stacks, groups, targets, choice: str) -> Design:
+def to_scene(stacks, groups, targets, choice) -> Design:
     """The :class:`Design` of per-channel atom lists ``stacks``."""
     layers = [_layer_dict([s[i] for s in stacks]) for i in range(len(stacks[0]))]
     data = {"stack": {"name": "design"}, "layer": layers}

@@ -6,16 +6,16 @@ The stack is built per channel as lists of :class:`~layersim.statistical.atomic.
 :class:`~layersim.statistical.atomic.Absorber`; indices and roughnesses are achromatic, optical
 depths and conductor indices per channel.
 
-Choices inside an equivalence class (``choice``):
+Choices inside an equivalence class (``choice``, a position in [0, 1]):
 
+* 2-layer lobe: the index of the upper interface at that position in the feasible set N1
+  (eq. 12), sampled on :data:`N1_SAMPLES` indices (0.5: its middle), with ``tau = 0`` between
+  the lobe and the layers above;
 * 1-layer dielectric: the index with ``tau = 0`` in the channel of largest attenuated energy
-  (the colour comes from absorption above, Bati et al. 2021 sec. 5.1.1), the root above the
-  index of the medium over it ("centre", "high") or below it ("low") when both exist;
-* conductor: the centre of the class ``[eta_min, eta_max]`` ("centre", "high"; the paper's
-  pick) or its lower bound, the largest edge tint ("low");
-* 2-layer lobe: the index of the upper interface at the centre ("centre"), lower ("low") or
-  upper ("high") end of the feasible set N1 (eq. 12), sampled on :data:`N1_SAMPLES` indices,
-  with ``tau = 0`` between the lobe and the layers above.
+  (the colour comes from absorption above, Bati et al. 2021 sec. 5.1.1); the root above the
+  index of the medium over it, or below it at ``choice == 0`` when both exist (eq. 7);
+* conductor: the middle of the class ``[eta_min, eta_max]`` (the paper's pick, sec. 7.1), or
+  at ``choice == 0`` its lower bound, the largest edge tint (Gulbrandsen 2014).
 """
 
 from __future__ import annotations
@@ -37,14 +37,15 @@ def _append(stacks, per_channel) -> list:
 
 
 def one_layer(stacks, eta_n: float, r_prime, s_r, s_t0n, target, lobe: int, eta_max: float,
-              choice: str, top: bool):
+              choice: float, top: bool):
     """Algorithm 4: append the interface (and the absorbing medium above it) of a 1-layer
     lobe; returns ``(stacks, eta)``."""
     alpha = interface_roughness(s_r)
     alpha_eff = effective_roughness(s_r, s_t0n)
     channels = len(stacks)
-    if target.base == "conductor" and lobe_is_last(target):
-        iors = [conductor_index(float(r), alpha_eff, eta_n, choice, lobe) for r in r_prime]
+    if target.base == "conductor":
+        how = "edge" if choice == 0.0 else "centre"
+        iors = [conductor_index(float(r), alpha_eff, eta_n, how, lobe) for r in r_prime]
         return _append(stacks, [Interface(e, alpha) for e in iors]), eta_n
     need = float(np.max(r_prime))
     limit = dielectric_limit(alpha_eff, eta_n, eta_max)
@@ -54,7 +55,7 @@ def one_layer(stacks, eta_n: float, r_prime, s_r, s_t0n, target, lobe: int, eta_
                           f"{need:.4g} (attenuated energy, Bati et al. 2021 eq. 7 and 18)",
                           lobe, "energy")
     eta = dielectric_root(need, alpha_eff, eta_n, eta_max,
-                          "below" if choice == "low" else "above")
+                          "below" if choice == 0.0 else "above")
     if eta is None:
         raise TargetError(f"no dielectric index in [1, {eta_max:g}] gives energy {need:.4g}",
                           lobe, "energy")
@@ -72,11 +73,7 @@ def one_layer(stacks, eta_n: float, r_prime, s_r, s_t0n, target, lobe: int, eta_
     return _append(stacks, [Interface(complex(eta), alpha)] * channels), eta
 
 
-def lobe_is_last(target) -> bool:
-    return target.base == "conductor"
-
-
-def two_layer(stacks, eta_n: float, target, total, lobe: int, eta_max: float, choice: str):
+def two_layer(stacks, eta_n: float, target, total, lobe: int, eta_max: float, choice: float):
     """Algorithm 5 (Algorithm 1 at the top): the upper interface takes the lobe's reflected
     variance, the lower one (Algorithm 4) the rest of its energy ``R̄_k`` (eq. 20)."""
     r_prime, s_r, s_t0n, stats = base_stats(stacks, target.energy, target.variance, lobe)
@@ -93,7 +90,7 @@ def two_layer(stacks, eta_n: float, target, total, lobe: int, eta_max: float, ch
         try:
             r2, s_r2, s_t2, _ = base_stats(trial, r_bar, target.variance, lobe)
             result = one_layer(trial, float(eta1), r2, s_r2, s_t2, target, lobe, eta_max,
-                               "centre", top=False)
+                               0.5, top=False)
         except TargetError as exc:
             last_error = exc
             continue
@@ -103,8 +100,7 @@ def two_layer(stacks, eta_n: float, target, total, lobe: int, eta_max: float, ch
         raise TargetError("no 2-layer configuration reaches this lobe (the feasible set N1 of "
                           f"Bati et al. 2021 eq. 12 is empty for indices in [1, {eta_max:g}])"
                           + why, lobe, "energy")
-    pick = {"low": 0, "high": len(feasible) - 1}.get(choice, len(feasible) // 2)
-    return feasible[pick]
+    return feasible[int(round(choice * (len(feasible) - 1)))]
 
 
 def _upper_roughness(stats, s_r, s_t0n, sigma, eta_rel, r_prime) -> float:
@@ -121,10 +117,11 @@ def _upper_roughness(stats, s_r, s_t0n, sigma, eta_rel, r_prime) -> float:
     return interface_roughness(s_r)
 
 
-def design_stack(targets, choice: str = "centre"):
+def design_stack(targets, choice=0.5):
     """Algorithm 2: the stack (per channel lists of atoms, top to bottom) for ``targets``
     (:class:`~layersim.statistical.targets.Targets`) and, per lobe, the indices of its
-    interfaces in the stack.
+    interfaces in the stack. ``choice``: one position in the equivalence classes for all
+    lobes, or one per lobe.
 
     Raises
     ------
@@ -135,14 +132,16 @@ def design_stack(targets, choice: str = "centre"):
     stacks = [[] for _ in range(channels)]
     eta_n, total = 1.0, np.zeros(channels)
     groups = []
+    choices = np.broadcast_to(np.asarray(choice, dtype=float), (len(targets.lobes),))
     for k, target in enumerate(targets.lobes, start=1):
+        choice = float(choices[k - 1])
         energy = np.broadcast_to(target.energy, (channels,))
         target = type(target)(energy, target.variance, target.roughness, target.layers,
                               target.base)
         total = total + energy
         before = len(stacks[0])
         options = [target.layers] if target.layers else [1, 2]
-        error = None
+        errors = []
         for layers in options:
             try:
                 if layers == 1:
@@ -152,12 +151,14 @@ def design_stack(targets, choice: str = "centre"):
                 else:
                     stacks, eta_n = two_layer(stacks, eta_n, target, total, k,
                                               targets.eta_max, choice)
-                error = None
+                errors = []
                 break
             except TargetError as exc:
-                error = exc
-        if error is not None:
-            raise error
+                errors.append(exc)
+        if len(errors) == 1:
+            raise errors[0]
+        if errors:
+            raise TargetError(f"{errors[0]}; with 2 layers: {errors[1]}")
         groups.append([i for i in range(before, len(stacks[0]))
                        if isinstance(stacks[0][i], Interface)])
     return stacks, groups
