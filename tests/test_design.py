@@ -134,3 +134,23 @@ def test_a_designed_scene_is_solved_and_simulated():
                       phi_edges=np.linspace(0, 2 * np.pi, 5), backend="warp-cpu", seed=1)
     R = np.asarray(exact.albedo(wi)[0])
     assert np.all(np.abs(res.reflectance - R) < 4 * res.reflectance_stderr + 1e-3)
+
+
+def test_cli_design_writes_a_scene_that_layersim_reads(tmp_path, capsys):
+    from layersim.cli import main
+    out = tmp_path / "stack.toml"
+    assert main(["design", str(ROOT / "examples" / "design_coated_copper.toml"), "--no-verify",
+                 "-o", str(out), "--candidates", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "candidate 1" in text and "conductor" in text
+    scene = layersim.Scene.from_toml(out)
+    assert scene.channels == 3 and scene.channel(0).layers[0].distribution == "ggx"
+
+
+def test_cli_design_refuses_unreachable_targets_in_one_line(tmp_path, capsys):
+    from layersim.cli import main
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[[lobe]]\nenergy = 0.15\nroughness = 0.1\nbase = \"conductor\"\n")
+    assert main(["design", str(bad), "--no-verify"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "lobe 1" in err[0] and "0.1716" in err[0]

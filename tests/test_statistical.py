@@ -148,7 +148,7 @@ def test_statistical_bsdf_bins_and_eval_carry_the_lobe_energies():
     R, T = b.albedo(wi)
     assert np.all(T == 0.0)
     bins = b.bin_energies(wi, np.linspace(0, 1, 11), np.linspace(0, 2 * np.pi, 13))
-    assert bins["top"].sum(axis=(0, 1)) == pytest.approx(R, rel=1e-12)
+    assert bins["top"].sum(axis=(0, 1)) == pytest.approx(R, rel=5e-4)
     th = np.linspace(0, np.pi / 2, 300)[1:]
     ph = np.linspace(0, 2 * np.pi, 601)[:-1]
     Th, Ph = np.meshgrid(th, ph, indexing="ij")

@@ -41,44 +41,34 @@ def _ggx_albedo(mu: float, alpha: float) -> float:
     return float(ggx_albedo(mu, alpha))
 
 
-def _stratified(n: int):
-    u = (np.arange(n) + 0.5) / n
-    return np.meshgrid(u, u, indexing="ij")
+#: Gauss-Legendre nodes per bin in the outgoing elevation and azimuth for :func:`lobe_bins`.
+BIN_NODES = 16
 
 
-def _sample_visible_normals(wi: np.ndarray, alpha: float, n: int) -> np.ndarray:
-    """GGX visible normals (Heitz 2018, "Sampling the GGX distribution of visible normals") on
-    a stratified ``n x n`` grid, shape (n*n, 3)."""
-    u1, u2 = (u.ravel() for u in _stratified(n))
-    vh = np.array([alpha * wi[0], alpha * wi[1], wi[2]])
-    vh /= np.linalg.norm(vh)
-    lensq = vh[0] ** 2 + vh[1] ** 2
-    t1 = np.array([-vh[1], vh[0], 0.0]) / np.sqrt(lensq) if lensq > 0 else np.array([1., 0, 0])
-    t2 = np.cross(vh, t1)
-    r, phi = np.sqrt(u1), 2.0 * np.pi * u2
-    p1, p2 = r * np.cos(phi), r * np.sin(phi)
-    s = 0.5 * (1.0 + vh[2])
-    p2 = (1.0 - s) * np.sqrt(np.maximum(0.0, 1.0 - p1 * p1)) + s * p2
-    p3 = np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))
-    nh = p1[:, None] * t1 + p2[:, None] * t2 + p3[:, None] * vh
-    ne = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 1e-12)], axis=1)
-    return ne / np.linalg.norm(ne, axis=1, keepdims=True)
-
-
-def lobe_bins(wi, alpha: float, mu_edges, phi_edges, n: int = 384) -> np.ndarray:
+def lobe_bins(wi, alpha: float, mu_edges, phi_edges, nodes: int = BIN_NODES) -> np.ndarray:
     """Fractions of a unit-energy GGX lobe (roughness ``alpha > 0``, incident ``wi``) leaving
-    into each ``(mu, phi)`` bin, shape ``(n_mu, n_phi)``, summing to 1: visible normals on a
-    stratified ``n x n`` grid, mirrored, weighted by Smith's masking of ``wo``."""
-    from ..kernels.fgd import smith_masking
-    m = _sample_visible_normals(wi, alpha, n)
-    wo = 2.0 * (m @ wi)[:, None] * m - wi
-    w = smith_masking(wo, m, alpha)
-    keep = w > 0
-    wo, w = wo[keep], w[keep]
-    phi = np.mod(np.arctan2(wo[:, 1], wo[:, 0]), 2.0 * np.pi)
-    hist, _, _ = np.histogram2d(wo[:, 2], phi, bins=[mu_edges, phi_edges], weights=w)
-    total = w.sum()
-    return hist / total if total > 0 else hist
+    into each ``(mu, phi)`` bin, shape ``(n_mu, n_phi)``: the lobe
+    ``D G2 / (4 wi.z wo.z E(wi.z, alpha))`` integrated with ``nodes x nodes`` Gauss-Legendre
+    nodes per bin in (theta_o, phi_o). Over the whole hemisphere they sum to 1 up to the
+    quadrature error (below 1e-4 for alpha >= 0.05 on 18 x 36 bins)."""
+    from ..kernels.fgd import ggx_lobe
+    mu_edges, phi_edges = np.asarray(mu_edges, float), np.asarray(phi_edges, float)
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    t_edges = np.arccos(np.clip(mu_edges, 0.0, 1.0))          # decreasing in theta
+    t0, t1 = t_edges[1:], t_edges[:-1]
+    th = 0.5 * (t0 + t1)[:, None] + 0.5 * (t1 - t0)[:, None] * x          # (n_mu, nodes)
+    wt = 0.5 * (t1 - t0)[:, None] * w
+    p0, p1 = phi_edges[:-1], phi_edges[1:]
+    ph = 0.5 * (p0 + p1)[:, None] + 0.5 * (p1 - p0)[:, None] * x          # (n_phi, nodes)
+    wp_ = 0.5 * (p1 - p0)[:, None] * w
+    T = th[:, None, :, None]
+    P = ph[None, :, None, :]
+    wo = np.stack(np.broadcast_arrays(np.sin(T) * np.cos(P), np.sin(T) * np.sin(P),
+                                      np.cos(T)), axis=-1)
+    f = ggx_lobe(np.broadcast_to(wi, wo.shape).reshape(-1, 3), wo.reshape(-1, 3), alpha)
+    f = f.reshape(wo.shape[:-1]) * np.cos(T) * np.sin(T)
+    bins = np.einsum("ijab,ia,jb->ij", f, wt, wp_)
+    return bins / _ggx_albedo(round(float(wi[2]), 12), alpha)
 
 
 class StatisticalBSDF:

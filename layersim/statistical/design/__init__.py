@@ -51,7 +51,7 @@ def designs(targets, eta_max: float | None = None) -> list[Design]:
             first_error = first_error or exc
             continue
         d = to_scene(stacks, groups, parsed, choice)
-        key = d.toml()
+        key = repr(d.data)
         if key not in seen:
             seen.add(key)
             out.append(d)
