@@ -323,7 +323,8 @@ def _describe_layer(per_channel: tuple[Layer, ...]) -> str:
             extra += f", rotated {math.degrees(layer.rotation):g} deg"
         return f"{layer.kind} ior={ior}, {rough}{extra}"
     if isinstance(layer, Medium):
-        return (f"medium tau={layer.tau:g}, albedo={vals(lambda x: f'{x.albedo:g}')}, "
+        return (f"medium tau={vals(lambda x: f'{x.tau:g}')}, "
+                f"albedo={vals(lambda x: f'{x.albedo:g}')}, "
                 f"g={vals(lambda x: f'{x.g:g}')}")
     if isinstance(layer, Diffuse):
         return f"diffuse albedo={vals(lambda x: f'{x.albedo:g}')}"
