@@ -181,3 +181,21 @@ def test_one_rough_interface_matches_the_exact_solve():
 def test_stacks_outside_the_model_are_refused_naming_layer_and_field(layer, field):
     with pytest.raises(UnsupportedStack, match=f"layer 0.*'{field}'"):
         StatisticalBSDF({"layer": [layer]})
+
+
+def test_bench_reports_the_statistical_model_where_it_applies():
+    from layersim.bench.runner import Settings, _albedo_error, _error, _solver_bins
+    from layersim.bench.statistical import markdown, statistical_row
+    s = Settings(angles=(0.0, 30.0), n_mu=9, n_phi=18)
+    glass = layersim.Scene.from_dict({"layer": [{"kind": "dielectric", "ior": 1.5,
+                                                 "roughness": 0.3, "distribution": "ggx"}]})
+    ref_bins, ref_alb = _solver_bins(layersim.solve(glass), s)
+    row = statistical_row(glass, s, ref_bins, ref_alb, _solver_bins, _error, _albedo_error)
+    # one interface: the model's reflected energy is exact; its transmitted energy 1 - R
+    # ignores the shadowing loss of single-scattering GGX, and has no distribution
+    assert row["albedo_error"] < 0.05 and row["top_error"] < 0.1 and row["error"] > 0.5
+    beckmann = layersim.Scene.from_dict({"layer": [{"kind": "dielectric", "ior": 1.5,
+                                                    "roughness": 0.3}]})
+    row = statistical_row(beckmann, s, ref_bins, ref_alb, _solver_bins, _error, _albedo_error)
+    assert "distribution" in row["skipped"]
+    assert "not applicable" in markdown(row, str)[0]

@@ -15,6 +15,7 @@ import numpy as np
 import scipy
 
 from ..kernels.runtime import cuda_available
+from .statistical import markdown as statistical_markdown
 
 
 def machine_info(command: str) -> dict:
@@ -259,6 +260,8 @@ def _markdown(results: dict, images: dict, throughput) -> str:
                              f"{r['paths_per_second']:.3g} | {_fmt(r['error'])} | "
                              f"{_fmt(r['stderr'])} | {100 * r['within_3sigma']:.1f}% |")
             lines.append("")
+        if s.get("statistical"):
+            lines += statistical_markdown(s["statistical"], _fmt)
         for img in images.get(s["name"], []):
             lines += [f"![{img}]({img})", ""]
     if throughput:
