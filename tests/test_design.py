@@ -154,3 +154,22 @@ def test_cli_design_refuses_unreachable_targets_in_one_line(tmp_path, capsys):
     assert main(["design", str(bad), "--no-verify"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "lobe 1" in err[0] and "0.1716" in err[0]
+
+
+@pytest.mark.slow
+def test_smooth_two_layer_class_is_bounded_by_the_one_layer_configurations():
+    """Bati et al. 2021 Fig. 7a: for R02 = 0.15 in air the upper index eta1 of a smooth 2-layer
+    lobe spans [1, D], D = (1 + sqrt(0.15)) / (1 - sqrt(0.15)) the 1-layer root of eq. 7 (the
+    lower interface vanishes there); near eta1 = 1 the lower interface alone gives R02."""
+    root = (1 + math.sqrt(0.15)) / (1 - math.sqrt(0.15))
+    found = {d.choice: [layer["ior"] for layer in d.data["layer"]]
+             for d in designs([{"energy": 0.15, "roughness": 0.0, "layers": 2}])}
+    step = 3.0 / 47                                   # the N1 scan over [1, 4]
+    assert root - step <= found[1.0][0] <= root
+    assert found[0.0][0] == pytest.approx(1.0, abs=step)
+    # the lower interface from eq. 11 (R'12 from R02 and R01) and eq. 7
+    eta1 = found[0.0][0]
+    r01 = ((eta1 - 1) / (eta1 + 1)) ** 2
+    r12 = (0.15 - r01) / (1 + (0.15 - 2) * r01)
+    assert found[0.0][1] == pytest.approx(eta1 * (1 + math.sqrt(r12)) / (1 - math.sqrt(r12)),
+                                          rel=1e-4)
