@@ -112,6 +112,9 @@ def _plots(out: Path, s: dict, settings) -> list[str]:
             rows = [r for r in mc if r["backend"] == backend]
             ax.loglog([r["seconds"] for r in rows], [r["error"] for r in rows], "s--",
                       label=f"Monte Carlo ({backend})")
+        stat = s.get("statistical", {})
+        if "error" in stat:
+            ax.loglog([stat["seconds"]], [stat["error"]], "D", label="statistical model")
         ax.set_xlabel("wall time (s)")
         ax.set_ylabel("relative L2 error of bin energies")
         ax.set_title(s["name"])

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import fgd
 from ..atomic import Absorber, Interface
 from ..forward import add_stack
 from ..targets import TargetError
@@ -59,7 +60,6 @@ def one_layer(stacks, eta_n: float, r_prime, s_r, s_t0n, target, lobe: int, eta_
     if eta is None:
         raise TargetError(f"no dielectric index in [1, {eta_max:g}] gives energy {need:.4g}",
                           lobe, "energy")
-    from .. import fgd
     r12 = float(fgd.dielectric(1.0, alpha_eff, eta / eta_n))
     tau = optical_depth(r12, np.asarray(r_prime))
     tau = np.where(tau > 1e-12, tau, 0.0)
@@ -108,7 +108,6 @@ def _upper_roughness(stats, s_r, s_t0n, sigma, eta_rel, r_prime) -> float:
     target variance: eq. 19 read with that interface's own energy (a fixed point, since the
     energy depends on the roughness through the FGD) rather than the whole lobe's, which
     Algorithm 5 uses as its first estimate."""
-    from .. import fgd
     st = stats[int(np.argmax(r_prime))]
     for _ in range(6):
         r = float(fgd.dielectric(1.0, effective_roughness(s_r, s_t0n), eta_rel))
