@@ -262,6 +262,10 @@ def cmd_design(args) -> int:
     from .statistical.targets import parse_targets
     from .statistical.verify import verify
     targets = parse_targets(args.targets)
+    if args.plot and args.no_verify:
+        raise ValueError("--plot draws the exact solve's lobes: drop --no-verify")
+    if args.candidates < 1:
+        raise ValueError(f"--candidates must be >= 1, got {args.candidates}")
     out = _output(args.output, "output file") if args.output else None
     image = _image(args.plot) if args.plot else None
     found = designs(args.targets)

@@ -88,6 +88,9 @@ def test_conductor_equivalence_class_follows_eq_8_to_10(r):
     eta_hi = (1 + r + math.sqrt(6 * r - 1 - r * r)) / (2 * (1 - r))
     k_hi = math.sqrt((r * (eta_hi + 1) ** 2 - (eta_hi - 1) ** 2) / (1 - r))     # eq. 8
     assert k_hi == pytest.approx(eta_hi, rel=1e-9)
+    # under a clear coat (eta0 = 1.5) the class scales with eta0 (Fig. 4c)
+    coated = conductor_index(r, 0.0, 1.5, "centre", 1)
+    assert coated == pytest.approx(1.5 * conductor_index(r, 0.0, 1.0, "centre", 1), rel=1e-9)
 
 
 @pytest.mark.parametrize("lobes,match", [
