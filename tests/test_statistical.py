@@ -199,3 +199,20 @@ def test_bench_reports_the_statistical_model_where_it_applies():
     row = statistical_row(beckmann, s, ref_bins, ref_alb, _solver_bins, _error, _albedo_error)
     assert "distribution" in row["skipped"]
     assert "not applicable" in markdown(row, str)[0]
+
+
+def test_per_channel_tau_is_coloured_beer_lambert_absorption_in_the_solver():
+    """A medium's ``tau`` per channel (what designs use for colour): a channel with tau = 0
+    solves exactly as the stack without the medium, and the plan keeps the medium."""
+    coat = {"kind": "dielectric", "ior": 1.5, "roughness": 0.3, "distribution": "ggx"}
+    base = {"kind": "conductor", "ior": [0.2, 3.0], "roughness": 0.3, "distribution": "ggx"}
+    medium = {"kind": "medium", "albedo": 0.0, "tau": [0.0, 0.2, 0.5]}
+    disc = {"n": 64, "md": 64}
+    tinted = layersim.Scene.from_dict({"layer": [coat, medium, base], "discretization": disc})
+    assert [tinted.channel(c).layers[1].tau for c in range(3)] == [0.0, 0.2, 0.5]
+    assert "tau=0/0.2/0.5" in layersim.make_plan(tinted).report()
+    normal = np.array([0.0, 0.0, 1.0])
+    R = layersim.solve(tinted).albedo(normal)[0]
+    clear = layersim.solve({"layer": [coat, base], "discretization": disc}).albedo(normal)[0]
+    assert R[0] == pytest.approx(float(clear), abs=1e-9)
+    assert R[0] > R[1] > R[2]
