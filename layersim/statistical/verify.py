@@ -155,3 +155,35 @@ def _memo(solve):
             cache[key] = solve(scene)
         return cache[key]
     return run
+
+
+class MonteCarloReference:
+    """The Monte Carlo reference (:func:`layersim.montecarlo.simulate`) of a scene behind the
+    two methods :func:`verify` reads (``bin_energies``, ``albedo``), for stacks the Fourier
+    solver refuses (near-specular interfaces inside a stack need more memory than it may
+    plan). Each call simulates ``paths`` particles; ``seconds`` adds up the walks' time."""
+
+    def __init__(self, scene, paths: int, backend: str = "warp-cpu", seed: int = 0):
+        self.scene, self.paths, self.backend, self.seed = scene, int(paths), backend, seed
+        self.seconds = 0.0
+
+    def _run(self, wi, mu_edges, phi_edges):
+        from ..montecarlo import simulate
+        t0 = time.perf_counter()
+        self.seed += 1
+        res = simulate(self.scene, wi, self.paths, mu_edges=mu_edges, phi_edges=phi_edges,
+                       backend=self.backend, seed=self.seed)
+        self.seconds += time.perf_counter() - t0
+        return res
+
+    def bin_energies(self, wi, mu_edges, phi_edges) -> dict:
+        return dict(self._run(wi, mu_edges, phi_edges).bins)
+
+    def albedo(self, wi):
+        res = self._run(wi, (0.0, 1.0), (0.0, 2.0 * np.pi))
+        return res.reflectance, res.transmittance
+
+
+def montecarlo_solve(paths: int, backend: str = "warp-cpu", seed: int = 0):
+    """A ``solve`` for :func:`verify` that returns :class:`MonteCarloReference` objects."""
+    return lambda scene: MonteCarloReference(scene, paths, backend, seed)
