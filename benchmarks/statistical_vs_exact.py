@@ -9,7 +9,8 @@ the model, the exact solve and a Monte Carlo run (its standard error), and the r
 design, the model (lobes and bins at one angle) and the exact solve. Stacks the solver refuses
 (near-specular interfaces inside a stack need more memory than it may plan) are listed with the
 reason and checked against the Monte Carlo reference instead (1e6 paths per direction, the
-same lobe and bin comparisons).
+same lobe and bin comparisons; its time is that of the whole verification: the walks of the
+cut stacks and of the three angles, and the width fits).
 
 Usage: python benchmarks/statistical_vs_exact.py [paths] [max_seconds]   (default 1e5, 300)
 """

@@ -176,3 +176,17 @@ def test_smooth_two_layer_class_is_bounded_by_the_one_layer_configurations():
     r12 = (0.15 - r01) / (1 + (0.15 - 2) * r01)
     assert found[0.0][1] == pytest.approx(eta1 * (1 + math.sqrt(r12)) / (1 - math.sqrt(r12)),
                                           rel=1e-4)
+
+
+def test_a_design_the_solver_refuses_is_verified_against_monte_carlo():
+    """Fig. 10c of Bati et al. 2021 (R = 0.15, sigma = 0.02, two layers): its lower interface
+    (alpha 0.01) needs ~16 GiB in the solver; Monte Carlo checks the design instead."""
+    from layersim.statistical.verify import montecarlo_solve, verify
+    d = designs([{"energy": 0.15, "variance": 0.02, "layers": 2}])[0]
+    with layersim.config.configure(max_memory=4 * 2 ** 30), pytest.raises(
+            layersim.LayersimError, match="GiB"):
+        layersim.solve(d.scene)
+    res = verify(d, angles=(0.0,), solve=montecarlo_solve(200_000))
+    (energy, alpha), = res["exact_lobes"]
+    assert float(energy[0]) == pytest.approx(0.15, abs=3e-3)      # se ~ 8e-4
+    assert 0.02 < float(alpha[0]) < 0.03

@@ -19,18 +19,20 @@ def stack_lines(design) -> list[str]:
     return [design.scene.describe()]
 
 
-def verification_lines(targets, result) -> list[str]:
-    """The table of one verification (``verify(...)``'s result) against ``targets``."""
-    lines = ["lobe  target energy / alpha       statistical energy / alpha        exact energy / alpha (fit)"]
+def verification_lines(targets, result, reference: str = "exact") -> list[str]:
+    """The table of one verification (``verify(...)``'s result) against ``targets``;
+    ``reference`` names what stands for exact transport (the solve, or Monte Carlo)."""
+    lines = ["lobe  target energy / alpha       statistical energy / alpha        "
+             f"{reference} energy / alpha (fit)"]
     for k, (t, (me, ma), (ee, ea)) in enumerate(zip(targets.lobes, result["lobes"],
                                                    result["exact_lobes"]), start=1):
         lines.append(f"{k:>4}  {_rgb(t.energy)} / {t.roughness:.4f}   "
                      f"{_rgb(me)} / {_rgb(ma, '{:.3f}')}   {_rgb(ee)} / {_rgb(ea, '{:.3f}')}")
-    lines.append("statistical BSDF vs exact solve, relative L2 over 18 x 36 bins (top side):")
+    lines.append(f"statistical BSDF vs {reference}, relative L2 over 18 x 36 bins (top side):")
     for theta, e in result["errors"].items():
         lines.append(f"  theta_i = {theta:4.0f} deg: L2 {e['l2']:.3f}   R model "
-                     f"{_rgb(e['R_model'])}   R exact {_rgb(e['R_exact'])}")
-    lines.append(f"times: statistical model {result['model_seconds']:.3f} s, exact solve "
+                     f"{_rgb(e['R_model'])}   R {reference} {_rgb(e['R_exact'])}")
+    lines.append(f"times: statistical model {result['model_seconds']:.3f} s, {reference} "
                  f"{result['exact_seconds']:.2f} s")
     return lines
 
