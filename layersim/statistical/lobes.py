@@ -7,8 +7,8 @@ Each lobe is a GGX reflection lobe without Fresnel, normalised to carry exactly 
 directional albedo (:func:`layersim.kernels.fgd.ggx_albedo`). A smooth lobe (roughness 0) is a
 mirror delta, left out of :meth:`StatisticalBSDF.eval` and given by ``specular`` (as in
 :class:`layersim.BSDF`). Only reflection is modelled (Bati et al. 2021, sec. 3): ``albedo``
-reports the model's transmitted energy, ``bin_energies`` has no bottom-side distribution
-(zeros, with the transmitted energy in ``info``).
+reports the model's transmitted energy, but ``bin_energies`` has no bottom-side distribution
+(zeros).
 """
 
 from __future__ import annotations
