@@ -7,6 +7,7 @@ Public entry points (see docs/conventions.md)::
     bsdf.eval(wi, wo); bsdf.albedo(wi); bsdf.bin_energies(wi, mu_edges, phi_edges)
     layersim.export(bsdf, path)                   # .bsdf file for renderers
     stack = layersim.add(top, bottom); layer = layersim.subtract(stack, known, side="top")
+    layersim.statistical.lobes(scene, theta_i); layersim.design(targets)   # Bati et al. 2021
 """
 from .errors import LayersimError, SceneError, InfeasibleError, OperatorError, FileFormatError
 from .scene import Scene, Dielectric, Conductor, Medium, Diffuse, Measured, Discretization
@@ -20,3 +21,18 @@ from .solver import solve, add
 from .subtract import subtract
 
 __version__ = "0.1.0"
+
+
+def design(targets, eta_max=None):
+    """Inverse design of layered appearance (Bati et al. 2021): target lobes -> candidate
+    scenes, preferred first; see :func:`layersim.statistical.design.design`."""
+    from .statistical.design import design as _design
+    return _design(targets, eta_max)
+
+
+def __getattr__(name):
+    # the statistical model loads its FGD table on first use, not at `import layersim`
+    if name == "statistical":
+        import importlib
+        return importlib.import_module(".statistical", __name__)
+    raise AttributeError(f"module 'layersim' has no attribute {name!r}")

@@ -273,6 +273,47 @@ def cmd_bench(args) -> int:
     return 0
 
 
+#: Paths per incident direction when `layersim design` verifies against Monte Carlo.
+MC_VERIFY_PATHS = 1_000_000
+
+
+def cmd_design(args) -> int:
+    from .statistical import report
+    from .statistical.design import designs
+    from .statistical.targets import parse_targets
+    from .statistical.verify import montecarlo_solve, verify
+    targets = parse_targets(args.targets)
+    if args.plot and args.no_verify:
+        raise ValueError("--plot draws the exact solve's lobes: drop --no-verify")
+    if args.candidates < 1:
+        raise ValueError(f"--candidates must be >= 1, got {args.candidates}")
+    out = _output(args.output, "output file") if args.output else None
+    image = _image(args.plot) if args.plot else None
+    found = designs(args.targets)
+    for i, d in enumerate(found[:args.candidates]):
+        print(f"candidate {i + 1} of {len(found)} (class position {d.choice}):")
+        print("\n".join(report.stack_lines(d)))
+    best = found[0]
+    if not args.no_verify:
+        reference = "exact"
+        try:
+            result = verify(best)
+        except LayersimError as exc:
+            print(f"exact solve refused ({exc}); verifying against Monte Carlo "
+                  f"({MC_VERIFY_PATHS:.0e} paths per direction)")
+            result = verify(best, solve=montecarlo_solve(MC_VERIFY_PATHS, backend="auto"))
+            reference = "Monte Carlo"
+        print("verification of candidate 1 at normal incidence:")
+        print("\n".join(report.verification_lines(targets, result, reference)))
+        if image:
+            report.plot_lobes(targets, best, result, image)
+            print(f"wrote {image}")
+    if out:
+        out.write_text(best.toml())
+        print(f"wrote {out} (layersim solve {out})")
+    return 0
+
+
 # ---- export / eval / plot ---------------------------------------------------------------
 
 def _load(path, args=None):
@@ -501,6 +542,10 @@ command exits with status 2, as 'layersim solve' would refuse it.""",
     "info": """examples:
   layersim info coated_gold.lsim
   layersim info coated_gold.bsdf""",
+    "design": """examples:
+  layersim design targets.toml -o stack.toml       # prints stacks and verification
+  layersim design targets.toml --no-verify         # statistical model only
+  layersim design targets.toml --plot lobes.png""",
     "bench": """examples:
   layersim bench --out bench-quick --quick
   layersim bench --out bench --stability --backend warp-cuda --backend opencl
@@ -592,6 +637,17 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--scene", action="append", help="run only this scene (file stem); "
                     "repeatable")
     sp.set_defaults(func=cmd_bench)
+
+    sp = _subparser(sub, "design", "inverse design (Bati et al. 2021): stacks whose "
+                                   "lobes at normal incidence match target lobes")
+    sp.add_argument("targets", help="targets file (TOML: [[lobe]] energy, roughness, layers, "
+                                    "base)")
+    sp.add_argument("-o", "--output", help="write the preferred stack as a scene file (TOML)")
+    sp.add_argument("--plot", help="image of the target lobes against the exact solve's")
+    sp.add_argument("--candidates", type=int, default=3, help="how many candidate stacks to "
+                                                             "print (default 3)")
+    sp.add_argument("--no-verify", action="store_true", help="skip the exact solve")
+    sp.set_defaults(func=cmd_design)
 
     src_help = "scene (.toml, solved on the fly), saved BSDF (.lsim) or .bsdf file"
     sp = _subparser(sub, "export", "write a tabulated Fourier BSDF file (.bsdf) for "

@@ -27,9 +27,10 @@ variable                   field               meaning (default)
 ``LAYERSIM_ORDER_THREADS`` ``order_threads``   threads for independent Fourier orders of
                                                the isotropic adding (1)
 ``LAYERSIM_WARP_VERBOSE``  ``warp_verbose``    Warp's banner and build messages (off)
-``LAYERSIM_CACHE_DIR``     ``cache_dir``       directory of computed tables kept between
-                                               runs (energy-compensation albedos;
-                                               ``~/.cache/layersim``; ``off``: none)
+``LAYERSIM_CACHE_DIR``     ``cache_dir``       directory of tables computed once and kept
+                                               between runs (energy-compensation albedos,
+                                               FGD tables; ``~/.cache/layersim``; ``off``:
+                                               none)
 =========================  ==================  ===========================================
 """
 
@@ -80,7 +81,8 @@ class Settings:
         Whether Warp prints its banner and kernel build messages.
     cache_dir : str or None
         Directory of tables computed once and reused by later runs (the albedo tables of
-        :mod:`layersim.compensation`); None keeps them in memory only.
+        :mod:`layersim.compensation`, the FGD tables of :mod:`layersim.statistical.fgd`); None
+        keeps them in memory only.
     """
 
     device: str = "cpu"

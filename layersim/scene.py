@@ -7,8 +7,9 @@ physics parameters.
 Per-channel (RGB) values: any physical value may be given as a list of three (R, G, B) values
 (a conductor's ``ior`` as three ``[eta, k]`` pairs; a medium's ``albedo`` and ``g``). Such a
 scene has ``channels == 3``; :meth:`Scene.channel` returns the monochromatic scene of one
-channel. Roughness, rotation and ``tau`` are shared by all channels; the plan takes the most
-demanding channel of a per-channel ``g`` (:mod:`layersim.plan.layers`).
+channel. Roughness and rotation are shared by all channels; a per-channel ``tau`` (coloured
+Beer-Lambert absorption) is planned for its largest value; the plan takes the most demanding
+channel of a per-channel ``g`` (:mod:`layersim.plan.layers`).
 
 Units: angles in degrees in files, radians in the dataclasses; indices of refraction are absolute
 (the medium above the stack has ``top_ior``, 1 by default); ``tau`` is optical thickness along the
@@ -370,7 +371,8 @@ def _describe_layer(per_channel: tuple[Layer, ...]) -> str:
             extra += f", energy compensation {layer.energy_compensation}"
         return f"{layer.kind} ior={ior}, {rough}{extra}"
     if isinstance(layer, Medium):
-        return (f"medium tau={layer.tau:g}, albedo={vals(lambda x: f'{x.albedo:g}')}, "
+        return (f"medium tau={vals(lambda x: f'{x.tau:g}')}, "
+                f"albedo={vals(lambda x: f'{x.albedo:g}')}, "
                 f"g={vals(lambda x: f'{x.g:g}')}")
     if isinstance(layer, Diffuse):
         return f"diffuse albedo={vals(lambda x: f'{x.albedo:g}')}"
@@ -540,11 +542,11 @@ def _parse_layer(ctx: _Ctx, raw: Any, compensation: str = "none") -> list[Layer]
                                lambda c, f, v: _real(c, f, v, lo=0.0, hi=1.0))
         gs = _per_channel(ctx, "g", raw.get("g", 0.0), lambda c, f, v: _real(
             c, f, v, lo=-1.0, hi=1.0, lo_open=True, hi_open=True))
-        tau = _real(ctx, "tau", raw["tau"], lo=0.0)
-        # a shared value pairs with every channel of the other
-        channels = max(len(albedos), len(gs))
-        return [Medium(albedo=albedos[c % len(albedos)], g=gs[c % len(gs)], tau=tau)
-                for c in range(channels)]
+        taus = _per_channel(ctx, "tau", raw["tau"], lambda c, f, v: _real(c, f, v, lo=0.0))
+        # a shared value pairs with every channel of the others
+        channels = max(len(albedos), len(gs), len(taus))
+        return [Medium(albedo=albedos[c % len(albedos)], g=gs[c % len(gs)],
+                       tau=taus[c % len(taus)]) for c in range(channels)]
 
     if kind == "measured":
         value = raw["file"]

@@ -15,6 +15,7 @@ import numpy as np
 import scipy
 
 from ..kernels.runtime import cuda_available
+from .statistical import markdown as statistical_markdown
 
 
 def machine_info(command: str) -> dict:
@@ -118,6 +119,9 @@ def _plots(out: Path, s: dict, settings) -> list[str]:
             rows = [r for r in mc if r["backend"] == backend]
             ax.loglog([r["seconds"] for r in rows], [r["error"] for r in rows], "s--",
                       label=f"Monte Carlo ({backend})")
+        stat = s.get("statistical", {})
+        if "error" in stat:
+            ax.loglog([stat["seconds"]], [stat["error"]], "D", label="statistical model")
         ax.set_xlabel("wall time (s)")
         ax.set_ylabel("relative L2 error of bin energies")
         ax.set_title(s["name"])
@@ -276,6 +280,8 @@ def _markdown(results: dict, images: dict, throughput) -> str:
                              f"{r['paths_per_second']:.3g} | {_fmt(r['error'])} | "
                              f"{_fmt(r['stderr'])} | {100 * r['within_3sigma']:.1f}% |")
             lines.append("")
+        if s.get("statistical"):
+            lines += statistical_markdown(s["statistical"], _fmt)
         for img in images.get(s["name"], []):
             lines += [f"![{img}]({img})", ""]
     if throughput:

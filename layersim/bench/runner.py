@@ -30,6 +30,7 @@ from ..errors import LayersimError
 from ..plan import make_plan
 from ..scene import Scene
 from ..solver import solve
+from .statistical import statistical_row
 
 
 @dataclass
@@ -233,4 +234,10 @@ def run_scene(path: Path, s: Settings, log=print) -> dict:
                 out["_mc_bins"] = b
                 log(f"  MC {used} {particles:.0e}: {sec:7.2f} s  error {row['error']:.2e} "
                     f"(stderr {row['stderr']:.1e}, {100 * row['within_3sigma']:.0f}% in 3 sigma)")
+    # ---- statistical model (third method, where it represents the scene) --------------
+    out["statistical"] = statistical_row(scene, s, ref_bins, ref_alb, _solver_bins, _error,
+                                         _albedo_error)
+    if "error" in out["statistical"]:
+        log(f"  statistical model: {out['statistical']['seconds']:.3f} s  error "
+            f"{out['statistical']['error']:.2e}")
     return out

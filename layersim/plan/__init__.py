@@ -113,7 +113,8 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
     seconds = work = None
     if not anisotropic:
         solved = [lp for lp in layers if lp.action != "left out"]
-        media = [(lp.orders, mono.layers[lp.index].tau) for lp in solved
+        media = [(lp.orders, max(scene.channel(c).layers[lp.index].tau
+                                 for c in range(scene.channels))) for lp in solved
                  if lp.action == "adding-doubling"]
         work = work_units(lengths, media, grid, md, len(solved) - 1, scene.channels)
         seconds = estimate_seconds(work)

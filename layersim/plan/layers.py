@@ -134,7 +134,7 @@ def _interface(scene: Scene, i: int, layer, survey: Survey) -> None:
 
 def _medium(scene: Scene, i: int, layer, survey: Survey) -> None:
     kind = layer.kind
-    if layer.tau == 0.0:
+    if all(s.layers[i].tau == 0.0 for s in _channels(scene)):
         survey.left_out.append(f"layer {i} (medium): tau = 0 is an exact no-op")
         survey.layers.append(LayerPlan(i, kind, "left out", "tau = 0"))
         return
@@ -143,7 +143,8 @@ def _medium(scene: Scene, i: int, layer, survey: Survey) -> None:
     channels = [s.layers[i] for s in _channels(scene)]
     gs = [x.g for x in channels]
     g_text = "/".join(f"{g:g}" for g in dict.fromkeys(gs))
-    lp = LayerPlan(i, kind, "adding-doubling", f"tau={layer.tau:g}, g={g_text}")
+    tau_text = "/".join(f"{t:g}" for t in dict.fromkeys(x.tau for x in channels))
+    lp = LayerPlan(i, kind, "adding-doubling", f"tau={tau_text}, g={g_text}")
     survey.layers.append(lp)
     if max(x.albedo for x in channels) == 0:
         lp.detail += ": no scattering, unscattered beam in all orders"
