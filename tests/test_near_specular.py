@@ -87,6 +87,7 @@ def _agrees_with_monte_carlo(scene, bsdf, wi, seed: int, slack: float,
     return R
 
 
+@pytest.mark.slow
 def test_near_specular_coat_agrees_with_monte_carlo_and_survives_save(tmp_path):
     """alpha 0.005 over rough gold at 40 degrees: albedo within 4 standard errors of 1e6
     paths plus the split's measured error at this roughness (benchmarks/near_specular.txt:
