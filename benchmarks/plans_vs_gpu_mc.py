@@ -1,0 +1,72 @@
+"""How close the planner's default discretisation (and a solve to tol = 1e-3) comes to the
+Monte Carlo reference at 1e9 paths: per scene of ``benchmarks/scenes/`` and incidence 0, 30 and
+60 degrees, the fraction of populated 18 x 36 bins (both sides) within 3 standard errors (Poisson
+floor E / N added), the relative L2 difference of bin energies and the albedo difference in
+standard errors; with the solve's error estimate (``layersim.accuracy``) beside it.
+
+Usage (on a GPU machine): python benchmarks/plans_vs_gpu_mc.py [paths] [backend] [SCENE ...]
+(default 1e9, warp-cuda, every scene). Output of a run on an NVIDIA H100:
+benchmarks/plans_vs_gpu_mc.txt.
+"""
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import layersim
+import layersim.montecarlo as mc
+from layersim.errors import LayersimError
+
+SCENES = Path(__file__).parent / "scenes"
+MU_EDGES = np.linspace(0.0, 1.0, 19)
+PHI_EDGES = np.linspace(0.0, 2.0 * np.pi, 37)
+ANGLES = (0.0, 30.0, 60.0)
+
+
+def compare(bsdf, scene, paths: int, backend: str, seed: int) -> str:
+    rows = []
+    for k, theta in enumerate(ANGLES):
+        t = np.radians(theta)
+        wi = np.array([np.sin(t), 0.0, np.cos(t)])
+        mono = scene.channel(0) if scene.channels > 1 else scene
+        res = mc.simulate(mono, wi, paths, mu_edges=MU_EDGES, phi_edges=PHI_EDGES,
+                          backend=backend, seed=seed + k)
+        e = bsdf.bin_energies(wi, MU_EDGES, PHI_EDGES)
+        ours = np.stack([np.asarray(e[s]).reshape(18, 36, -1)[..., 0] for s in ("top", "bottom")])
+        est = np.stack([np.asarray(res.bins[s]).reshape(18, 36, -1)[..., 0] for s in ("top", "bottom")])
+        sig = np.stack([np.asarray(res.bins_stderr[s]).reshape(18, 36, -1)[..., 0]
+                        for s in ("top", "bottom")])
+        sig = np.sqrt(sig ** 2 + np.maximum(est, 0.0) / paths)
+        populated = (est > 0) | (ours > 1e-12)
+        inside = float(np.mean((np.abs(ours - est) <= 3 * sig + 1e-15)[populated]))
+        l2 = float(np.sqrt(np.sum((ours - est) ** 2) / np.sum(est ** 2)))
+        R = float(np.atleast_1d(bsdf.albedo(wi)[0])[0])
+        r, sr = float(np.atleast_1d(res.reflectance)[0]), float(np.atleast_1d(res.reflectance_stderr)[0])
+        rows.append(f"{theta:3.0f} deg: {100 * inside:5.1f} % in 3 sigma, L2 {l2:.1e}, "
+                    f"dR {(R - r) / max(sr, 1e-12):+5.1f} se")
+    return " | ".join(rows)
+
+
+def main() -> None:
+    paths = int(float(sys.argv[1])) if len(sys.argv) > 1 else 1_000_000_000
+    backend = sys.argv[2] if len(sys.argv) > 2 else "warp-cuda"
+    names = sys.argv[3:] or sorted(p.stem for p in SCENES.glob("*.toml"))
+    print(f"# {paths:.0e} paths per direction, backend {backend}; bins 18 x 36 per side")
+    for name in names:
+        scene = layersim.Scene.from_toml(SCENES / f"{name}.toml")
+        for label, kw in (("default", {"error_estimate": True}), ("tol 1e-3", {"tol": 1e-3})):
+            t0 = time.perf_counter()
+            try:
+                bsdf = layersim.solve(scene, **kw)
+            except LayersimError as exc:
+                print(f"{name:22s} {label:8s} refused: {str(exc)[:160]}", flush=True)
+                continue
+            sec = time.perf_counter() - t0
+            print(f"{name:22s} {label:8s} n={bsdf.info['n']:4d} md={bsdf.info['md']:5d} "
+                  f"estimate {bsdf.error_estimate:.1e} ({sec:.1f} s): "
+                  + compare(bsdf, scene, paths, backend, 100), flush=True)
+
+
+if __name__ == "__main__":
+    main()
