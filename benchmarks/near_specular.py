@@ -86,10 +86,7 @@ def compare(label: str, sc: layersim.Scene, paths: int, backend: str, seed: int,
         res = mc.simulate(sc, wi, paths, mu_edges=MU_EDGES, phi_edges=PHI_EDGES,
                           backend=backend, seed=seed)
         seed += 1
-        est, sig = res.bins["top"], res.bins_stderr["top"]
-        populated = (est > 0) | (bins > 1e-12)
-        sig = np.sqrt(sig ** 2 + np.maximum(bins, 0.0) / paths)
-        z = (np.abs(bins - est) / np.maximum(sig, 1e-15))[populated]
+        z = res.z_scores("top", bins)        # with the Poisson floor of nearly empty bins
         dR = R - res.reflectance
         zR = dR / max(res.reflectance_stderr, 1e-15)
         in3 = float(np.mean(z <= 3.0))

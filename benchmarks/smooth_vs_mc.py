@@ -56,13 +56,8 @@ def compare(name: str, d: dict, theta: float, paths: int, backend: str, seed: in
                       backend=backend, seed=seed)
     R, T = (float(x) for x in bsdf.albedo(wi))
     bins = bsdf.bin_energies(wi, MU_EDGES, PHI_EDGES)
-    z = []
-    for side in ("top", "bottom"):
-        ours, est, sig = bins[side], res.bins[side], res.bins_stderr[side]
-        populated = (est > 0) | (ours > 1e-12)
-        sig = np.sqrt(sig ** 2 + np.maximum(ours, 0.0) / paths)
-        z.append((np.abs(ours - est) / np.maximum(sig, 1e-15))[populated])
-    z = np.concatenate(z)
+    # with the Poisson floor of nearly empty bins (MCResult.z_scores)
+    z = np.concatenate([res.z_scores(side, bins[side]) for side in ("top", "bottom")])
     out = {"R": R, "T": T, "mcR": res.reflectance, "mcT": res.transmittance,
            "zR": (R - res.reflectance) / max(res.reflectance_stderr, 1e-15),
            "zT": (T - res.transmittance) / max(res.transmittance_stderr, 1e-15),

@@ -68,6 +68,21 @@ class MCResult:
     mu_edges: np.ndarray
     phi_edges: np.ndarray
 
+    def z_scores(self, side: str, values) -> np.ndarray:
+        """Distances, in standard errors, of ``values`` (bin energies of the same bins from
+        another method, e.g. a solver's :meth:`layersim.bsdf.BSDF.bin_energies`; shape of
+        ``bins[side]``) from these bins, over the populated bins (either nonzero), flattened.
+
+        An empty or nearly empty bin has a tiny sample standard error; its real spread is
+        Poisson, variance >= E / N for a bin that receives energy E per path, so ``max(values,
+        0) / particles`` is added to the variance."""
+        values = np.asarray(values, float)
+        est = np.asarray(self.bins[side], float)
+        sig = np.sqrt(np.asarray(self.bins_stderr[side], float) ** 2
+                      + np.maximum(values, 0.0) / np.asarray(self.particles, float))
+        populated = (est > 0) | (values > 1e-12)
+        return (np.abs(values - est) / np.maximum(sig, 1e-15))[populated]
+
     def summary(self) -> str:
         """A few lines for reports and the command line."""
         def fmt(x, e):

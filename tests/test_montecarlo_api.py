@@ -39,6 +39,33 @@ def same(a, b):
                     for s in ("top", "bottom")))
 
 
+def test_z_scores_measure_bin_differences_in_standard_errors_with_a_poisson_floor():
+    """The walk's own bins are 0 standard errors from themselves; a shift by 3 standard errors
+    of its busiest bin reads 3 se / sqrt(se^2 + E / N); a value E in a bin the walk left empty
+    (zero standard error) is judged against the Poisson spread sqrt(E / N): sqrt(E N); bins
+    empty in both are left out."""
+    import dataclasses
+    res = run(SLAB)
+    est, se = res.bins["top"], res.bins_stderr["top"]
+    assert np.all(res.z_scores("top", est) == 0.0) and res.z_scores("top", est).size == est.size
+    busy = np.unravel_index(np.argmax(est), est.shape)
+    shifted = est.copy()
+    shifted[busy] += 3.0 * se[busy]
+    z = res.z_scores("top", shifted)
+    assert z.max() == pytest.approx(3.0 * se[busy] / np.sqrt(se[busy] ** 2
+                                                             + shifted[busy] / res.particles))
+    hole = (0, 0)
+    est0, se0 = est.copy(), se.copy()
+    est0[hole] = se0[hole] = 0.0
+    holed = dataclasses.replace(res, bins={**res.bins, "top": est0},
+                                bins_stderr={**res.bins_stderr, "top": se0})
+    values = est0.copy()
+    values[hole] = 1e-3
+    z = holed.z_scores("top", values)
+    assert z.size == np.count_nonzero(est0) + 1
+    assert z.max() == pytest.approx(np.sqrt(1e-3 * res.particles))
+
+
 # ------------------------------------------------------------------------------------------------
 # Determinism and batching
 # ------------------------------------------------------------------------------------------------

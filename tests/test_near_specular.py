@@ -79,10 +79,7 @@ def _agrees_with_monte_carlo(scene, bsdf, wi, seed: int, slack: float,
     assert abs(R - res.reflectance) <= 4 * res.reflectance_stderr + slack
     bins = bsdf.bin_energies(wi, mu_edges, phi_edges)["top"]
     assert abs(bins.sum() - R) < 2e-3
-    est = res.bins["top"]
-    sig = np.sqrt(res.bins_stderr["top"] ** 2 + np.maximum(bins, 0) / paths)
-    populated = (est > 0) | (bins > 1e-12)
-    z = (np.abs(bins - est) / np.maximum(sig, 1e-15))[populated]
+    z = res.z_scores("top", bins)
     assert z.size > 50 and np.mean(z <= 3.0) >= 0.97, np.sort(z)[-5:]
     return R
 

@@ -143,13 +143,7 @@ def test_smooth_stacks_agree_with_monte_carlo(name):
         assert abs(R - res.reflectance) <= 4 * res.reflectance_stderr + 1e-12
         assert abs(T - res.transmittance) <= 4 * res.transmittance_stderr + 1e-12
         bins = bsdf.bin_energies(wi, MU_EDGES, PHI_EDGES)
-        z = []
-        for side in ("top", "bottom"):
-            ours, est, sig = bins[side], res.bins[side], res.bins_stderr[side]
-            populated = (est > 0) | (ours > 1e-12)
-            sig = np.sqrt(sig**2 + np.maximum(ours, 0.0) / paths)     # Poisson floor
-            z.append((np.abs(ours - est) / np.maximum(sig, 1e-15))[populated])
-        z = np.concatenate(z)
+        z = np.concatenate([res.z_scores(side, bins[side]) for side in ("top", "bottom")])
         assert z.size > 50
         assert np.mean(z <= 3.0) >= 0.99, (theta, np.sort(z)[-5:])
 

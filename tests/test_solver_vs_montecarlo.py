@@ -27,16 +27,8 @@ def compare(scene, wi, particles, seed=11, min_fraction=0.99):
                         else (res.transmittance_stderr, res.reflectance_stderr))
     assert abs(top - mc_top) <= 4 * err_top + 1e-12
     assert abs(bottom - mc_bot) <= 4 * err_bot + 1e-12
-    z_all = []
-    for side in ("top", "bottom"):
-        ours, est, sig = bins[side], res.bins[side], res.bins_stderr[side]
-        populated = (est > 0) | (ours > 1e-12)
-        # an empty or nearly empty Monte Carlo bin has a tiny sample standard error; its real
-        # spread is Poisson: variance >= E / N for a bin that receives energy E per path
-        sig = np.sqrt(sig ** 2 + np.maximum(ours, 0.0) / particles)
-        z = np.abs(ours - est)[populated] / np.maximum(sig[populated], 1e-15)
-        z_all.append(z)
-    z = np.concatenate(z_all)
+    # with the Poisson floor of nearly empty bins (MCResult.z_scores)
+    z = np.concatenate([res.z_scores(side, bins[side]) for side in ("top", "bottom")])
     assert z.size > 20
     assert np.mean(z <= 4.0) >= min_fraction, (np.sort(z)[-5:], z.size)
     return z
