@@ -80,17 +80,20 @@ def relative_errors(table: np.ndarray, reference: np.ndarray) -> np.ndarray:
     return np.sqrt(num / np.where(den > 0, den, 1.0))
 
 
-def scaled(scene: Scene, plan, scale: float) -> Scene:
-    """``scene`` with ``n`` and ``md`` set to ``scale`` times the plan's (``n`` even, at least
-    8; ``md`` at least 1)."""
-    n = max(8, 2 * int(round(plan.n * scale / 2.0)))
-    md = max(1, int(round(plan.md * scale)))
+def scaled(scene: Scene, n: int, md: int, scale: float) -> Scene:
+    """``scene`` with ``n`` and ``md`` set to ``scale`` times the given ones (``n`` even, at
+    least 8; ``md`` at least 1)."""
+    n = max(8, 2 * int(round(n * scale / 2.0)))
+    md = max(1, int(round(md * scale)))
     return replace(scene, discretization=replace(scene.discretization, n=n, md=md, tol=None))
 
 
-def estimate(bsdf, companions: list) -> dict:
+def estimate(bsdf, companions: list, tables: list | None = None) -> dict:
     """The error estimate of ``bsdf`` from its coarser ``companions`` (same scene, at the
     scales of :data:`COMPANIONS`, in that order; the last may be missing).
+
+    ``tables`` (optional) are the :func:`bin_table` of ``bsdf`` followed by those of the
+    companions, where the caller has them already.
 
     Returns
     -------
@@ -99,12 +102,13 @@ def estimate(bsdf, companions: list) -> dict:
         same per angle of :data:`ANGLES`), ``angles``, ``bins``, ``safety`` and the companions'
         ``n`` and ``md``.
     """
-    table = bin_table(bsdf)
+    if tables is None:
+        tables = [bin_table(b) for b in (bsdf, *companions)]
     per_angle = np.zeros(len(ANGLES))
     # one companion cannot tell an accidental agreement: its distance counts twice
     alone = SINGLE if len(companions) == 1 else 1.0
-    for (_, weight), companion in zip(COMPANIONS, companions):
-        d = relative_errors(table, bin_table(companion))
+    for (_, weight), table in zip(COMPANIONS, tables[1:]):
+        d = relative_errors(tables[0], table)
         per_angle = np.maximum(per_angle, SAFETY * alone * weight * d)
     return {"estimate": float(per_angle.max()), "per_angle": [float(x) for x in per_angle],
             "angles": list(ANGLES), "bins": list(BINS), "safety": SAFETY,
@@ -115,18 +119,18 @@ def with_estimate(scene: Scene, solve, bsdf):
     """``bsdf`` (solved from ``scene``) with its error estimate in ``bsdf.info["accuracy"]``,
     from companion solves at the scales of :data:`COMPANIONS` (``solve(scene)`` solves)."""
     t0 = time.perf_counter()
-    plan = replace(make_plan(scene), n=bsdf.info["n"], md=bsdf.info["md"])
     companions = []
     for ratio, _ in COMPANIONS:
+        coarser = scaled(scene, bsdf.info["n"], bsdf.info["md"], ratio)
         try:
-            companions.append(solve(scaled(scene, plan, ratio)))
+            companions.append(solve(coarser))
         except InfeasibleError as exc:
             # too coarse to resolve a lobe: the estimate rests on the finer companion
             if not companions:
                 raise InfeasibleError(
                     f"no error estimate: the companion solve at n = "
-                    f"{scaled(scene, plan, ratio).discretization.n} is refused ({exc}); "
-                    "estimate a solve with a larger n") from None
+                    f"{coarser.discretization.n} is refused ({exc}); estimate a solve with a "
+                    "larger n") from None
             break
     bsdf.info["accuracy"] = {**estimate(bsdf, companions), "seconds": time.perf_counter() - t0}
     return bsdf
@@ -161,9 +165,10 @@ def solve_to_tolerance(scene: Scene, tol: float, solve, log=None):
     if not (isinstance(tol, (int, float)) and 0.0 < tol < 1.0):
         raise ValueError(f"tol must be a number in (0, 1), got {tol!r}")
     plan = make_plan(scene, refuse=False)
-    ladder, solved, best = [], [], None
+    # the last rungs solved and their bin tables (each rung is the companion of the next two)
+    ladder, solved, tables, best = [], [], [], None
     for scale in LADDER:
-        rung = scaled(scene, plan, scale)
+        rung = scaled(scene, plan.n, plan.md, scale)
         t0 = time.perf_counter()
         try:
             bsdf = solve(rung)
@@ -184,8 +189,9 @@ def solve_to_tolerance(scene: Scene, tol: float, solve, log=None):
                 "seconds": time.perf_counter() - t0, "estimate": None}
         ladder.append(step)
         solved.append(bsdf)
+        tables.append(bin_table(bsdf))
         if len(solved) >= 2:
-            acc = estimate(bsdf, solved[-2::-1])
+            acc = estimate(bsdf, solved[-2::-1], tables[::-1])
             step["estimate"] = acc["estimate"]
             if log is not None:
                 log(f"n = {step['n']}, md = {step['md']}: estimated error "
@@ -195,7 +201,7 @@ def solve_to_tolerance(scene: Scene, tol: float, solve, log=None):
             if acc["estimate"] <= tol:
                 bsdf.info["accuracy"] = {**acc, "tol": tol, "met": True, "ladder": ladder}
                 return bsdf
-            del solved[:-2]
+            del solved[:-2], tables[:-2]
     bsdf, est = best
     raise InfeasibleError(
         f"tol = {tol:g} not reached within {LADDER[-1]:.2g} times the planned n and md: the "
