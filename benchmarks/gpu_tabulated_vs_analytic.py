@@ -12,22 +12,16 @@ import tempfile
 
 import numpy as np
 
-import layersim
-import layersim.montecarlo as mc
-from layersim.ndf.table import sampled_table
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
+
+import layersim                                    # noqa: E402
+import layersim.montecarlo as mc                   # noqa: E402
+from layersim.ndf.table import sampled_table       # noqa: E402
+from test_tabulated_ndf import beckmann            # noqa: E402
 
 GOLD = [0.143552, 3.98397]
 tmp = tempfile.mkdtemp()
-
-
-def beck(th, ph, au=0.3, av=0.15):
-    """Anisotropic Beckmann NDF (1/sr) at (theta_h, phi_h)."""
-    t2 = np.tan(th) ** 2
-    return (np.exp(-t2 * (np.cos(ph) ** 2 / au**2 + np.sin(ph) ** 2 / av**2))
-            / (np.pi * au * av * np.cos(th) ** 4))
-
-
-tab = sampled_table(beck)
+tab = sampled_table(beckmann)          # alpha (0.3, 0.15)
 np.savez(os.path.join(tmp, "b.npz"), theta=tab.theta, phi=tab.phi, D=tab.D)
 coat = {"kind": "dielectric", "ior": 1.5, "roughness": 0.2}
 paths = int(float(sys.argv[1]))

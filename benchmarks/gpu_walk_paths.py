@@ -14,38 +14,20 @@ import time
 
 import numpy as np
 
-import layersim
-import layersim.montecarlo as mc
-from layersim.merl import write_merl
-from layersim.ndf.table import sampled_table
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
+
+import layersim                                    # noqa: E402
+import layersim.montecarlo as mc                   # noqa: E402
+from layersim.merl import write_merl               # noqa: E402
+from layersim.ndf.table import sampled_table       # noqa: E402
+from test_measured import analytic as glossy       # noqa: E402
+from test_tabulated_ndf import beckmann            # noqa: E402
 
 GOLD = [0.143552, 3.98397]
 tmp = tempfile.mkdtemp()
-
-
-def beck(th, ph, au=0.3, av=0.15):
-    """Anisotropic Beckmann NDF (1/sr) at (theta_h, phi_h)."""
-    t2 = np.tan(th) ** 2
-    return (np.exp(-t2 * (np.cos(ph) ** 2 / au**2 + np.sin(ph) ** 2 / av**2))
-            / (np.pi * au * av * np.cos(th) ** 4))
-
-
-tab = sampled_table(beck)
+tab = sampled_table(beckmann)          # alpha (0.3, 0.15)
 np.savez(os.path.join(tmp, "b.npz"), theta=tab.theta, phi=tab.phi, D=tab.D)
-ALPHA = 0.3
-
-
-def analytic(th, td, pd):
-    """A glossy isotropic BRDF in half/difference angles (1/sr), three channels (as
-    tests/test_measured.py)."""
-    th, td, pd = np.broadcast_arrays(th, td, pd)
-    d = np.exp(-np.tan(th) ** 2 / ALPHA ** 2) / (np.pi * ALPHA ** 2 * np.cos(th) ** 4)
-    spec = 0.2 * d * (1.0 + 0.5 * (1.0 - np.cos(td)) ** 5)
-    return (np.array([0.1, 0.2, 0.3])[:, None] / np.pi
-            + np.array([1.0, 0.8, 0.6])[:, None] * spec.reshape(1, -1)).reshape(3, *th.shape)
-
-
-write_merl(os.path.join(tmp, "m.binary"), analytic)
+write_merl(os.path.join(tmp, "m.binary"), glossy)
 coat = {"kind": "dielectric", "ior": 1.5, "roughness": 0.2}
 scenes = {
     "8 rough glass/air, multiple-scattering": {
