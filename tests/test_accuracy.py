@@ -72,6 +72,25 @@ def test_unreachable_tolerance_is_refused_with_the_best_estimate():
             layersim.solve(scene, tol=1e-9)
 
 
+def test_meeting_names_the_angles_within_tolerance():
+    """The refusal of an unreachable tol says at which incidence angles the best estimate
+    meets it, from the per-angle estimates."""
+    acc = {"angles": [0.0, 30.0, 60.0, 80.0], "per_angle": [4e-4, 6e-4, 9e-4, 3e-3]}
+    assert accuracy.meeting(acc, 1e-3) == "within tol at 0, 30, 60 deg; 0.003 at 80 deg"
+    assert accuracy.meeting(acc, 1e-4) == "over tol at every angle"
+
+
+def test_estimate_weights_an_accidental_agreement():
+    """The estimate is SAFETY x d1 while the coarser companion agrees as convergence of up to
+    fourth order explains (d2 <= 5 d1), SAFETY x d2 / 5 beyond, and SINGLE x SAFETY x d1 with
+    one companion."""
+    d1, d2 = np.array([1e-3, 1e-3]), np.array([3e-3, 1e-2])
+    est = accuracy.estimate_from_distances([d1, d2])
+    assert np.allclose(est, accuracy.SAFETY * np.array([1e-3, 2e-3]))
+    assert np.allclose(accuracy.estimate_from_distances([d1]),
+                       accuracy.SINGLE * accuracy.SAFETY * d1)
+
+
 def _beckmann_conductor(wi, wo, eta, k, alpha):
     """Float64 reference of a rough conductor (Beckmann, isotropic; Walter et al. 2007 eq. 20
     with the Smith G1 of eq. 27 and the exact conductor Fresnel term), written independently
