@@ -58,9 +58,12 @@ def measure(name: str, label: str, scene, bsdf, seconds: float, t_default: float
 
 def main() -> None:
     names = sys.argv[1:] or DEFAULT
-    print(f"# {platform.node()} ({platform.processor() or platform.machine()}); estimate: "
-          f"{accuracy.SAFETY} x the largest weighted distance to companions at "
-          f"{' and '.join(f'{r:.3g}' for r, _ in accuracy.COMPANIONS)} of n and md; "
+    print(f"# python benchmarks/accuracy.py {' '.join(names)}   (shared 2-core CI VM "
+          f"{platform.node()}, beside other jobs: times are wall times under load, their "
+          "ratios side by side)")
+    print(f"# estimate: {accuracy.SAFETY} x the largest of the distances to companions at "
+          + " and ".join(f"{r:.3g} (weight {w:g})" for r, w in accuracy.COMPANIONS)
+          + " of n and md; "
           f"ladder scales {', '.join(f'{s:.3g}' for s in accuracy.LADDER)}")
     for name in names:
         scene = layersim.Scene.from_toml(SCENES / f"{name}.toml")
