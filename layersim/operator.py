@@ -607,49 +607,86 @@ def read_delta(d, prefix: str) -> dict:
             if f"{prefix}delta_{name}" in d}
 
 
-#: Largest dense (orders x h x h) scratch array _orders_to_csr uses (entries; 128 MiB).
-DENSE_ASSEMBLY_MAX = 1 << 24
+#: Largest dense scratch array _orders_to_csr uses (entries; 32 MiB): a slab of orders times
+#: the pairs of a block (larger slabs fall out of cache and assemble no faster).
+DENSE_ASSEMBLY_MAX = 1 << 22
 
 
 def _orders_to_csr(chunks, m: int, grid: Grid) -> "OrderStack":
     """Per-order CSR blocks ``B_l = c_l f_l w_i mu_i`` from per-pair series chunks, pruned per
-    order (:data:`DROP_TOLERANCE` relative to the order's largest entry).
+    order (:data:`DROP_TOLERANCE` relative to the order's largest entry, exact zeros dropped).
+    The pairs ``(o, i)`` are unique across chunks, as the projection produces them.
 
-    Small operators are scattered into a dense ``(m, h, h)`` array whose nonzeros come out
-    already in (order, row, column) order: no sort, several times faster than sorting the
-    triplets (the assembly dominated the numeric projection on a GPU). Larger ones sort one
-    combined integer key.
+    The pairs are sorted once by (row, column); a slab of orders of the series, one column per
+    pair in that order, then lists its nonzeros row by row already in (order, row, column)
+    order: no sort of the entries, and no scan of the empty ``(m, h, h)`` positions (most of a
+    near-specular block's). When one order of the pairs exceeds the scratch limit
+    (:data:`DENSE_ASSEMBLY_MAX`), the triplets are sorted by one combined integer key instead.
     """
     h = grid.h
     chunks = [(o, i, c[:, :m]) for o, i, c in chunks if o.size]
     if not chunks:
         return OrderStack(np.zeros(0), np.zeros(0, np.int32), np.zeros(m * h + 1, np.int64), h)
     weight = order_weight(np.arange(m))
-    if m * h * h <= DENSE_ASSEMBLY_MAX:
-        dense = np.zeros((m, h, h))
-        for o, i, c in chunks:
-            dense[:, o, i] = (c * grid.flux_weight[i][:, None]).T
-        dense *= weight[:, None, None]
-        return OrderStack.from_dense(dense)
+    pairs = sum(o.size for o, _, _ in chunks)
+    if pairs <= DENSE_ASSEMBLY_MAX:
+        l, o, i, v = _pair_slabs(chunks, m, grid, weight, pairs)
     else:
-        rows, cols, orders, vals = [], [], [], []
-        for o, i, c in chunks:
-            p, l = np.nonzero(c)
-            rows.append(o[p])
-            cols.append(i[p])
-            orders.append(l)
-            vals.append(c[p, l] * grid.flux_weight[i[p]] * weight[l])
-        o, i = np.concatenate(rows), np.concatenate(cols)
-        l, v = np.concatenate(orders), np.concatenate(vals)
-        order = np.argsort((l.astype(np.int64) * h + o) * h + i, kind="stable")
-        o, i, l, v = o[order], i[order], l[order], v[order]
-        amax = np.zeros(m)
-        np.maximum.at(amax, l, np.abs(v))
-        keep = np.abs(v) >= DROP_TOLERANCE * amax[l]
-        o, i, l, v = o[keep], i[keep], l[keep], v[keep]
+        l, o, i, v = _sorted_triplets(chunks, m, grid, weight)
     indptr = np.zeros(m * h + 1, np.int64)
     np.cumsum(np.bincount(l * h + o, minlength=m * h), out=indptr[1:])
     return OrderStack(v, i.astype(np.int32), indptr, h)
+
+
+def _pair_slabs(chunks, m: int, grid: Grid, weight: np.ndarray, pairs: int):
+    """Order, row, column and value of the kept entries of :func:`_orders_to_csr`, in (order,
+    row, column) order, from slabs of orders ``(orders, pairs)`` with the pairs sorted."""
+    h, fw = grid.h, grid.flux_weight
+    o = np.concatenate([c[0] for c in chunks])
+    i = np.concatenate([c[1] for c in chunks])
+    by_position = np.argsort(o.astype(np.int64) * h + i, kind="stable")
+    column = np.empty(pairs, np.int64)           # the sorted column of each chunk row
+    column[by_position] = np.arange(pairs)
+    o, i = o[by_position], i[by_position]
+    starts = np.cumsum([0] + [c[0].size for c in chunks])
+    per = max(1, DENSE_ASSEMBLY_MAX // pairs)
+    out = []
+    for l0 in range(0, m, per):
+        l1 = min(m, l0 + per)
+        slab = np.zeros((l1 - l0, pairs))
+        for (_, ik, c), a, b in zip(chunks, starts[:-1], starts[1:]):
+            k = min(l1, c.shape[1]) - l0          # series shorter than m end in zeros
+            if k > 0:
+                slab[:k, column[a:b]] = (c[:, l0:l0 + k] * fw[ik][:, None]).T
+        slab *= weight[l0:l1, None]
+        # |x| < cut as two comparisons, max |x| as max(max, -min): no float temporary
+        cut = DROP_TOLERANCE * np.maximum(slab.max(axis=1), -slab.min(axis=1))[:, None]
+        slab[(slab < cut) & (slab > -cut)] = 0.0
+        at = np.flatnonzero(slab)
+        ls, p = np.divmod(at, pairs)
+        out.append((ls + l0, o[p], i[p], slab.reshape(-1)[at]))
+    return tuple(np.concatenate(part) for part in zip(*out))
+
+
+def _sorted_triplets(chunks, m: int, grid: Grid, weight: np.ndarray):
+    """Order, row, column and value of the kept entries of :func:`_orders_to_csr`, sorted by
+    one combined integer key."""
+    h = grid.h
+    rows, cols, orders, vals = [], [], [], []
+    for o, i, c in chunks:
+        p, l = np.nonzero(c)
+        rows.append(o[p])
+        cols.append(i[p])
+        orders.append(l)
+        vals.append(c[p, l] * grid.flux_weight[i[p]] * weight[l])
+    o, i = np.concatenate(rows), np.concatenate(cols)
+    l, v = np.concatenate(orders), np.concatenate(vals)
+    order = np.argsort((l.astype(np.int64) * h + o) * h + i, kind="stable")
+    o, i, l, v = o[order], i[order], l[order], v[order]
+    amax = np.zeros(m)
+    np.maximum.at(amax, l, np.abs(v))
+    keep = np.abs(v) >= DROP_TOLERANCE * amax[l]
+    return l[keep], o[keep], i[keep], v[keep]
 
 
 def prune_order(mat: sps.csr_matrix) -> sps.csr_matrix:

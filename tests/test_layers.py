@@ -374,6 +374,38 @@ def test_operator_assembly_dense_and_sorted_paths_agree(monkeypatch):
         np.testing.assert_allclose(dense[l].toarray(), ref, rtol=1e-15)
 
 
+def test_operator_assembly_slabs_of_orders(monkeypatch):
+    """_orders_to_csr in slabs of a few orders (small scratch limit), with a chunk whose series
+    stops short of m: the same stacked CSR arrays, bit for bit, as one slab of every order and
+    as the sorted triplets, and the entries of a dense reference (B_l = c_l f_l w_i mu_i,
+    pruned per order)."""
+    from layersim import operator as opmod
+    grid = opmod.Grid.make("gauss-lobatto", 30)
+    rng = np.random.default_rng(5)
+    h, m = grid.h, 9
+    o, i = np.divmod(rng.permutation(h * h)[:150], h)
+    c = rng.normal(size=(150, m)) * 10.0 ** rng.integers(-15, 0, size=(150, 1))
+    c[rng.random(c.shape) < 0.4] = 0.0
+    chunks = [(o[:100], i[:100], c[:100]), (o[100:], i[100:], c[100:, :4])]   # short series
+    one = opmod._orders_to_csr(chunks, m, grid)
+    monkeypatch.setattr(opmod, "DENSE_ASSEMBLY_MAX", 2 * 150)                  # 2 orders a slab
+    slabs = opmod._orders_to_csr(chunks, m, grid)
+    monkeypatch.setattr(opmod, "DENSE_ASSEMBLY_MAX", 0)                        # sorted triplets
+    srt = opmod._orders_to_csr(chunks, m, grid)
+    for other in (slabs, srt):
+        for a, b in ((one._data, other._data), (one._indices, other._indices),
+                     (one._indptr, other._indptr)):
+            np.testing.assert_array_equal(a, b)
+    for l in range(m):
+        ref = np.zeros((h, h))
+        for ok, ik, ck in chunks:
+            if l < ck.shape[1]:
+                ref[ok, ik] = ck[:, l] * grid.flux_weight[ik] * opmod.order_weight(l)
+        ref[np.abs(ref) < opmod.DROP_TOLERANCE * np.abs(ref).max()] = 0.0
+        assert one[l].has_sorted_indices and one[l].nnz == np.count_nonzero(ref)
+        np.testing.assert_array_equal(one[l].toarray(), ref)
+
+
 def test_order_stack_views_and_file_round_trip(tmp_path):
     """OrderStack: per-order CSR views of the stacked arrays (indexing, negative indices,
     slices), consistency checks, and an operator file round trip that keeps every order."""
