@@ -640,7 +640,11 @@ def _orders_to_csr(chunks, m: int, grid: Grid) -> "OrderStack":
 
 def _pair_slabs(chunks, m: int, grid: Grid, weight: np.ndarray, pairs: int):
     """Order, row, column and value of the kept entries of :func:`_orders_to_csr`, in (order,
-    row, column) order, from slabs of orders ``(orders, pairs)`` with the pairs sorted."""
+    row, column) order, from slabs ``(orders, pairs)`` with the pairs sorted by position.
+
+    A slab holds only the pairs of chunks whose series reach its first order: the projection
+    batches pairs of similar series length, and most of a block's short series end long before
+    ``m`` (a third to a half of the (pair, order) table lies within its chunks' reach)."""
     h, fw = grid.h, grid.flux_weight
     o = np.concatenate([c[0] for c in chunks])
     i = np.concatenate([c[1] for c in chunks])
@@ -649,23 +653,39 @@ def _pair_slabs(chunks, m: int, grid: Grid, weight: np.ndarray, pairs: int):
     column[by_position] = np.arange(pairs)
     o, i = o[by_position], i[by_position]
     starts = np.cumsum([0] + [c[0].size for c in chunks])
-    per = max(1, DENSE_ASSEMBLY_MAX // pairs)
-    out = []
-    for l0 in range(0, m, per):
-        l1 = min(m, l0 + per)
-        slab = np.zeros((l1 - l0, pairs))
-        for (_, ik, c), a, b in zip(chunks, starts[:-1], starts[1:]):
-            k = min(l1, c.shape[1]) - l0          # series shorter than m end in zeros
+    reach = [_series_reach(c) for _, _, c in chunks]
+    pair_reach = np.repeat(reach, np.diff(starts))[by_position]
+    out, l0 = [], 0
+    while l0 < m:
+        active = pair_reach > l0
+        if not active.any():
+            break
+        rank = np.cumsum(active) - 1             # slab column of each active sorted pair
+        width = int(rank[-1]) + 1
+        l1 = min(m, l0 + max(1, DENSE_ASSEMBLY_MAX // width))
+        slab = np.zeros((l1 - l0, width))
+        for (_, ik, c), a, b, k in zip(chunks, starts[:-1], starts[1:], reach):
+            k = min(l1, k) - l0                  # orders of this chunk's series in the slab
             if k > 0:
-                slab[:k, column[a:b]] = (c[:, l0:l0 + k] * fw[ik][:, None]).T
+                slab[:k, rank[column[a:b]]] = (c[:, l0:l0 + k] * fw[ik][:, None]).T
         slab *= weight[l0:l1, None]
         # |x| < cut as two comparisons, max |x| as max(max, -min): no float temporary
         cut = DROP_TOLERANCE * np.maximum(slab.max(axis=1), -slab.min(axis=1))[:, None]
         slab[(slab < cut) & (slab > -cut)] = 0.0
         at = np.flatnonzero(slab)
-        ls, p = np.divmod(at, pairs)
+        ls, p = np.divmod(at, width)
+        p = np.flatnonzero(active)[p]
         out.append((ls + l0, o[p], i[p], slab.reshape(-1)[at]))
+        l0 = l1
+    if not out:
+        return np.zeros(0, np.int64), o[:0], i[:0], np.zeros(0)
     return tuple(np.concatenate(part) for part in zip(*out))
+
+
+def _series_reach(c: np.ndarray) -> int:
+    """One past the last order (column) of ``c`` with a nonzero entry (0 when all zero)."""
+    nonzero = np.flatnonzero(c.any(axis=0))
+    return int(nonzero[-1]) + 1 if nonzero.size else 0
 
 
 def _sorted_triplets(chunks, m: int, grid: Grid, weight: np.ndarray):
