@@ -330,6 +330,22 @@ class IsoOperator(Operator):
     def nnz(self) -> int:
         return sum(mat.nnz for blk in self.blocks.values() if blk is not None for mat in blk)
 
+    def order_nnz(self, name: str, m: int | None = None) -> np.ndarray:
+        """Stored entries of block ``name`` per order ``0 .. m-1`` (default :attr:`m`; zero
+        past the last order), shape (m,), read from the row pointers of an
+        :class:`OrderStack` without building its per-order matrices."""
+        blk = self.blocks[name]
+        if blk is None:
+            raise OperatorError(f"block {name} was left out of this operator (opaque)")
+        m = self.m if m is None else m
+        out = np.zeros(m, np.int64)
+        k = min(m, self.m)
+        if isinstance(blk, OrderStack):
+            out[:k] = blk.nnz_per_order()[:k]
+        else:
+            out[:k] = [mat.nnz for mat in blk[:k]]
+        return out
+
     def memory_bytes(self) -> int:
         """Bytes held by the sparse blocks (values, indices and row pointers)."""
         return sum(memory.sparse_bytes(mat)
@@ -550,6 +566,10 @@ class OrderStack(Sequence):
                                   shape=((stop - orders.start) * h, h))
             out[:stop - orders.start] = rows.toarray().reshape(-1, h, h)
         return out
+
+    def nnz_per_order(self) -> np.ndarray:
+        """Stored entries of each order, shape (m,)."""
+        return np.diff(self._indptr[::self.h])
 
     def __len__(self) -> int:
         return len(self._mats)
