@@ -55,6 +55,10 @@ SPARSE_DENSITY = 0.05
 #: ... if their blocks have at least this many ordinates per hemisphere: below it, SciPy's
 #: per-call overhead outweighs what sparsity saves (docs/performance.md).
 SPARSE_MIN_H = 128
+#: The density threshold grows as ``(h / SPARSE_MIN_H)^2`` up to this factor: dense LAPACK's
+#: cost grows as h^3 while the sparse path's per-call overhead does not (crossover near 5 % at
+#: h = 128 and 12-15 % at h = 195, docs/performance.md).
+SPARSE_DENSITY_GROWTH = 3.0
 #: Entries of one (orders x h x h) array of a batch of orders (2 MiB): below SPARSE_MIN_H
 #: every order is dense, and orders are added in batches (:func:`_add_orders_dense`).
 ORDER_BATCH_ELEMENTS = 1 << 18
@@ -137,7 +141,7 @@ def add(top: IsoOperator, bottom: IsoOperator, threads: int | None = None) -> Is
 
 def order_tasks(top: IsoOperator, bottom: IsoOperator, m: int, opaque: bool) -> list:
     """The orders of :func:`add` as tasks ``(range of orders, dense)``: orders whose blocks hold
-    at least :data:`SPARSE_DENSITY` nonzeros (all orders below :data:`SPARSE_MIN_H` ordinates)
+    at least :func:`sparse_density` nonzeros (all orders below :data:`SPARSE_MIN_H` ordinates)
     go dense, in runs of at most :data:`ORDER_BATCH_ELEMENTS` entries per (orders, h, h)
     array; the others sparse, one range per run (the density counts the operand blocks of the
     order, from the stored entries per order, without building per-order matrices)."""
@@ -148,7 +152,7 @@ def order_tasks(top: IsoOperator, bottom: IsoOperator, m: int, opaque: bool) -> 
         counts = [top.order_nnz(k, m) for k in ("Rb", "Ttb", "Tbt")] + [bottom.order_nnz("Rt", m)]
         if not opaque:
             counts += [bottom.order_nnz(k, m) for k in ("Rb", "Ttb", "Tbt")]
-        dense = np.sum(counts, axis=0) / (len(counts) * h * h) >= SPARSE_DENSITY
+        dense = np.sum(counts, axis=0) / (len(counts) * h * h) >= sparse_density(h)
     per = max(1, ORDER_BATCH_ELEMENTS // (h * h))
     tasks, start = [], 0
     for l in range(1, m + 1):
@@ -156,6 +160,13 @@ def order_tasks(top: IsoOperator, bottom: IsoOperator, m: int, opaque: bool) -> 
             tasks.append((range(start, l), bool(dense[start])))
             start = l
     return tasks
+
+
+def sparse_density(h: int) -> float:
+    """Fraction of nonzeros below which an order of ``h`` ordinates per hemisphere is added
+    with sparse LU (:data:`SPARSE_DENSITY`, :data:`SPARSE_DENSITY_GROWTH`)."""
+    growth = (h / max(SPARSE_MIN_H, 1)) ** 2
+    return SPARSE_DENSITY * min(SPARSE_DENSITY_GROWTH, max(1.0, growth))
 
 
 def _add_orders_sparse(top: IsoOperator, bottom: IsoOperator, orders: range, opaque: bool,
