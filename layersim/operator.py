@@ -650,17 +650,18 @@ def _orders_to_csr(chunks, m: int, grid: Grid) -> "OrderStack":
     weight = order_weight(np.arange(m))
     pairs = sum(o.size for o, _, _ in chunks)
     if pairs <= DENSE_ASSEMBLY_MAX:
-        l, o, i, v = _pair_slabs(chunks, m, grid, weight, pairs)
+        row, col, val = _pair_slabs(chunks, m, grid, weight, pairs)
     else:
-        l, o, i, v = _sorted_triplets(chunks, m, grid, weight)
+        row, col, val = _sorted_triplets(chunks, m, grid, weight)
     indptr = np.zeros(m * h + 1, np.int64)
-    np.cumsum(np.bincount(l * h + o, minlength=m * h), out=indptr[1:])
-    return OrderStack(v, i.astype(np.int32), indptr, h)
+    np.cumsum(np.bincount(row, minlength=m * h), out=indptr[1:])
+    return OrderStack(val, col, indptr, h)
 
 
 def _pair_slabs(chunks, m: int, grid: Grid, weight: np.ndarray, pairs: int):
-    """Order, row, column and value of the kept entries of :func:`_orders_to_csr`, in (order,
-    row, column) order, from slabs ``(orders, pairs)`` with the pairs sorted by position.
+    """Stacked row ``l h + o``, column (int32) and value of the kept entries of
+    :func:`_orders_to_csr`, in (order, row, column) order, from slabs ``(orders, pairs)`` with
+    the pairs sorted by position.
 
     A slab holds only the pairs of chunks whose series reach its first order: the projection
     batches pairs of similar series length, and most of a block's short series end long before
@@ -671,7 +672,7 @@ def _pair_slabs(chunks, m: int, grid: Grid, weight: np.ndarray, pairs: int):
     by_position = np.argsort(o.astype(np.int64) * h + i, kind="stable")
     column = np.empty(pairs, np.int64)           # the sorted column of each chunk row
     column[by_position] = np.arange(pairs)
-    o, i = o[by_position], i[by_position]
+    o, i = o[by_position].astype(np.int64), i[by_position].astype(np.int32)
     starts = np.cumsum([0] + [c[0].size for c in chunks])
     reach = [_series_reach(c) for _, _, c in chunks]
     pair_reach = np.repeat(reach, np.diff(starts))[by_position]
@@ -695,10 +696,10 @@ def _pair_slabs(chunks, m: int, grid: Grid, weight: np.ndarray, pairs: int):
         at = np.flatnonzero(slab)
         ls, p = np.divmod(at, width)
         p = np.flatnonzero(active)[p]
-        out.append((ls + l0, o[p], i[p], slab.reshape(-1)[at]))
+        out.append(((ls + l0) * h + o[p], i[p], slab.reshape(-1)[at]))
         l0 = l1
     if not out:
-        return np.zeros(0, np.int64), o[:0], i[:0], np.zeros(0)
+        return np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0)
     return tuple(np.concatenate(part) for part in zip(*out))
 
 
@@ -709,8 +710,8 @@ def _series_reach(c: np.ndarray) -> int:
 
 
 def _sorted_triplets(chunks, m: int, grid: Grid, weight: np.ndarray):
-    """Order, row, column and value of the kept entries of :func:`_orders_to_csr`, sorted by
-    one combined integer key."""
+    """Stacked row, column (int32) and value of the kept entries of :func:`_orders_to_csr`,
+    sorted by one combined integer key."""
     h = grid.h
     rows, cols, orders, vals = [], [], [], []
     for o, i, c in chunks:
@@ -726,7 +727,7 @@ def _sorted_triplets(chunks, m: int, grid: Grid, weight: np.ndarray):
     amax = np.zeros(m)
     np.maximum.at(amax, l, np.abs(v))
     keep = np.abs(v) >= DROP_TOLERANCE * amax[l]
-    return l[keep], o[keep], i[keep], v[keep]
+    return l[keep].astype(np.int64) * h + o[keep], i[keep].astype(np.int32), v[keep]
 
 
 def prune_order(mat: sps.csr_matrix) -> sps.csr_matrix:
