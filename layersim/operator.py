@@ -395,11 +395,12 @@ class IsoOperator(Operator):
     def from_dense(cls, grid: Grid, blocks: dict, eta_top: float,
                    eta_bottom: float | None, delta: dict | None = None) -> "IsoOperator":
         """Assemble from dense arrays ``blocks[name]`` of shape (m, h, h) (already scaled as
-        ``B_l``), pruning small entries."""
+        ``B_l``), pruning small entries per order as :func:`prune_order` does, into one
+        :class:`OrderStack` per block (the arrays are copied, not overwritten)."""
         out = {}
         for name in BLOCKS:
             arr = blocks.get(name)
-            out[name] = None if arr is None else [prune_order(sps.csr_matrix(a)) for a in arr]
+            out[name] = None if arr is None else OrderStack.from_dense(np.array(arr, float))
         return cls(grid, out, eta_top, eta_bottom, delta)
 
     @classmethod
