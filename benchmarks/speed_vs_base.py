@@ -129,6 +129,7 @@ def main() -> None:
     print(f"# machine: shared 2-core CI VM, beside other jobs ({platform.machine()}, "
           f"{os.cpu_count()} cores, Python {platform.python_version()}); "
           f"date {time.strftime('%Y-%m-%d')}")
+    print(f"# load average (1 min) at the start: {os.getloadavg()[0]:.1f}")
     print(f"# base: {base.module}\n# new:  {new.module}")
     print("# best of the repeats after one warm-up solve per worker, base and new alternating;"
           "\n# max rel diff: albedo at 0..85 deg, and 18 x 36 top bin energies at 0/30/60 deg"
@@ -156,6 +157,7 @@ def main() -> None:
               f"{cpu['base'] / cpu['new']:6.2f} {alb:11.1e} {bins:9.1e}", flush=True)
     base.close()
     new.close()
+    print(f"# load average (1 min) at the end: {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":
