@@ -59,8 +59,8 @@ SPARSE_MIN_H = 128
 #: cost grows as h^3 while the sparse path's per-call overhead does not (crossover near 5 % at
 #: h = 128 and 12-15 % at h = 195, docs/performance.md).
 SPARSE_DENSITY_GROWTH = 3.0
-#: Entries of one (orders x h x h) array of a batch of orders (2 MiB): below SPARSE_MIN_H
-#: every order is dense, and orders are added in batches (:func:`_add_orders_dense`).
+#: Entries of one (orders x h x h) array of a batch of consecutive dense orders (2 MiB;
+#: :func:`_add_orders_dense`).
 ORDER_BATCH_ELEMENTS = 1 << 18
 #: Blocks with fewer ordinates per hemisphere than this run with single-threaded BLAS.
 BLAS_SINGLE_BELOW = 512
