@@ -247,6 +247,35 @@ def test_sparse_and_dense_orders_agree(monkeypatch, opaque):
             assert all(blk[l].nnz == dense.blocks[name][l].nnz for l in range(M))
 
 
+def test_adding_mixes_dense_runs_and_sparse_orders(monkeypatch):
+    """With the density threshold inside the range of the orders' densities, one adding step
+    groups its orders into dense batches and sparse runs covering every order once; the
+    operator agrees with the all-dense one, order by order, to round-off."""
+    top = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.1, alpha_v=0.1), 1.0)
+    bottom = medium_operator(GRID, M, 0.9, 0.6, 0.8, 1.5)
+    monkeypatch.setattr(adding, "SPARSE_MIN_H", 0)
+    monkeypatch.setattr(adding, "SPARSE_DENSITY", 0.0)
+    dense = adding.add(top, bottom)
+    counts = sum(op.order_nnz(k, M) for op, k in ((top, "Rb"), (top, "Ttb"), (top, "Tbt"),
+                                                  (bottom, "Rt"), (bottom, "Rb"),
+                                                  (bottom, "Ttb"), (bottom, "Tbt")))
+    density = counts / (7 * GRID.h ** 2)
+    threshold = np.median(density)
+    monkeypatch.setattr(adding, "SPARSE_DENSITY", 1.0)
+    growth = adding.sparse_density(GRID.h)          # the factor of SPARSE_DENSITY at this h
+    monkeypatch.setattr(adding, "SPARSE_DENSITY", threshold / growth)
+    assert adding.sparse_density(GRID.h) == pytest.approx(threshold)
+    monkeypatch.setattr(adding, "ORDER_BATCH_ELEMENTS", 3 * GRID.h ** 2)
+    tasks = adding.order_tasks(top, bottom, M, opaque=False)
+    assert [l for orders, _ in tasks for l in orders] == list(range(M))
+    assert {kind for _, kind in tasks} == {True, False}
+    for orders, kind in tasks:
+        assert all((density[l] >= threshold) == kind for l in orders)
+        assert not kind or len(orders) <= 3
+    mixed = adding.add(top, bottom)
+    close_ops(mixed, dense, rtol=1e-10)
+
+
 def test_adding_refuses_mismatched_operators():
     a = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3), 1.0)
     other = medium_operator(Grid.make("gauss-lobatto", 50), M, 0.5, 0.0, 1.0, 1.5)
