@@ -17,7 +17,8 @@ solves with ``A`` only, which is factorised once per Fourier order::
 
 Below an opaque bottom layer only ``Rt`` is computed. Each order uses dense LAPACK or sparse
 SuperLU (UMFPACK via scikit-umfpack when installed) depending on the density and size of its
-blocks (:data:`SPARSE_DENSITY`, :data:`SPARSE_MIN_H`).
+blocks (:data:`SPARSE_DENSITY`, :data:`SPARSE_MIN_H`); consecutive dense orders are solved as
+one stacked batch (numpy's batched LAPACK and matmul).
 
 Threads: orders are independent and can be spread over a thread pool (``threads=``), but on the
 block sizes of typical plans (h <= 256) the per-order work is too small for Python threads to pay
@@ -28,7 +29,6 @@ limited to one thread (via threadpoolctl) for blocks below :data:`BLAS_SINGLE_BE
 
 from __future__ import annotations
 
-import functools
 from concurrent.futures import ThreadPoolExecutor
 
 from contextlib import nullcontext
@@ -55,8 +55,12 @@ SPARSE_DENSITY = 0.05
 #: ... if their blocks have at least this many ordinates per hemisphere: below it, SciPy's
 #: per-call overhead outweighs what sparsity saves (docs/performance.md).
 SPARSE_MIN_H = 128
-#: Entries of one (orders x h x h) array of a batch of orders (2 MiB): below SPARSE_MIN_H
-#: every order is dense, and orders are added in batches (:func:`_add_orders_dense`).
+#: The density threshold grows as ``(h / SPARSE_MIN_H)^2`` up to this factor: dense LAPACK's
+#: cost grows as h^3 while the sparse path's per-call overhead does not (crossover near 5 % at
+#: h = 128 and 12-15 % at h = 195, docs/performance.md).
+SPARSE_DENSITY_GROWTH = 3.0
+#: Entries of one (orders x h x h) array of a batch of consecutive dense orders (2 MiB;
+#: :func:`_add_orders_dense`).
 ORDER_BATCH_ELEMENTS = 1 << 18
 #: Blocks with fewer ordinates per hemisphere than this run with single-threaded BLAS.
 BLAS_SINGLE_BELOW = 512
@@ -111,19 +115,16 @@ def add(top: IsoOperator, bottom: IsoOperator, threads: int | None = None) -> Is
     opaque = bottom.opaque
 
     names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
+    # runs of orders that go the same way (dense LAPACK in stacked batches, or sparse LU
+    # order by order), each a task
+    tasks = order_tasks(top, bottom, m, opaque)
 
-    def one(l: int):
-        blk1 = {k: top.block(k, l) for k in ("Rt", "Rb", "Ttb", "Tbt")}
-        blk2 = {k: bottom.block(k, l) for k in names}
-        return _add_order(blk1, blk2, opaque)
+    def work(task):
+        orders, dense = task
+        if dense:
+            return _add_orders_dense(top, bottom, orders, opaque)
+        return _add_orders_sparse(top, bottom, orders, opaque, names)
 
-    batched = top.h < SPARSE_MIN_H      # every order dense: batches of orders
-    if batched:
-        per = max(1, ORDER_BATCH_ELEMENTS // (top.h * top.h))
-        tasks = [range(l, min(m, l + per)) for l in range(0, m, per)]
-        work = functools.partial(_add_orders_dense, top, bottom, opaque=opaque)
-    else:
-        tasks, work = range(m), one
     threads = threads or settings().order_threads
     limit = threadpool_limits(1, user_api="blas") if top.h < BLAS_SINGLE_BELOW else nullcontext()
     with limit:
@@ -132,32 +133,53 @@ def add(top: IsoOperator, bottom: IsoOperator, threads: int | None = None) -> Is
                 results = list(pool.map(work, tasks))
         else:
             results = [work(t) for t in tasks]
-    if batched:
-        blocks = {name: OrderStack.concatenate([r[name] for r in results]) for name in names}
-    else:
-        blocks = {name: [r[name] for r in results] for name in names}
+    blocks = {name: OrderStack.concatenate([r[name] for r in results]) for name in names}
     delta = add_deltas(top.delta, bottom.delta, opaque)      # diagonal algebra (deltas.py)
     return IsoOperator(top.grid, blocks, top.eta_top, None if opaque else bottom.eta_bottom,
                        delta)
 
 
-def _density(*mats) -> float:
-    h = mats[0].shape[0]
-    return sum(m.nnz for m in mats) / (len(mats) * h * h)
-
-
-def _add_order(b1: dict, b2: dict, opaque: bool) -> dict:
-    Rt1, Rb1, Ttb1, Tbt1 = b1["Rt"], b1["Rb"], b1["Ttb"], b1["Tbt"]
-    Rt2 = b2["Rt"]
-    h = Rt1.shape[0]
-    coupled = Rb1.nnz > 0 and Rt2.nnz > 0
-    if opaque:
-        mats = (Rb1, Rt2, Ttb1, Tbt1)
+def order_tasks(top: IsoOperator, bottom: IsoOperator, m: int, opaque: bool) -> list:
+    """The orders of :func:`add` as tasks ``(range of orders, dense)``: orders whose blocks hold
+    at least :func:`sparse_density` nonzeros (all orders below :data:`SPARSE_MIN_H` ordinates)
+    go dense, in runs of at most :data:`ORDER_BATCH_ELEMENTS` entries per (orders, h, h)
+    array; the others sparse, one range per run (the density counts the operand blocks of the
+    order, from the stored entries per order, without building per-order matrices)."""
+    h = top.h
+    if h < SPARSE_MIN_H:
+        dense = np.ones(m, bool)
     else:
-        mats = (Rb1, Rt2, Ttb1, Tbt1, b2["Rb"], b2["Ttb"], b2["Tbt"])
-    if h >= SPARSE_MIN_H and _density(*mats) < SPARSE_DENSITY:
-        return _add_order_sparse(b1, b2, opaque, coupled)
-    return _add_order_dense(b1, b2, opaque, coupled, h)
+        counts = [top.order_nnz(k, m) for k in ("Rb", "Ttb", "Tbt")] + [bottom.order_nnz("Rt", m)]
+        if not opaque:
+            counts += [bottom.order_nnz(k, m) for k in ("Rb", "Ttb", "Tbt")]
+        dense = np.sum(counts, axis=0) / (len(counts) * h * h) >= sparse_density(h)
+    per = max(1, ORDER_BATCH_ELEMENTS // (h * h))
+    tasks, start = [], 0
+    for l in range(1, m + 1):
+        if l == m or dense[l] != dense[start] or (dense[start] and l - start == per):
+            tasks.append((range(start, l), bool(dense[start])))
+            start = l
+    return tasks
+
+
+def sparse_density(h: int) -> float:
+    """Fraction of nonzeros below which an order of ``h`` ordinates per hemisphere is added
+    with sparse LU (:data:`SPARSE_DENSITY`, :data:`SPARSE_DENSITY_GROWTH`)."""
+    growth = (h / max(SPARSE_MIN_H, 1)) ** 2
+    return SPARSE_DENSITY * min(SPARSE_DENSITY_GROWTH, max(1.0, growth))
+
+
+def _add_orders_sparse(top: IsoOperator, bottom: IsoOperator, orders: range, opaque: bool,
+                       names: tuple) -> dict:
+    """:func:`_add_order_sparse` for each order of ``orders``; ``{block: OrderStack}``."""
+    out = {name: [] for name in names}
+    for l in orders:
+        b1 = {k: top.block(k, l) for k in ("Rt", "Rb", "Ttb", "Tbt")}
+        b2 = {k: bottom.block(k, l) for k in names}
+        coupled = b1["Rb"].nnz > 0 and b2["Rt"].nnz > 0
+        for name, mat in _add_order_sparse(b1, b2, opaque, coupled).items():
+            out[name].append(OrderStack.from_csr(mat, top.h))
+    return {name: OrderStack.concatenate(stacks) for name, stacks in out.items()}
 
 
 def _dense_orders(op: IsoOperator, name: str, orders: range) -> np.ndarray:
@@ -170,10 +192,10 @@ def _dense_orders(op: IsoOperator, name: str, orders: range) -> np.ndarray:
 
 def _add_orders_dense(top: IsoOperator, bottom: IsoOperator, orders: range,
                       opaque: bool) -> dict:
-    """:func:`_add_order_dense` for a batch of orders at once: the same LAPACK solves and
-    products, stacked, with the blocks read and the results pruned and stored as stacked
-    CSR (:class:`OrderStack`): at small h the per-order conversions to and from SciPy
-    matrices cost more than the arithmetic. Returns ``{block: OrderStack of the orders}``."""
+    """The adding equations for a batch of orders at once, with dense LAPACK: the solves and
+    products stacked, the blocks read and the results pruned and stored as stacked CSR
+    (:class:`OrderStack`) without per-order SciPy matrices, whose construction would cost more
+    than the arithmetic. Returns ``{block: OrderStack of the orders}``."""
     Rt1, Rb1, Ttb1, Tbt1 = (_dense_orders(top, k, orders) for k in ("Rt", "Rb", "Ttb", "Tbt"))
     Rt2 = _dense_orders(bottom, "Rt", orders)
     h = Rt1.shape[1]
@@ -182,8 +204,9 @@ def _add_orders_dense(top: IsoOperator, bottom: IsoOperator, orders: range,
     else:
         Rb2, Ttb2, Tbt2 = (_dense_orders(bottom, k, orders) for k in ("Rb", "Ttb", "Tbt"))
         rhs = np.concatenate([Ttb1, Rb1 @ Tbt2], axis=2)
-    # uncoupled orders (Rb1 or Rt2 zero) have A = I, whose LU solve returns rhs exactly;
-    # numpy.linalg, not scipy.linalg (see _add_order_dense)
+    # uncoupled orders (Rb1 or Rt2 zero) have A = I, whose LU solve returns rhs exactly.
+    # numpy.linalg, not scipy.linalg: batches may run on threads (threads=), and scipy's
+    # LAPACK wrappers returned corrupted results when called concurrently (layersim.threads)
     Y = np.linalg.solve(np.eye(h) - Rb1 @ Rt2, rhs)
     Y1 = Y[:, :, :h]
     out = {"Rt": Rt1 + Tbt1 @ (Rt2 @ Y1)}
@@ -193,31 +216,6 @@ def _add_orders_dense(top: IsoOperator, bottom: IsoOperator, orders: range,
         out["Rb"] = Rb2 + Ttb2 @ Y2
         out["Tbt"] = Tbt1 @ Tbt2 + Tbt1 @ (Rt2 @ Y2)
     return {k: OrderStack.from_dense(np.ascontiguousarray(v)) for k, v in out.items()}
-
-
-def _add_order_dense(b1, b2, opaque, coupled, h):
-    Rt1, Rb1, Ttb1, Tbt1 = (b1[k].toarray() for k in ("Rt", "Rb", "Ttb", "Tbt"))
-    Rt2 = b2["Rt"].toarray()
-    if opaque:
-        rhs = Ttb1
-    else:
-        Rb2, Ttb2, Tbt2 = (b2[k].toarray() for k in ("Rb", "Ttb", "Tbt"))
-        rhs = np.hstack([Ttb1, Rb1 @ Tbt2])
-    if coupled:
-        A = np.eye(h) - Rb1 @ Rt2
-        # numpy.linalg, not scipy.linalg: orders may run on threads (threads=), and scipy's
-        # LAPACK wrappers returned corrupted results when called concurrently (layersim.threads)
-        Y = np.linalg.solve(A, rhs)
-    else:
-        Y = rhs
-    Y1 = Y[:, :h]
-    out = {"Rt": Rt1 + Tbt1 @ (Rt2 @ Y1)}
-    if not opaque:
-        Y2 = Y[:, h:]
-        out["Ttb"] = Ttb2 @ Y1
-        out["Rb"] = Rb2 + Ttb2 @ Y2
-        out["Tbt"] = Tbt1 @ Tbt2 + Tbt1 @ (Rt2 @ Y2)
-    return {k: prune_order(sps.csr_matrix(v)) for k, v in out.items()}
 
 
 def sparse_lu(A: sps.csc_matrix):

@@ -330,6 +330,22 @@ class IsoOperator(Operator):
     def nnz(self) -> int:
         return sum(mat.nnz for blk in self.blocks.values() if blk is not None for mat in blk)
 
+    def order_nnz(self, name: str, m: int | None = None) -> np.ndarray:
+        """Stored entries of block ``name`` per order ``0 .. m-1`` (default :attr:`m`; zero
+        past the last order), shape (m,), read from the row pointers of an
+        :class:`OrderStack` without building its per-order matrices."""
+        blk = self.blocks[name]
+        if blk is None:
+            raise OperatorError(f"block {name} was left out of this operator (opaque)")
+        m = self.m if m is None else m
+        out = np.zeros(m, np.int64)
+        k = min(m, self.m)
+        if isinstance(blk, OrderStack):
+            out[:k] = blk.nnz_per_order()[:k]
+        else:
+            out[:k] = [mat.nnz for mat in blk[:k]]
+        return out
+
     def memory_bytes(self) -> int:
         """Bytes held by the sparse blocks (values, indices and row pointers)."""
         return sum(memory.sparse_bytes(mat)
@@ -379,11 +395,12 @@ class IsoOperator(Operator):
     def from_dense(cls, grid: Grid, blocks: dict, eta_top: float,
                    eta_bottom: float | None, delta: dict | None = None) -> "IsoOperator":
         """Assemble from dense arrays ``blocks[name]`` of shape (m, h, h) (already scaled as
-        ``B_l``), pruning small entries."""
+        ``B_l``), pruning small entries per order as :func:`prune_order` does, into one
+        :class:`OrderStack` per block (the arrays are copied, not overwritten)."""
         out = {}
         for name in BLOCKS:
             arr = blocks.get(name)
-            out[name] = None if arr is None else [prune_order(sps.csr_matrix(a)) for a in arr]
+            out[name] = None if arr is None else OrderStack.from_dense(np.array(arr, float))
         return cls(grid, out, eta_top, eta_bottom, delta)
 
     @classmethod
@@ -551,6 +568,10 @@ class OrderStack(Sequence):
             out[:stop - orders.start] = rows.toarray().reshape(-1, h, h)
         return out
 
+    def nnz_per_order(self) -> np.ndarray:
+        """Stored entries of each order, shape (m,)."""
+        return np.diff(self._indptr[::self.h])
+
     def __len__(self) -> int:
         return len(self._mats)
 
@@ -607,49 +628,107 @@ def read_delta(d, prefix: str) -> dict:
             if f"{prefix}delta_{name}" in d}
 
 
-#: Largest dense (orders x h x h) scratch array _orders_to_csr uses (entries; 128 MiB).
-DENSE_ASSEMBLY_MAX = 1 << 24
+#: Largest dense scratch array _orders_to_csr uses (entries; 32 MiB): a slab of orders times
+#: the pairs of a block (larger slabs fall out of cache and assemble no faster).
+DENSE_ASSEMBLY_MAX = 1 << 22
 
 
 def _orders_to_csr(chunks, m: int, grid: Grid) -> "OrderStack":
     """Per-order CSR blocks ``B_l = c_l f_l w_i mu_i`` from per-pair series chunks, pruned per
-    order (:data:`DROP_TOLERANCE` relative to the order's largest entry).
+    order (:data:`DROP_TOLERANCE` relative to the order's largest entry, exact zeros dropped).
+    The pairs ``(o, i)`` are unique across chunks, as the projection produces them.
 
-    Small operators are scattered into a dense ``(m, h, h)`` array whose nonzeros come out
-    already in (order, row, column) order: no sort, several times faster than sorting the
-    triplets (the assembly dominated the numeric projection on a GPU). Larger ones sort one
-    combined integer key.
+    The pairs are sorted once by (row, column); a slab of orders of the series, one column per
+    pair in that order, then lists its nonzeros row by row already in (order, row, column)
+    order: no sort of the entries, and no scan of the empty ``(m, h, h)`` positions (most of a
+    near-specular block's). When one order of the pairs exceeds the scratch limit
+    (:data:`DENSE_ASSEMBLY_MAX`), the triplets are sorted by one combined integer key instead.
     """
     h = grid.h
     chunks = [(o, i, c[:, :m]) for o, i, c in chunks if o.size]
     if not chunks:
         return OrderStack(np.zeros(0), np.zeros(0, np.int32), np.zeros(m * h + 1, np.int64), h)
     weight = order_weight(np.arange(m))
-    if m * h * h <= DENSE_ASSEMBLY_MAX:
-        dense = np.zeros((m, h, h))
-        for o, i, c in chunks:
-            dense[:, o, i] = (c * grid.flux_weight[i][:, None]).T
-        dense *= weight[:, None, None]
-        return OrderStack.from_dense(dense)
+    pairs = sum(o.size for o, _, _ in chunks)
+    if pairs <= DENSE_ASSEMBLY_MAX:
+        row, col, val = _pair_slabs(chunks, m, grid, weight, pairs)
     else:
-        rows, cols, orders, vals = [], [], [], []
-        for o, i, c in chunks:
-            p, l = np.nonzero(c)
-            rows.append(o[p])
-            cols.append(i[p])
-            orders.append(l)
-            vals.append(c[p, l] * grid.flux_weight[i[p]] * weight[l])
-        o, i = np.concatenate(rows), np.concatenate(cols)
-        l, v = np.concatenate(orders), np.concatenate(vals)
-        order = np.argsort((l.astype(np.int64) * h + o) * h + i, kind="stable")
-        o, i, l, v = o[order], i[order], l[order], v[order]
-        amax = np.zeros(m)
-        np.maximum.at(amax, l, np.abs(v))
-        keep = np.abs(v) >= DROP_TOLERANCE * amax[l]
-        o, i, l, v = o[keep], i[keep], l[keep], v[keep]
+        row, col, val = _sorted_triplets(chunks, m, grid, weight)
     indptr = np.zeros(m * h + 1, np.int64)
-    np.cumsum(np.bincount(l * h + o, minlength=m * h), out=indptr[1:])
-    return OrderStack(v, i.astype(np.int32), indptr, h)
+    np.cumsum(np.bincount(row, minlength=m * h), out=indptr[1:])
+    return OrderStack(val, col, indptr, h)
+
+
+def _pair_slabs(chunks, m: int, grid: Grid, weight: np.ndarray, pairs: int):
+    """Stacked row ``l h + o``, column (int32) and value of the kept entries of
+    :func:`_orders_to_csr`, in (order, row, column) order, from slabs ``(orders, pairs)`` with
+    the pairs sorted by position.
+
+    A slab holds only the pairs of chunks whose series reach its first order: the projection
+    batches pairs of similar series length, and most of a block's short series end long before
+    ``m`` (a third to a half of the (pair, order) table lies within its chunks' reach)."""
+    h, fw = grid.h, grid.flux_weight
+    o = np.concatenate([c[0] for c in chunks])
+    i = np.concatenate([c[1] for c in chunks])
+    by_position = np.argsort(o.astype(np.int64) * h + i, kind="stable")
+    column = np.empty(pairs, np.int64)           # the sorted column of each chunk row
+    column[by_position] = np.arange(pairs)
+    o, i = o[by_position].astype(np.int64), i[by_position].astype(np.int32)
+    starts = np.cumsum([0] + [c[0].size for c in chunks])
+    reach = [_series_reach(c) for _, _, c in chunks]
+    pair_reach = np.repeat(reach, np.diff(starts))[by_position]
+    out, l0 = [], 0
+    while l0 < m:
+        active = pair_reach > l0
+        if not active.any():
+            break
+        rank = np.cumsum(active) - 1             # slab column of each active sorted pair
+        width = int(rank[-1]) + 1
+        l1 = min(m, l0 + max(1, DENSE_ASSEMBLY_MAX // width))
+        slab = np.zeros((l1 - l0, width))
+        for (_, ik, c), a, b, k in zip(chunks, starts[:-1], starts[1:], reach):
+            k = min(l1, k) - l0                  # orders of this chunk's series in the slab
+            if k > 0:
+                slab[:k, rank[column[a:b]]] = (c[:, l0:l0 + k] * fw[ik][:, None]).T
+        slab *= weight[l0:l1, None]
+        # |x| < cut as two comparisons, max |x| as max(max, -min): no float temporary
+        cut = DROP_TOLERANCE * np.maximum(slab.max(axis=1), -slab.min(axis=1))[:, None]
+        slab[(slab < cut) & (slab > -cut)] = 0.0
+        at = np.flatnonzero(slab)
+        ls, p = np.divmod(at, width)
+        p = np.flatnonzero(active)[p]
+        out.append(((ls + l0) * h + o[p], i[p], slab.reshape(-1)[at]))
+        l0 = l1
+    if not out:
+        return np.zeros(0, np.int64), np.zeros(0, np.int32), np.zeros(0)
+    return tuple(np.concatenate(part) for part in zip(*out))
+
+
+def _series_reach(c: np.ndarray) -> int:
+    """One past the last order (column) of ``c`` with a nonzero entry (0 when all zero)."""
+    nonzero = np.flatnonzero(c.any(axis=0))
+    return int(nonzero[-1]) + 1 if nonzero.size else 0
+
+
+def _sorted_triplets(chunks, m: int, grid: Grid, weight: np.ndarray):
+    """Stacked row, column (int32) and value of the kept entries of :func:`_orders_to_csr`,
+    sorted by one combined integer key."""
+    h = grid.h
+    rows, cols, orders, vals = [], [], [], []
+    for o, i, c in chunks:
+        p, l = np.nonzero(c)
+        rows.append(o[p])
+        cols.append(i[p])
+        orders.append(l)
+        vals.append(c[p, l] * grid.flux_weight[i[p]] * weight[l])
+    o, i = np.concatenate(rows), np.concatenate(cols)
+    l, v = np.concatenate(orders), np.concatenate(vals)
+    order = np.argsort((l.astype(np.int64) * h + o) * h + i, kind="stable")
+    o, i, l, v = o[order], i[order], l[order], v[order]
+    amax = np.zeros(m)
+    np.maximum.at(amax, l, np.abs(v))
+    keep = np.abs(v) >= DROP_TOLERANCE * amax[l]
+    return l[keep].astype(np.int64) * h + o[keep], i[keep].astype(np.int32), v[keep]
 
 
 def prune_order(mat: sps.csr_matrix) -> sps.csr_matrix:

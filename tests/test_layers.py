@@ -247,6 +247,35 @@ def test_sparse_and_dense_orders_agree(monkeypatch, opaque):
             assert all(blk[l].nnz == dense.blocks[name][l].nnz for l in range(M))
 
 
+def test_adding_mixes_dense_runs_and_sparse_orders(monkeypatch):
+    """With the density threshold inside the range of the orders' densities, one adding step
+    groups its orders into dense batches and sparse runs covering every order once; the
+    operator agrees with the all-dense one, order by order, to round-off."""
+    top = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.1, alpha_v=0.1), 1.0)
+    bottom = medium_operator(GRID, M, 0.9, 0.6, 0.8, 1.5)
+    monkeypatch.setattr(adding, "SPARSE_MIN_H", 0)
+    monkeypatch.setattr(adding, "SPARSE_DENSITY", 0.0)
+    dense = adding.add(top, bottom)
+    counts = sum(op.order_nnz(k, M) for op, k in ((top, "Rb"), (top, "Ttb"), (top, "Tbt"),
+                                                  (bottom, "Rt"), (bottom, "Rb"),
+                                                  (bottom, "Ttb"), (bottom, "Tbt")))
+    density = counts / (7 * GRID.h ** 2)
+    threshold = np.median(density)
+    monkeypatch.setattr(adding, "SPARSE_DENSITY", 1.0)
+    growth = adding.sparse_density(GRID.h)          # the factor of SPARSE_DENSITY at this h
+    monkeypatch.setattr(adding, "SPARSE_DENSITY", threshold / growth)
+    assert adding.sparse_density(GRID.h) == pytest.approx(threshold)
+    monkeypatch.setattr(adding, "ORDER_BATCH_ELEMENTS", 3 * GRID.h ** 2)
+    tasks = adding.order_tasks(top, bottom, M, opaque=False)
+    assert [l for orders, _ in tasks for l in orders] == list(range(M))
+    assert {kind for _, kind in tasks} == {True, False}
+    for orders, kind in tasks:
+        assert all((density[l] >= threshold) == kind for l in orders)
+        assert not kind or len(orders) <= 3
+    mixed = adding.add(top, bottom)
+    close_ops(mixed, dense, rtol=1e-10)
+
+
 def test_adding_refuses_mismatched_operators():
     a = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3), 1.0)
     other = medium_operator(Grid.make("gauss-lobatto", 50), M, 0.5, 0.0, 1.0, 1.5)
@@ -372,6 +401,38 @@ def test_operator_assembly_dense_and_sorted_paths_agree(monkeypatch):
             ref[o, i] = c[:, l] * grid.flux_weight[i] * opmod.order_weight(l)
         ref[np.abs(ref) < opmod.DROP_TOLERANCE * np.abs(ref).max()] = 0.0
         np.testing.assert_allclose(dense[l].toarray(), ref, rtol=1e-15)
+
+
+def test_operator_assembly_slabs_of_orders(monkeypatch):
+    """_orders_to_csr in slabs of a few orders (small scratch limit), with a chunk whose series
+    stops short of m: the same stacked CSR arrays, bit for bit, as one slab of every order and
+    as the sorted triplets, and the entries of a dense reference (B_l = c_l f_l w_i mu_i,
+    pruned per order)."""
+    from layersim import operator as opmod
+    grid = opmod.Grid.make("gauss-lobatto", 30)
+    rng = np.random.default_rng(5)
+    h, m = grid.h, 9
+    o, i = np.divmod(rng.permutation(h * h)[:150], h)
+    c = rng.normal(size=(150, m)) * 10.0 ** rng.integers(-15, 0, size=(150, 1))
+    c[rng.random(c.shape) < 0.4] = 0.0
+    chunks = [(o[:100], i[:100], c[:100]), (o[100:], i[100:], c[100:, :4])]   # short series
+    one = opmod._orders_to_csr(chunks, m, grid)
+    monkeypatch.setattr(opmod, "DENSE_ASSEMBLY_MAX", 2 * 150)                  # 2 orders a slab
+    slabs = opmod._orders_to_csr(chunks, m, grid)
+    monkeypatch.setattr(opmod, "DENSE_ASSEMBLY_MAX", 0)                        # sorted triplets
+    srt = opmod._orders_to_csr(chunks, m, grid)
+    for other in (slabs, srt):
+        for a, b in ((one._data, other._data), (one._indices, other._indices),
+                     (one._indptr, other._indptr)):
+            np.testing.assert_array_equal(a, b)
+    for l in range(m):
+        ref = np.zeros((h, h))
+        for ok, ik, ck in chunks:
+            if l < ck.shape[1]:
+                ref[ok, ik] = ck[:, l] * grid.flux_weight[ik] * opmod.order_weight(l)
+        ref[np.abs(ref) < opmod.DROP_TOLERANCE * np.abs(ref).max()] = 0.0
+        assert one[l].has_sorted_indices and one[l].nnz == np.count_nonzero(ref)
+        np.testing.assert_array_equal(one[l].toarray(), ref)
 
 
 def test_order_stack_views_and_file_round_trip(tmp_path):

@@ -239,11 +239,15 @@ def on_gpu(device) -> bool:
 
 
 def _mirror(chunks, scale: float = 1.0, skip_diagonal: bool = True):
-    """Chunks of the transposed block (``f(o <- i) -> f(i <- o)``), times ``scale``."""
+    """Chunks of the transposed block (``f(o <- i) -> f(i <- o)``), times ``scale``. The
+    coefficients are shared, not copied, where no row is left out and ``scale`` is 1 (the
+    assembly only reads them)."""
     out = []
     for o, i, c in chunks:
-        sel = o != i if skip_diagonal else slice(None)
-        out.append((i[sel], o[sel], c[sel] * scale))
+        if skip_diagonal and (o == i).any():
+            sel = o != i
+            o, i, c = o[sel], i[sel], c[sel]
+        out.append((i, o, c if scale == 1.0 else c * scale))
     return out
 
 
