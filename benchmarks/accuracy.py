@@ -11,11 +11,14 @@ worst of 0, 30, 60 and 80 degrees (what the estimate estimates). It prints the e
 measured error, their ratio (the estimate is meant to lie above the error and within 3 times
 it), the discretisation reached, and the wall time against the default solve's.
 
-Usage: python benchmarks/accuracy.py [SCENE ...]   (names in benchmarks/scenes/, without .toml)
+Usage: python benchmarks/accuracy.py [--tol T ...] [SCENE ...]   (names in benchmarks/scenes/,
+without .toml; --tol: only these tolerances, default 1e-2 1e-3 1e-4)
 """
 
 from __future__ import annotations
 
+import argparse
+import os
 import platform
 import sys
 import time
@@ -57,10 +60,14 @@ def measure(name: str, label: str, scene, bsdf, seconds: float, t_default: float
 
 
 def main() -> None:
-    names = sys.argv[1:] or DEFAULT
-    print(f"# python benchmarks/accuracy.py {' '.join(names)}   (shared 2-core CI VM "
-          f"{platform.node()}, beside other jobs: times are wall times under load, their "
-          "ratios side by side)")
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--tol", type=float, action="append")
+    parser.add_argument("scenes", nargs="*")
+    args = parser.parse_args()
+    names = args.scenes or DEFAULT
+    tols = args.tol or TOLS
+    print(f"# python benchmarks/accuracy.py {' '.join(sys.argv[1:])}   ({platform.node()}, "
+          f"{os.cpu_count()} cores: times are wall times, their ratios side by side)")
     print(f"# estimate: {accuracy.SAFETY} x the largest of the distances to companions at "
           + " and ".join(f"{r:.3g} (weight {w:g})" for r, w in accuracy.COMPANIONS)
           + " of n and md; "
@@ -73,7 +80,7 @@ def main() -> None:
         t0 = time.perf_counter()
         bsdf = layersim.solve(scene, error_estimate=True)
         measure(name, "default+est", scene, bsdf, time.perf_counter() - t0, t_default)
-        for tol in TOLS:
+        for tol in tols:
             t0 = time.perf_counter()
             try:
                 bsdf = layersim.solve(scene, tol=tol)

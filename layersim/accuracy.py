@@ -62,7 +62,7 @@ SINGLE = 2.0
 
 #: Scales of the planner's ``n`` and ``md`` that a solve to a tolerance climbs; a rung is
 #: accepted from the second solved on.
-LADDER = tuple(0.25 * 2.0 ** (k / 2.0) for k in range(1, 8))
+LADDER = tuple(0.25 * 2.0 ** (k / 2.0) for k in range(1, 10))
 
 
 def bin_table(bsdf, angles=ANGLES, bins=BINS) -> np.ndarray:
