@@ -80,12 +80,28 @@ def relative_errors(table: np.ndarray, reference: np.ndarray) -> np.ndarray:
     return np.sqrt(num / np.where(den > 0, den, 1.0))
 
 
-def scaled(scene: Scene, n: int, md: int, scale: float) -> Scene:
+def scaled(scene: Scene, n: int, md: int, scale: float, ms: int | None = None) -> Scene:
     """``scene`` with ``n`` and ``md`` set to ``scale`` times the given ones (``n`` even, at
-    least 8; ``md`` at least 1)."""
+    least 8; ``md`` at least 1), and for an anisotropic solve (``ms`` > 0) its coupling
+    half-width too (:func:`scaled_ms`).
+
+    The coupled modes converge faster than ``n`` but their truncation, at the planner's
+    ``ms``, dominates the error of anisotropic stacks (``benchmarks/accuracy_aniso.txt``): a
+    companion on the same ``ms`` cannot see it, a rung of the ladder on the same ``ms`` cannot
+    reduce it. ``ms`` = 0 or None (isotropic) leaves the scene's ``ms`` as it is."""
     n = max(8, 2 * int(round(n * scale / 2.0)))
     md = max(1, int(round(md * scale)))
-    return replace(scene, discretization=replace(scene.discretization, n=n, md=md, tol=None))
+    disc = replace(scene.discretization, n=n, md=md, tol=None)
+    if ms:
+        disc = replace(disc, ms=scaled_ms(ms, scale))
+    return replace(scene, discretization=disc)
+
+
+def scaled_ms(ms: int, scale: float) -> int:
+    """``ms`` scaled like ``n`` and ``md``, at least 1: the planner's ``ms`` grows in
+    proportion to the roughness ratio (Zeltner & Jakob 2018, eq. (25)), so the same scale
+    of it is the same relative refinement of the azimuthal coupling for any anisotropy."""
+    return max(1, int(round(ms * scale)))
 
 
 def estimate(bsdf, companions: list, tables: list | None = None) -> dict:
@@ -121,7 +137,7 @@ def with_estimate(scene: Scene, solve, bsdf):
     t0 = time.perf_counter()
     companions = []
     for ratio, _ in COMPANIONS:
-        coarser = scaled(scene, bsdf.info["n"], bsdf.info["md"], ratio)
+        coarser = scaled(scene, bsdf.info["n"], bsdf.info["md"], ratio, bsdf.info.get("ms"))
         try:
             companions.append(solve(coarser))
         except InfeasibleError as exc:
@@ -168,7 +184,7 @@ def solve_to_tolerance(scene: Scene, tol: float, solve, log=None):
     # the last rungs solved and their bin tables (each rung is the companion of the next two)
     ladder, solved, tables, best = [], [], [], None
     for scale in LADDER:
-        rung = scaled(scene, plan.n, plan.md, scale)
+        rung = scaled(scene, plan.n, plan.md, scale, plan.ms)
         t0 = time.perf_counter()
         try:
             bsdf = solve(rung)
