@@ -83,12 +83,12 @@ def relative_errors(table: np.ndarray, reference: np.ndarray) -> np.ndarray:
 def scaled(scene: Scene, n: int, md: int, scale: float, ms: int | None = None) -> Scene:
     """``scene`` with ``n`` and ``md`` set to ``scale`` times the given ones (``n`` even, at
     least 8; ``md`` at least 1), and for an anisotropic solve (``ms`` > 0) its coupling
-    half-width too (:func:`scaled_ms`).
+    half-width to :func:`scaled_ms` of it.
 
-    The coupled modes converge faster than ``n`` but their truncation, at the planner's
-    ``ms``, dominates the error of anisotropic stacks (``benchmarks/accuracy_aniso.txt``): a
-    companion on the same ``ms`` cannot see it, a rung of the ladder on the same ``ms`` cannot
-    reduce it. ``ms`` = 0 or None (isotropic) leaves the scene's ``ms`` as it is."""
+    The truncation of the coupled modes at the planner's ``ms`` dominates the error of
+    anisotropic stacks (``benchmarks/aniso_error_sources.txt``): a companion on the same
+    ``ms`` cannot see it, and a rung of the ladder on the same ``ms`` cannot reduce it.
+    ``ms`` = 0 or None (isotropic) leaves the scene's ``ms`` as it is."""
     n = max(8, 2 * int(round(n * scale / 2.0)))
     md = max(1, int(round(md * scale)))
     disc = replace(scene.discretization, n=n, md=md, tol=None)
@@ -98,10 +98,16 @@ def scaled(scene: Scene, n: int, md: int, scale: float, ms: int | None = None) -
 
 
 def scaled_ms(ms: int, scale: float) -> int:
-    """``ms`` scaled like ``n`` and ``md``, at least 1: the planner's ``ms`` grows in
-    proportion to the roughness ratio (Zeltner & Jakob 2018, eq. (25)), so the same scale
-    of it is the same relative refinement of the azimuthal coupling for any anisotropy."""
-    return max(1, int(round(ms * scale)))
+    """The coupling half-width of a companion or rung at ``scale``: ``ms sqrt(scale)``,
+    rounded, at least 1.
+
+    The relative L2 error of keeping ``|s| <= m`` falls like ``exp(-K m / ms)`` near the
+    planner's ``ms`` (Zeltner & Jakob 2018, eq. (25)), with ``K`` = 4.2-5.4 for roughness
+    ratios 2-6 (``benchmarks/aniso_ms_decay.txt``). Scaling ``m`` by ``sqrt(scale)`` then
+    multiplies that error by ``exp(K (1 - sqrt(scale)))``: about 2 at ``scale = 1/sqrt 2``
+    and 4 at ``1/2`` for ``K`` = 4.7, what scaling ``n`` and ``md`` does to an error falling
+    like ``n^-2``, which the weights of :data:`COMPANIONS` assume."""
+    return max(1, int(round(ms * math.sqrt(scale))))
 
 
 def estimate(bsdf, companions: list, tables: list | None = None) -> dict:
