@@ -89,12 +89,34 @@ def relative_errors(table: np.ndarray, reference: np.ndarray) -> np.ndarray:
     return np.sqrt(num / np.where(den > 0, den, 1.0))
 
 
-def scaled(scene: Scene, n: int, md: int, scale: float) -> Scene:
+def scaled(scene: Scene, n: int, md: int, scale: float, ms: int | None = None) -> Scene:
     """``scene`` with ``n`` and ``md`` set to ``scale`` times the given ones (``n`` even, at
-    least 8; ``md`` at least 1)."""
+    least 8; ``md`` at least 1), and for an anisotropic solve (``ms`` > 0) its coupling
+    half-width to :func:`scaled_ms` of it.
+
+    The truncation of the coupled modes at the planner's ``ms`` dominates the error of
+    anisotropic stacks (``benchmarks/aniso_error_sources.txt``): a companion on the same
+    ``ms`` cannot see it, and a rung of the ladder on the same ``ms`` cannot reduce it.
+    ``ms`` = 0 or None (isotropic) leaves the scene's ``ms`` as it is."""
     n = max(8, 2 * int(round(n * scale / 2.0)))
     md = max(1, int(round(md * scale)))
-    return replace(scene, discretization=replace(scene.discretization, n=n, md=md, tol=None))
+    disc = replace(scene.discretization, n=n, md=md, tol=None)
+    if ms:
+        disc = replace(disc, ms=scaled_ms(ms, scale))
+    return replace(scene, discretization=disc)
+
+
+def scaled_ms(ms: int, scale: float) -> int:
+    """The coupling half-width of a companion or rung at ``scale``: ``ms sqrt(scale)``,
+    rounded, at least 1.
+
+    The relative L2 error of keeping ``|s| <= m`` falls like ``exp(-K m / ms)`` near the
+    planner's ``ms`` (Zeltner & Jakob 2018, eq. (25)), with ``K`` = 4.2-5.4 for roughness
+    ratios 2-6 (``benchmarks/aniso_ms_decay.txt``). Scaling ``m`` by ``sqrt(scale)`` then
+    multiplies that error by ``exp(K (1 - sqrt(scale)))``: about 2 at ``scale = 1/sqrt 2``
+    and 4 at ``1/2`` for ``K`` = 4.7, what scaling ``n`` and ``md`` does to an error falling
+    like ``n^-2``, which the weights of :data:`COMPANIONS` assume."""
+    return max(1, int(round(ms * math.sqrt(scale))))
 
 
 def estimate(bsdf, companions: list, tables: list | None = None) -> dict:
@@ -147,7 +169,7 @@ def with_estimate(scene: Scene, solve, bsdf):
     t0 = time.perf_counter()
     companions = []
     for ratio, _ in COMPANIONS:
-        coarser = scaled(scene, bsdf.info["n"], bsdf.info["md"], ratio)
+        coarser = scaled(scene, bsdf.info["n"], bsdf.info["md"], ratio, bsdf.info.get("ms"))
         try:
             companions.append(solve(coarser))
         except InfeasibleError as exc:
@@ -194,7 +216,7 @@ def solve_to_tolerance(scene: Scene, tol: float, solve, log=None):
     # the last rungs solved and their bin tables (each rung is the companion of the next two)
     ladder, solved, tables, best = [], [], [], None
     for scale in LADDER:
-        rung = scaled(scene, plan.n, plan.md, scale)
+        rung = scaled(scene, plan.n, plan.md, scale, plan.ms)
         t0 = time.perf_counter()
         try:
             bsdf = solve(rung)
