@@ -21,11 +21,12 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from .. import accuracy
 from ..errors import LayersimError
 from ..plan import make_plan
 from ..scene import Scene
@@ -73,11 +74,6 @@ def montecarlo_module():
     except ImportError:
         return None
     return montecarlo
-
-
-def _rescaled(scene: Scene, n: int, md: int) -> Scene:
-    n = max(4, int(round(n / 2)) * 2)
-    return replace(scene, discretization=replace(scene.discretization, n=n, md=max(1, md)))
 
 
 def _solver_bins(bsdf, s: Settings) -> tuple[np.ndarray, np.ndarray]:
@@ -164,7 +160,9 @@ def run_scene(path: Path, s: Settings, log=print) -> dict:
         plan = make_plan(scene)
         n0, md0 = plan.n, plan.md
         t0 = time.perf_counter()
-        ref = solve(_rescaled(scene, s.reference_scale * n0, int(s.reference_scale * md0)))
+        # the coupled modes' ms grows too: its truncation is the larger error of anisotropic
+        # stacks (layersim.accuracy.scaled)
+        ref = solve(accuracy.scaled(scene, n0, md0, s.reference_scale, plan.ms))
         ref_bins, ref_alb = _solver_bins(ref, s)
         out["reference"] = {"kind": "solver", "n": ref.info["n"], "md": ref.info["md"],
                             "seconds": time.perf_counter() - t0}
@@ -198,7 +196,7 @@ def run_scene(path: Path, s: Settings, log=print) -> dict:
     # ---- solver ladder --------------------------------------------------------------
     if n0 is not None:
         for scale in s.scales:
-            sc = _rescaled(scene, scale * n0, int(math.ceil(scale * md0)))
+            sc = accuracy.scaled(scene, n0, md0, scale, plan.ms)
             try:
                 t0 = time.perf_counter()
                 b = solve(sc)
