@@ -4,12 +4,15 @@ Monte Carlo reference at 1e9 paths: per scene of ``benchmarks/scenes/`` and inci
 floor E / N added), the relative L2 difference of bin energies and the albedo difference in
 standard errors; with the solve's error estimate (``layersim.accuracy``) beside it.
 
-Usage (on a GPU machine): python benchmarks/plans_vs_gpu_mc.py [paths] [backend] [SCENE ...]
-(default 1e9, warp-cuda, every scene). Output of a run on an NVIDIA H100:
-benchmarks/plans_vs_gpu_mc.txt.
+Usage (on a GPU machine): python benchmarks/plans_vs_gpu_mc.py [--tol T ...] [paths] [backend]
+[SCENE[:KEY=VALUE,...] ...] (default 1e9, warp-cuda, every scene, tol 1e-3; ``--tol 0``: the
+default plan only). ``KEY=VALUE`` set ``[discretization]`` fields over the planner's (e.g.
+``additive_validation:ms=8`` keeps the planned n and md and widens the coupled modes). Output
+of runs on an NVIDIA H100: benchmarks/plans_vs_gpu_mc.txt.
 """
-import sys
+import argparse
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -48,14 +51,36 @@ def compare(bsdf, scene, paths: int, backend: str, seed: int) -> str:
     return " | ".join(rows)
 
 
+def load(spec: str):
+    """The scene of ``NAME[:KEY=VALUE,...]``, with the planner's n and md and the given
+    [discretization] fields."""
+    name, _, fields = spec.partition(":")
+    scene = layersim.Scene.from_toml(SCENES / f"{name}.toml")
+    if not fields:
+        return scene
+    plan = layersim.make_plan(scene, refuse=False)
+    disc = {"n": plan.n, "md": plan.md}
+    disc.update({k: int(v) for k, v in (f.split("=") for f in fields.split(","))})
+    return replace(scene, discretization=replace(scene.discretization, **disc))
+
+
 def main() -> None:
-    paths = int(float(sys.argv[1])) if len(sys.argv) > 1 else 1_000_000_000
-    backend = sys.argv[2] if len(sys.argv) > 2 else "warp-cuda"
-    names = sys.argv[3:] or sorted(p.stem for p in SCENES.glob("*.toml"))
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--tol", type=float, action="append")
+    parser.add_argument("paths", nargs="?", default="1e9")
+    parser.add_argument("backend", nargs="?", default="warp-cuda")
+    parser.add_argument("scenes", nargs="*")
+    args = parser.parse_args()
+    paths = int(float(args.paths))
+    backend = args.backend
+    names = args.scenes or sorted(p.stem for p in SCENES.glob("*.toml"))
+    tols = [t for t in (args.tol or [1e-3]) if t > 0]
     print(f"# {paths:.0e} paths per direction, backend {backend}; bins 18 x 36 per side")
     for name in names:
-        scene = layersim.Scene.from_toml(SCENES / f"{name}.toml")
-        for label, kw in (("default", {"error_estimate": True}), ("tol 1e-3", {"tol": 1e-3})):
+        scene = load(name)
+        runs = [("default", {"error_estimate": True})]
+        runs += [(f"tol {t:g}", {"tol": t}) for t in tols]
+        for label, kw in runs:
             t0 = time.perf_counter()
             try:
                 bsdf = layersim.solve(scene, **kw)
