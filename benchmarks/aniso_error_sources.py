@@ -1,8 +1,10 @@
 """Which discretisation parameter leaves the error of an anisotropic (coupled-mode) solve.
 
 Solves ``benchmarks/scenes/additive_validation.toml`` (Zeltner & Jakob 2018, sec. 5.5: a
-dielectric of alpha (0.1, 0.2) over gold of alpha (0.2, 0.1)) on the planner's default
-discretisation and with one parameter refined at a time:
+dielectric of alpha (0.1, 0.2) over gold of alpha (0.2, 0.1)) on the planner's n and md with
+the coupling half-width of the 1 % rule (Zeltner & Jakob 2018, eq. (25):
+``layersim.aniso.plan.ms_one_percent``, the planner's ``ms`` less ``MS_MARGIN``; "default" below)
+and with one parameter refined at a time:
 
 * ``n`` (ordinates) x sqrt 2 and x 2, ``md`` (Fourier orders in the azimuth difference) x 2,
 * ``ms`` (coupling half-width, modes -ms..ms of the azimuth sum) +1, +2, +4,
@@ -68,6 +70,9 @@ def albedos(bsdf) -> np.ndarray:
 def main() -> None:
     paths = int(float(sys.argv[2])) if sys.argv[1:2] == ["--mc"] else 0
     scene = layersim.Scene.from_toml(SCENE)
+    plan = layersim.make_plan(scene)
+    scene = replace(scene, discretization=replace(
+        scene.discretization, n=plan.n, md=plan.md, ms=plan.ms - aplan.MS_MARGIN))
     base = layersim.solve(scene)
     n, md, ms = base.info["n"], base.info["md"], base.info["ms"]
     disc = scene.discretization

@@ -37,10 +37,12 @@ import resource
 import subprocess
 import sys
 import time
+from types import SimpleNamespace
 
 import layersim
 from layersim import solver
 from layersim.aniso import AnisoOperator
+from layersim.aniso import plan as aplan
 from layersim.config import settings
 from layersim.outofcore import memory
 
@@ -59,6 +61,14 @@ ROWS = [  # (top alpha_u, alpha_v), (bottom alpha_u, alpha_v), paper: total s, a
 OVERRIDES = {6: {"n": 224, "md": 300}}
 
 
+def paper_ms(top, bottom) -> int:
+    """The coupling half-width of the paper's solves: its eq. (25) for the more anisotropic
+    layer (``layersim.aniso.plan.ms_one_percent``), without the planner's margin, so that the
+    timings compare like with like; 0 for the isotropic rows."""
+    layers = [SimpleNamespace(alpha_u=a[0], alpha_v=a[1]) for a in (top, bottom)]
+    return max(aplan.ms_one_percent(layer) for layer in layers)
+
+
 def _density(op) -> float:
     """Nonzeros over all entries of the coupled representation (percent)."""
     if not isinstance(op, AnisoOperator):
@@ -71,8 +81,9 @@ def run_row(k: int) -> dict:
     top, bottom = ROWS[k - 1][:2]
     scene = {"layer": [{"kind": "dielectric", "ior": 1.5, "roughness": list(top)},
                        {"kind": "conductor", "ior": GOLD, "roughness": list(bottom)}]}
-    if k in OVERRIDES:
-        scene["discretization"] = dict(OVERRIDES[k])
+    scene["discretization"] = dict(OVERRIDES.get(k, {}))
+    if paper_ms(top, bottom):
+        scene["discretization"]["ms"] = paper_ms(top, bottom)
     # warm up Warp (kernel modules load once per process; compiled modules are cached on disk)
     layersim.solve(layersim.Scene.from_dict({"layer": [
         {"kind": "conductor", "ior": [0.2, 3.0], "roughness": [0.3, 0.2]}],

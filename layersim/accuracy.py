@@ -111,11 +111,11 @@ def scaled_ms(ms: int, scale: float) -> int:
     rounded, at least 1.
 
     The relative L2 error of keeping ``|s| <= m`` falls like ``exp(-K m / ms)`` near the
-    planner's ``ms`` (Zeltner & Jakob 2018, eq. (25)), with ``K`` = 4.2-5.4 for roughness
-    ratios 2-6 (``benchmarks/aniso_ms_decay.txt``). Scaling ``m`` by ``sqrt(scale)`` then
-    multiplies that error by ``exp(K (1 - sqrt(scale)))``: about 2 at ``scale = 1/sqrt 2``
-    and 4 at ``1/2`` for ``K`` = 4.7, what scaling ``n`` and ``md`` does to an error falling
-    like ``n^-2``, which the weights of :data:`COMPANIONS` assume."""
+    planner's ``ms`` (Zeltner & Jakob 2018, eq. (25) plus ``layersim.aniso.plan.MS_MARGIN``),
+    with ``K`` = 5.4-6.8 for roughness ratios 2-6 (``benchmarks/aniso_ms_decay.txt``).
+    Scaling ``m`` by ``sqrt(scale)`` then multiplies that error by ``exp(K (1 - sqrt(scale)))``:
+    2-3 at ``scale = 1/sqrt 2`` and 5-7 at ``1/2``, near what scaling ``n`` and ``md`` does to an
+    error falling like ``n^-2``, which the weights of :data:`COMPANIONS` assume."""
     return max(1, int(round(ms * math.sqrt(scale))))
 
 

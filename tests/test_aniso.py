@@ -760,7 +760,8 @@ def test_plan_chooses_the_representation_and_the_coupling_width():
         {"kind": "dielectric", "ior": 1.5, "roughness": 0.2},
         {"kind": "conductor", "ior": [0.2, 3.0], "roughness": [0.1, 0.3]}]}))
     assert aniso.representation == "anisotropic"
-    assert aniso.ms == int(np.ceil(2.58 * 3 - 1.82))          # Zeltner & Jakob 2018, eq. (25), ratio 3
+    # Zeltner & Jakob 2018, eq. (25) at ratio 3 (1 % of the coefficients), and the margin
+    assert aniso.ms == int(np.ceil(2.58 * 3 - 1.82)) + 2
     assert [lp.ms for lp in aniso.layers] == [0, aniso.ms]
     text = aniso.report()
     assert "coupled modes" in text and "ratio 3" in text and f"ms = {aniso.ms}" in text
@@ -776,7 +777,7 @@ def test_memory_limit_refuses_a_coupled_plan_and_says_what_to_reduce():
         {"kind": "dielectric", "ior": 1.5, "roughness": 0.1},
         {"kind": "conductor", "ior": [0.2, 3.0], "roughness": [0.05, 0.15]}]})
     with configure(max_memory=2_000_000), \
-            pytest.raises(InfeasibleError, match="ms = 6.*GiB.*ms in \\[discretization\\]"):
+            pytest.raises(InfeasibleError, match="ms = 8.*GiB.*ms in \\[discretization\\]"):
         layersim.make_plan(scene)
 
 
