@@ -105,6 +105,17 @@ def _phi_breaks(wi: wp.vec3d, cos_c: wp.float64):
     return b, pi - b
 
 
+@wp.func
+def _panel_end(panel: int, b0: wp.float64, b1: wp.float64, last: wp.float64):
+    """Upper end of panel 0, 1 or 2 of an interval split at ``b0 <= b1`` and ending at
+    ``last`` (a panel may be empty)."""
+    if panel == 0:
+        return b0
+    if panel == 1:
+        return b1
+    return last
+
+
 @wp.kernel
 def _fgd_kernel(mu: wp.array(dtype=wp.float64), alpha: wp.array(dtype=wp.float64),
                 eta: wp.array(dtype=wp.float64), k: wp.array(dtype=wp.float64),
@@ -135,11 +146,7 @@ def _fgd_kernel(mu: wp.array(dtype=wp.float64), alpha: wp.array(dtype=wp.float64
     p0, p1 = _phi_breaks(wi, cos_c)
     plo = zero
     for ppanel in range(3):
-        phi_hi = wp.float64(wp.pi)
-        if ppanel == 0:
-            phi_hi = p0
-        elif ppanel == 1:
-            phi_hi = p1
+        phi_hi = _panel_end(ppanel, p0, p1, wp.float64(wp.pi))
         if phi_hi > plo:
             for j in range(p_x.shape[0]):
                 phi = plo + (phi_hi - plo) * p_x[j]
@@ -147,11 +154,7 @@ def _fgd_kernel(mu: wp.array(dtype=wp.float64), alpha: wp.array(dtype=wp.float64
                 u0, u1 = _tir_breaks(wi, a, phi, cos_c)
                 lo = zero
                 for panel in range(3):
-                    hi = one
-                    if panel == 0:
-                        hi = u0
-                    elif panel == 1:
-                        hi = u1
+                    hi = _panel_end(panel, u0, u1, one)
                     if hi > lo:
                         for i in range(u_x.shape[0]):
                             u = lo + (hi - lo) * u_x[i]
