@@ -158,16 +158,23 @@ def microfacet_eval_tabulated(wi: Any, wo: Any, eta: Any, k: Any, tab: Any, off:
 
 
 @wp.func
+def cdf_start(tab: Any, off: int):
+    """Index of the marginal CDF of the theta cells in the table at ``off``: after the
+    counts, ``theta``, ``phi``, ``D`` and ``S`` (module docstring)."""
+    n_t = int(tab[off])
+    n_p = int(tab[off + 1])
+    return off + HEAD + n_t + n_p + n_t * n_p + int(tab[off + 2]) * int(tab[off + 3])
+
+
+@wp.func
 def cell_pdf(tab: Any, off: int, i: int, j: int, theta: Any):
     """Density (1/sr) of the normals drawn by :func:`sample_normal` in cell ``(i, j)`` at
     elevation ``theta`` (the cell's probability over its ``sin^2``-by-``phi`` area)."""
     n_t = int(tab[off])
     n_p = int(tab[off + 1])
-    n_st = int(tab[off + 2])
-    n_sp = int(tab[off + 3])
     t0 = off + HEAD
     p0 = t0 + n_t
-    c0 = p0 + n_p + n_t * n_p + n_st * n_sp
+    c0 = cdf_start(tab, off)
     r0 = c0 + n_t + i * (n_p + 1)
     prob = (tab[c0 + i + 1] - tab[c0 + i]) * (tab[r0 + j + 1] - tab[r0 + j])
     sa = wp.sin(tab[t0 + i])
@@ -185,11 +192,9 @@ def sample_normal(tab: Any, off: int, u1: Any, u2: Any):
     Returns ``(m, pdf)``: the unit normal (``m.z > 0``) and its density per steradian."""
     n_t = int(tab[off])
     n_p = int(tab[off + 1])
-    n_st = int(tab[off + 2])
-    n_sp = int(tab[off + 3])
     t0 = off + HEAD
     p0 = t0 + n_t
-    c0 = p0 + n_p + n_t * n_p + n_st * n_sp
+    c0 = cdf_start(tab, off)
     zero = u1 * type(u1)(0.0)
     one = type(u1)(1.0)
     i = find_node(tab, c0, n_t - 1, u1)
