@@ -37,7 +37,7 @@ SCENES = Path(__file__).parent / "scenes"
 DEFAULT = ("vandehulst_slab", "dusty_gold", "coated_gold", "coated_hg_diffuse")
 TOLS = (1e-2, 1e-3, 1e-4)
 #: Anisotropic (coupled-mode) scenes: the additive validation stack of Zeltner & Jakob 2018,
-#: sec. 5.5, and a single brushed gold conductor (Beckmann, alpha 0.1 x 0.2, ms = 4). The
+#: sec. 5.5, and a single brushed gold conductor (Beckmann, alpha 0.1 x 0.2). The
 #: stack's references at twice n, md and ms take minutes each on a 2-core machine, so it is
 #: measured at the default plan and tol 1e-2 (whose rungs are coarser than the default) only.
 ANISO = {
