@@ -18,13 +18,11 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import os
-import tempfile
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import settings
+from .. import tablecache
 from ..kernels import compensation as kcomp
 from ..kernels.physics import DISTRIBUTION_CODES
 from ..kernels.runtime import ensure_init
@@ -105,12 +103,9 @@ def _compute(eta: float, k: float, alpha: float, dist: str, unit_fresnel: bool) 
     return Albedos(*out)
 
 
-def _cache_path(key: str) -> str | None:
-    root = settings().cache_dir
-    if root is None:
-        return None
+def _cache_path(key: str):
     digest = hashlib.sha256(key.encode()).hexdigest()[:24]
-    return os.path.join(root, "compensation", f"albedo-{digest}.npz")
+    return tablecache.path("compensation", f"albedo-{digest}.npz")
 
 
 @functools.lru_cache(maxsize=256)
@@ -123,32 +118,14 @@ def albedos(eta: float, k: float, alpha: float, dist: str,
     key = (f"v{VERSION} n{NODES} u{N_U} p{N_PHI} h{MU_HORIZON!r} eta{eta!r} k{k!r} "
            f"a{alpha!r} {dist} unit{int(unit_fresnel)}")
     path = _cache_path(key)
-    if path is not None and os.path.exists(path):
-        try:
-            with np.load(path) as d:
-                if str(d["key"]) == key:
-                    return Albedos(*(d[f] for f in ("r_top", "t_top", "r_bottom",
-                                                    "t_bottom")))
-        except (OSError, ValueError, KeyError):
-            pass                  # unreadable or foreign file: recompute and replace it
+    fields = ("r_top", "t_top", "r_bottom", "t_bottom")
+    stored = tablecache.read(path)
+    # a file of another key (or of missing fields) is recomputed and replaced
+    if stored is not None and str(stored.get("key")) == key and all(f in stored for f in fields):
+        return Albedos(*(stored[f] for f in fields))
     tab = _compute(eta, k, alpha, dist, unit_fresnel)
-    if path is not None:
-        _store(path, key, tab)
+    tablecache.write(path, key=key, **{f: getattr(tab, f) for f in fields})
     return tab
-
-
-def _store(path: str, key: str, tab: Albedos) -> None:
-    """Write atomically (a temporary file renamed into place). The cache only saves time: a
-    directory that cannot be written leaves the tables in memory."""
-    try:
-        os.makedirs(os.path.dirname(path), exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path), suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, key=key, r_top=tab.r_top, t_top=tab.t_top, r_bottom=tab.r_bottom,
-                     t_bottom=tab.t_bottom)
-        os.replace(tmp, path)
-    except OSError:
-        pass
 
 
 @functools.lru_cache(maxsize=256)

@@ -17,14 +17,12 @@ takes the value at 1/32).
 from __future__ import annotations
 
 import functools
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
-from ..config import settings
+from .. import tablecache
 
 #: Table axes: incidence cosine, GGX roughness, log of the relative index.
 MU = np.linspace(1.0 / 32.0, 1.0, 32)
@@ -41,12 +39,8 @@ class FGDRangeError(ValueError):
 
 
 def _cache_path() -> Path | None:
-    root = settings().cache_dir
-    if root is None:
-        return None
-    name = (f"fgd_ggx_v{_VERSION}_{MU.size}x{ALPHA.size}x{LOG_ETA.size}"
-            f"_q{NODES[0]}x{NODES[1]}.npz")
-    return Path(root) / name
+    return tablecache.path(f"fgd_ggx_v{_VERSION}_{MU.size}x{ALPHA.size}x{LOG_ETA.size}"
+                           f"_q{NODES[0]}x{NODES[1]}.npz")
 
 
 def build_table() -> np.ndarray:
@@ -60,21 +54,12 @@ def build_table() -> np.ndarray:
 @functools.lru_cache(maxsize=None)
 def _table_for(cache: str | None) -> np.ndarray:
     path = Path(cache) if cache else None
-    if path is not None and path.exists():
-        with np.load(path) as data:
-            table = data["fgd"]
-        if table.shape == (MU.size, ALPHA.size, LOG_ETA.size):
-            return table
+    stored = tablecache.read(path)
+    if stored is not None and "fgd" in stored \
+            and stored["fgd"].shape == (MU.size, ALPHA.size, LOG_ETA.size):
+        return stored["fgd"]
     table = build_table()
-    if path is not None:
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, fgd=table, mu=MU, alpha=ALPHA, log_eta=LOG_ETA)
-            os.replace(tmp, path)
-        except OSError:
-            pass  # a read-only cache costs time, not correctness
+    tablecache.write(path, fgd=table, mu=MU, alpha=ALPHA, log_eta=LOG_ETA)
     return table
 
 
