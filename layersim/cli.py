@@ -245,6 +245,7 @@ def cmd_info(args) -> int:
 def cmd_bench(args) -> int:
     from . import bench      # imported when used: the benchmark report needs matplotlib
     from .montecarlo import BACKENDS, available_backends
+    from .montecarlo.backends import why_unavailable
     backends = args.backend or ["auto"]
     unknown = [b for b in backends if b not in BACKENDS]
     if unknown:
@@ -253,8 +254,9 @@ def cmd_bench(args) -> int:
     here = available_backends()
     missing = [b for b in backends if b != "auto" and b not in here]
     if missing:
+        reason = why_unavailable(missing[0]) or "not available"
         raise ValueError(f"--backend {missing[0]}: not available on this machine (available: "
-                         f"{', '.join(here)})")
+                         f"{', '.join(here)}): {reason}")
     out = Path(args.out)
     # the report creates the folder and its parents: the nearest existing one must take them
     base = next(p for p in [out, *out.absolute().parents] if p.exists())

@@ -51,3 +51,9 @@ class OperatorError(LayersimError, ValueError):
 
 class FileFormatError(LayersimError, ValueError):
     """A file is not a valid layersim/BSDF file (wrong magic, truncated, inconsistent sizes)."""
+
+
+class BackendUnavailableError(LayersimError, RuntimeError):
+    """A Monte Carlo backend is not installed, has no device, or its device cannot build the
+    walk; the message names the device and the driver's reason, and says what to install or
+    which backend to use instead."""

@@ -9,10 +9,13 @@ Backends
 --------
 ``"warp-cpu"``   Warp's CPU device (always present; runs a launch on one core).
 ``"warp-cuda"``  Warp on the first CUDA device.
-``"opencl"``     the OpenCL device named by ``$PYOPENCL_CTX`` if set, else the first GPU of any
-                 platform, else the first device (PoCL's CPU device uses every core).
+``"opencl"``     the OpenCL device named by ``$PYOPENCL_CTX`` if set, else the first GPU that
+                 can build the walk, else the first device that can (PoCL's CPU device uses
+                 every core); devices are checked once per process by
+                 :mod:`.opencl_device`.
 ``"auto"``       the fastest one present: warp-cuda; else opencl on a GPU, or on a CPU device
-                 with at least :data:`OPENCL_CPU_MIN_UNITS` compute units; else warp-cpu.
+                 with at least :data:`OPENCL_CPU_MIN_UNITS` compute units, that can build the
+                 walk; else warp-cpu.
 
 Why the CPU threshold: PoCL's float32 math library is several times slower than Warp's, so per
 core PoCL reaches well under half of warp-cpu's paths/s (``benchmarks/mc_throughput.py``;
@@ -22,20 +25,20 @@ cores; four keeps a margin.
 
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import LayersimError
+from ..errors import BackendUnavailableError
 from ..kernels import walk
 from ..kernels.opencl_codegen import Program, parameters
 from ..kernels.runtime import ensure_init
+from .opencl_device import build_options, device_label, opencl_device
 from .stack import StackArrays
 
 __all__ = ["BACKENDS", "BackendUnavailableError", "Launch", "available_backends", "make_runner",
-           "resolve_backend"]
+           "resolve_backend", "why_unavailable"]
 
 BACKENDS = ("auto", "warp-cpu", "warp-cuda", "opencl")
 #: An OpenCL CPU device needs this many compute units to be preferred over warp-cpu by "auto".
@@ -43,11 +46,6 @@ OPENCL_CPU_MIN_UNITS = 4
 
 #: Kernel parameters of the walk, in order (the thread index excluded).
 _PARAMS = [name for name, _ in parameters(walk.walk_thread)[1:]]
-
-
-class BackendUnavailableError(LayersimError, RuntimeError):
-    """The requested backend is not installed or has no device; the message says what to
-    install or which backend to use instead."""
 
 
 @dataclass(frozen=True)
@@ -78,36 +76,13 @@ def _cuda_count() -> int:
     return wp.get_cuda_device_count()
 
 
-def _opencl_device():
-    """The OpenCL device to use, or raise BackendUnavailableError saying what to install."""
-    try:
-        import pyopencl as cl
-    except ImportError as exc:
-        raise BackendUnavailableError(
-            "backend 'opencl' needs pyopencl: pip install pyopencl pocl-binary-distribution "
-            "(PoCL provides a CPU device where no vendor OpenCL driver is installed)") from exc
-    if os.environ.get("PYOPENCL_CTX"):
-        return cl.create_some_context(interactive=False).devices[0]
-    try:
-        platforms = cl.get_platforms()
-    except cl.Error:
-        platforms = []
-    devices = [d for p in platforms for d in p.get_devices()]
-    if not devices:
-        raise BackendUnavailableError(
-            "backend 'opencl': no OpenCL device found; install a vendor OpenCL driver or "
-            "`pip install pocl-binary-distribution` for a CPU device, or use backend='warp-cpu'")
-    gpus = [d for d in devices if d.type & cl.device_type.GPU]
-    return (gpus or devices)[0]
-
-
 def available_backends() -> list[str]:
     """Backends that can run here, fastest first."""
     out = []
     if _cuda_count() > 0:
         out.append("warp-cuda")
     try:
-        device = _opencl_device()
+        device = opencl_device()
     except BackendUnavailableError:
         device = None
     fast_opencl = device is not None and (
@@ -118,6 +93,19 @@ def available_backends() -> list[str]:
     if device is not None and not fast_opencl:
         out.append("opencl")
     return out
+
+
+def why_unavailable(backend: str) -> str | None:
+    """Why a backend cannot run here (one line naming the device and the reason), or None."""
+    try:
+        if backend == "opencl":
+            opencl_device()
+        elif backend == "warp-cuda" and _cuda_count() == 0:
+            return ("backend 'warp-cuda': Warp sees no CUDA device; install an NVIDIA driver "
+                    "(and a CUDA build of warp-lang), or use backend='opencl' or 'warp-cpu'")
+    except BackendUnavailableError as exc:
+        return str(exc)
+    return None
 
 
 def _is_cpu(device) -> bool:
@@ -169,10 +157,9 @@ class _WarpRunner:
         import warp as wp
         self.wp = wp
         if cuda:
-            if _cuda_count() == 0:
-                raise BackendUnavailableError(
-                    "backend 'warp-cuda': Warp sees no CUDA device; install an NVIDIA driver "
-                    "(and a CUDA build of warp-lang), or use backend='opencl' or 'warp-cpu'")
+            reason = why_unavailable("warp-cuda")
+            if reason:
+                raise BackendUnavailableError(reason)
             self.device = wp.get_device("cuda")
         else:
             self.device = wp.get_device("cpu")
@@ -229,19 +216,14 @@ class _OpenCLRunner:
     def __init__(self, launch: Launch):
         import pyopencl as cl
         self.cl = cl
-        device = _opencl_device()
-        if "cl_khr_int64_base_atomics" not in device.extensions:
-            raise BackendUnavailableError(
-                f"backend 'opencl': device {device.name!r} lacks cl_khr_int64_base_atomics, "
-                "which the deterministic fixed-point tallies need; use backend='warp-cpu' or "
-                "another OpenCL device ($PYOPENCL_CTX)")
+        device = opencl_device()
         self.name = "opencl"
-        self.device_name = f"{device.name.strip()} ({device.platform.name.strip()})"
+        self.device_name = device_label(device)
         self.ctx = _context_for(device)
         self.queue = cl.CommandQueue(self.ctx)
         key = id(self.ctx)
         if key not in _KERNELS:
-            program = cl.Program(self.ctx, opencl_source()).build(options=_build_options(device))
+            program = cl.Program(self.ctx, opencl_source()).build(options=build_options(device))
             _KERNELS[key] = cl.Kernel(program, "walk")
         self.kernel = _KERNELS[key]
         gpu = bool(device.type & cl.device_type.GPU)
@@ -293,18 +275,6 @@ class _OpenCLRunner:
 
 
 _CONTEXTS: dict = {}
-
-
-def _build_options(device) -> list:
-    """OpenCL build options: correctly rounded single-precision divide and sqrt where the device
-    offers them. OpenCL's default allows 2.5-3 ulp there (Warp's CUDA code is correctly rounded),
-    which biases the exit azimuths of walks at normal incidence on NVIDIA GPUs (bins beyond 4
-    sigma from warp-cuda at 1e7 paths); the option costs some throughput on the coated scenes
-    (``benchmarks/mc_throughput.py``; figures in docs/performance.md)."""
-    import pyopencl as cl
-    if device.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT:
-        return ["-cl-fp32-correctly-rounded-divide-sqrt"]
-    return []
 
 
 def _context_for(device):

@@ -44,18 +44,14 @@ def rough_glass():
         {"kind": "dielectric", "ior": 1.5, "roughness": 0.3}]})
     return layersim.solve(scene)
 
-def _opencl_device():
-    try:
-        import pyopencl as cl
-        devices = [d for p in cl.get_platforms() for d in p.get_devices()]
-    except Exception:                                       # no ICD loader, no platform
-        return None
-    return devices[0] if devices else None
-
 
 @pytest.fixture(scope="session")
 def cl_device():
-    dev = _opencl_device()
-    if dev is None:
-        pytest.skip("no OpenCL device (pip install pocl-binary-distribution)")
-    return dev
+    """The OpenCL device the walk runs on; the tests that need it skip, with the driver's reason,
+    only where no device can build (layersim.montecarlo.opencl_device)."""
+    from layersim.montecarlo import BackendUnavailableError
+    from layersim.montecarlo.opencl_device import opencl_device
+    try:
+        return opencl_device()
+    except BackendUnavailableError as exc:
+        pytest.skip(str(exc))

@@ -132,7 +132,7 @@ def test_backend_selection_and_errors():
     names = mc.available_backends()
     assert "warp-cpu" in names
     if "opencl" in names:
-        device = backends._opencl_device()
+        device = backends.opencl_device()
         small_cpu = backends._is_cpu(device) and \
             device.max_compute_units < backends.OPENCL_CPU_MIN_UNITS
         # on a CPU with few cores PoCL is slower than warp-cpu: "auto" must not pick it

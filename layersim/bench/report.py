@@ -30,12 +30,9 @@ def machine_info(command: str) -> dict:
             info["gpu"] = [str(d) for d in warp.get_cuda_devices()]
     except Exception:  # pragma: no cover - warp is a dependency; keep the report robust
         pass
-    try:
-        import pyopencl as cl
-        info["opencl"] = [f"{p.name}: " + ", ".join(d.name for d in p.get_devices())
-                          for p in cl.get_platforms()]
-    except Exception:
-        info["opencl"] = []
+    from ..montecarlo.opencl_device import checked_devices
+    info["opencl"] = [c.label + ("" if c.ok else f": cannot build ({c.reason})")
+                      for c in checked_devices()]
     try:
         info["layersim_commit"] = subprocess.run(
             ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
