@@ -188,6 +188,71 @@ def test_an_unwritable_output_is_refused_before_the_solve(files, capsys, monkeyp
     assert not (tmp_path / "nonexistent").exists()
 
 
+def _unwritable_places(tmp_path):
+    """Output places where no file can be created, as (path factory, words of the reason):
+    a virtual file system (refuses files that the permission bits allow, also to root), a
+    folder that does not exist, and a "folder" that is a file."""
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    places = [(lambda name: tmp_path / "nonexistent" / name, ("does not exist",)),
+              (lambda name: blocker / name, ("is a file, not a folder",))]
+    if Path("/proc/self").is_dir():
+        places.append((lambda name: Path("/proc") / name, ("cannot write there",)))
+    return places
+
+
+@pytest.mark.parametrize("command, option, name", [
+    (["solve", "{d}/glass.toml"], "-o", "x.lsim"),
+    (["export", "{d}/glass.toml"], "-o", "x.bsdf"),
+    (["plot", "{d}/glass.toml", "--wi", "30,0"], "-o", "x.png"),
+    (["plot", "{d}/glass.toml", "--blocks"], "-o", "x.png"),
+    (["subtract", "{d}/glass.lsim", "{d}/glass.lsim", "--side", "top"], "-o", "x.lsim"),
+    (["design", "{examples}/design_coated_copper.toml"], "-o", "x.toml"),
+    (["design", "{examples}/design_coated_copper.toml"], "--plot", "x.png"),
+    (["fit-ndf", "{d}/view.npz"], "-o", "x.npz"),
+    (["fit-ndf", "{d}/view.npz", "-o", "{tmp}/ndf.npz"], "--plot", "x.png"),
+    (["bench", "--quick"], "--out", "report"),
+])
+def test_every_output_option_is_checked_before_the_work(files, capsys, monkeypatch, tmp_path,
+                                                        command, option, name):
+    """Each output that a command writes is refused, on one line naming the option and why,
+    before the work starts: also where the permission bits would allow it (``/proc``)."""
+    import layersim.bench
+    import layersim.ndf.workflow
+    import layersim.statistical.design     # noqa: F401 (the package's `design` is a function)
+    for module, attr in (("layersim.cli", "solve"), ("layersim.cli", "subtract"),
+                         ("layersim.cli", "_load"), ("layersim.cli", "export")):
+        monkeypatch.setattr(f"{module}.{attr}", _no_solve)
+    monkeypatch.setattr(layersim.bench, "run", _no_solve)
+    monkeypatch.setattr(layersim.ndf.workflow, "fit_files", _no_solve)
+    monkeypatch.setattr(sys.modules["layersim.statistical.design"], "designs", _no_solve)
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    argv = [a.format(d=files, examples=examples, tmp=tmp_path) for a in command]
+    for place, words in _unwritable_places(tmp_path):
+        if option == "--out" and "does not exist" in words:
+            continue                     # the bench creates its folder and missing parents
+        line = _refused(argv + [option, place(name)], capsys, *words)
+        assert line.startswith(f"layersim: error: {option} "), line
+
+
+def test_an_existing_output_file_is_checked_for_writing(files, capsys, monkeypatch, tmp_path):
+    """An existing output that cannot be opened for writing (a pipe that no one reads) is
+    refused before the solve, and an existing writable file is left as it was by the check."""
+    monkeypatch.setattr("layersim.cli.solve", _no_solve)
+    pipe = tmp_path / "pipe"
+    os.mkfifo(pipe)
+    _refused(["solve", files / "glass.toml", "-o", pipe], capsys, f"-o {pipe}",
+             "cannot write there")
+    pipe.unlink()
+    from layersim.cli import _output
+    mine = tmp_path / "old.lsim"
+    mine.write_bytes(b"old")
+    before = mine.stat().st_mtime_ns
+    assert _output(mine, "-o") == mine
+    assert mine.read_bytes() == b"old" and mine.stat().st_mtime_ns == before
+    assert sorted(tmp_path.iterdir()) == [mine]       # the probe file is gone
+
+
 def test_an_unknown_or_absent_backend_is_refused_before_the_bench(capsys, tmp_path,
                                                                   monkeypatch):
     import layersim.bench
