@@ -377,20 +377,22 @@ def _load(path, args=None):
         bars.close()
 
 
-def _vector(text: str, name: str, n: int) -> np.ndarray:
+def _vector(text: str, name: str, what: str) -> np.ndarray:
+    """The comma-separated finite numbers of option ``name``, as many as the names in
+    ``what`` (e.g. ``"X,Y,Z"``), which the error message shows."""
+    n = what.count(",") + 1
     try:
         v = np.array([float(x) for x in text.split(",")])
     except ValueError:
         v = np.zeros(0)
     if v.size != n or not np.all(np.isfinite(v)):
-        what = "X,Y,Z" if n == 3 else "THETA,PHI"
         raise ValueError(f"{name} must be {n} comma-separated finite numbers {what}, got "
                          f"{text!r}")
     return v
 
 
 def _unit(text: str, name: str) -> np.ndarray:
-    v = _vector(text, name, 3)
+    v = _vector(text, name, "X,Y,Z")
     scale = float(np.max(np.abs(v)))
     if scale == 0.0:
         raise ValueError(f"{name} must be a nonzero direction")
@@ -407,7 +409,9 @@ def cmd_export(args) -> int:
     if not 0.0 <= args.relerr < 1.0:          # before solving the scene
         raise ValueError(f"--relerr {args.relerr:g}: the relative truncation must be in [0, 1)")
     out = _output(args.output if args.output else Path(args.source).stem + ".bsdf", "-o")
-    alpha = _vector(args.alpha, "--alpha", 2) if args.alpha else (0.0, 0.0)
+    alpha = _vector(args.alpha, "--alpha", "A_TOP,A_BOTTOM") if args.alpha else (0.0, 0.0)
+    if np.any(np.asarray(alpha) < 0.0):
+        raise ValueError(f"--alpha {args.alpha}: roughness hints must be >= 0")
     bsdf = _load(args.source, args)
     if isinstance(bsdf, FourierTable):
         if args.version not in (None, bsdf.version) or args.relerr:
@@ -466,7 +470,7 @@ def cmd_plot(args) -> int:
         plot.plot_blocks(bsdf, out, order=args.order, phi_d=math.radians(args.phi_d),
                          title=name)
     else:
-        theta, phi = _vector(args.wi, "--wi", 2)
+        theta, phi = _vector(args.wi, "--wi", "THETA,PHI")
         if not 0.0 <= theta <= 180.0 or theta == 90.0:
             raise ValueError(f"--wi THETA must be in [0, 180] degrees and not 90 (the horizon), "
                              f"got {theta:g}")
@@ -693,8 +697,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--relerr", type=float, default=0.0,
                     help="version 2: drop each pair's coefficients below this fraction of its "
                          "largest (e.g. 1e-3 as the Layer Laboratory does; default 0 keeps all)")
-    sp.add_argument("--alpha", help="A_TOP,A_BOTTOM: Beckmann-equivalent roughness hints for "
-                                    "the header (default 0,0)")
+    sp.add_argument("--alpha", metavar="A_TOP,A_BOTTOM",
+                    help="Beckmann-equivalent roughness (>= 0) of the top and bottom surface, "
+                         "a hint for renderers written into the header (default 0,0)")
     sp.set_defaults(func=cmd_export)
     sp = _subparser(sub, "eval", "print f(wi, wo) in 1/sr (per channel for RGB)", [quiet])
     sp.add_argument("source", help=src_help)

@@ -292,6 +292,24 @@ def test_subtract_on_two_discretisations_says_how_to_solve_the_known_layer(files
              cwd=tmp_path)
 
 
+@pytest.mark.parametrize("alpha, words", [
+    ("0.3", ("--alpha", "2 comma-separated finite numbers A_TOP,A_BOTTOM", "'0.3'")),
+    ("0.3,x", ("--alpha", "A_TOP,A_BOTTOM")),
+    ("-0.1,0.2", ("--alpha -0.1,0.2", "roughness hints must be >= 0")),
+])
+def test_export_alpha_is_named_as_the_two_roughness_hints(files, capsys, monkeypatch,
+                                                           tmp_path, alpha, words):
+    """--alpha holds the Beckmann-equivalent roughness of the top and bottom surface (header
+    fields of the .bsdf file), not angles: help and errors say so, before the solve."""
+    monkeypatch.setattr("layersim.cli.solve", _no_solve)
+    line = _refused(["export", files / "glass.toml", "-o", tmp_path / "x.bsdf", "--alpha",
+                     alpha], capsys, *words, cwd=tmp_path)
+    assert "THETA" not in line and "PHI" not in line
+    with pytest.raises(SystemExit):
+        cli_main(["export", "--help"])
+    assert "--alpha A_TOP,A_BOTTOM" in capsys.readouterr().out
+
+
 def test_an_unknown_image_format_is_refused_before_the_solve(files, capsys, monkeypatch,
                                                             tmp_path):
     monkeypatch.setattr("layersim.cli.solve", _no_solve)
