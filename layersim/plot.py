@@ -213,6 +213,23 @@ def _srgb(lin: np.ndarray) -> np.ndarray:
     return np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
 
 
+#: Decades of ``f`` that ``log`` pictures show below the largest value.
+LOG_DECADES = 4
+
+
+def _log_tone(rgb: np.ndarray, lum: np.ndarray, top: float):
+    """Linear RGB colours ``rgb`` (..., 3) of luminance ``lum`` (...) scaled so that their
+    luminance becomes its position on a log scale over :data:`LOG_DECADES` decades below
+    ``top`` (0 at ``top / 10^LOG_DECADES`` and below, 1 at ``top``), keeping each colour's
+    chromaticity; returns the scaled colours and the matching colour-bar norm (LogNorm)."""
+    from matplotlib.colors import LogNorm
+    floor = top * 10.0 ** -LOG_DECADES
+    level = np.clip(np.log10(np.maximum(lum, floor) / floor) / LOG_DECADES, 0.0, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gain = np.where(lum > 0, level / np.where(lum > 0, lum, 1.0), 0.0)
+    return rgb * gain[..., None], LogNorm(floor, top)
+
+
 def plot_slices(bsdf, wi, path, resolution: int = 256, log: bool = False,
                 title: str | None = None) -> Path:
     """Draw hemispherical slices of ``f(wi, .)`` on the projected unit disk into a PNG.
@@ -226,9 +243,10 @@ def plot_slices(bsdf, wi, path, resolution: int = 256, log: bool = False,
     resolution : int
         Pixels per disk side.
     log : bool
-        Colour by ``log10 f`` (glossy lobes span decades; 4 decades shown); RGB images are
-        always linear (the largest luminance maps to 1, sRGB-encoded). Each side has its own
-        scale.
+        Colour by ``log10 f`` (glossy lobes span decades; :data:`LOG_DECADES` shown). RGB
+        images keep each pixel's colour and map its luminance, linearly or (``log``) by its
+        log10 over those decades, to 0..1 (the largest luminance is 1, sRGB-encoded). Each
+        side has its own scale.
     """
     wi = np.asarray(wi, float)
     if wi.shape != (3,) or not np.all(np.isfinite(wi)) or abs(np.linalg.norm(wi) - 1) > 1e-5:
@@ -244,19 +262,24 @@ def plot_slices(bsdf, wi, path, resolution: int = 256, log: bool = False,
         # each side has its own scale (reflection is often far weaker than transmission)
         finite = img[np.isfinite(img)]
         top = float(finite.max()) if finite.size else 0.0
-        floor = top * 1e-4 if top > 0 else 1e-12
+        floor = top * 10.0 ** -LOG_DECADES if top > 0 else 1e-12
         if rgb:
-            lum = img[np.isfinite(img[..., 0])] @ LUMINANCE
-            norm = float(lum.max()) if lum.size and lum.max() > 0 else 1.0
-            lin = np.clip(np.nan_to_num(img, nan=0.0) / norm, 0.0, 1.0)
+            img0 = np.nan_to_num(img, nan=0.0)
+            lum = img0 @ LUMINANCE
+            norm = float(lum.max()) if lum.max() > 0 else 1.0
+            if log:
+                lin, scale = _log_tone(img0, lum, norm)
+                label = r"luminance of $f$ [1/sr], log scale"
+            else:
+                lin, scale = img0 / norm, Normalize(0.0, norm)
+                label = r"luminance of $f$ [1/sr]"
             alpha = np.isfinite(img[..., 0]).astype(float)[..., None]
-            ax.imshow(np.concatenate([_srgb(lin), alpha], axis=-1), extent=[-1, 1, -1, 1],
-                      origin="lower", interpolation="nearest")
-            # the scale of the image: grey levels encoded as the image is, 0 to the largest
+            ax.imshow(np.concatenate([_srgb(np.clip(lin, 0.0, 1.0)), alpha], axis=-1),
+                      extent=[-1, 1, -1, 1], origin="lower", interpolation="nearest")
+            # the scale of the image: grey levels encoded as the image is, up to the largest
             # luminance (which is white)
             grey = ListedColormap(np.repeat(_srgb(np.linspace(0, 1, 256))[:, None], 3, 1))
-            fig.colorbar(ScalarMappable(Normalize(0.0, norm), grey), ax=ax, shrink=0.8,
-                         label=r"luminance of $f$ [1/sr]")
+            fig.colorbar(ScalarMappable(scale, grey), ax=ax, shrink=0.8, label=label)
         elif log:
             im = ax.imshow(np.log10(np.maximum(img, floor)), extent=[-1, 1, -1, 1],
                            origin="lower", cmap="inferno", interpolation="nearest",

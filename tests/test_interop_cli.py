@@ -229,6 +229,28 @@ def test_slices_integrate_to_the_albedo_and_peak_where_physics_says(glass):
     assert np.hypot(x + s * np.cos(np.radians(30)), y + s * np.sin(np.radians(30))) < 0.06
 
 
+def test_log_slices_of_an_rgb_bsdf_are_logarithmic(glass_files, tmp_path):
+    """--log draws RGB slices on a log scale too: the picture differs from the linear one,
+    and each pixel keeps its colour with its luminance mapped to log10 over LOG_DECADES
+    decades below the largest (0 at the floor, 1 at the top)."""
+    rgb = layersim.BSDF.load(glass_files / "rgb.lsim")
+    wi = unit(20.0)
+    lin = matplotlib.image.imread(plot.plot_slices(rgb, wi, tmp_path / "lin.png"))
+    log = matplotlib.image.imread(plot.plot_slices(rgb, wi, tmp_path / "log.png", log=True))
+    assert lin.shape == log.shape and np.abs(lin - log).max() > 0.2
+    img = np.nan_to_num(plot.slice_images(rgb, wi, resolution=64)["reflection"])
+    lum = img @ layersim.channels.LUMINANCE
+    top = lum.max()
+    toned, norm = plot._log_tone(img, lum, top)
+    level = toned @ layersim.channels.LUMINANCE
+    expect = np.clip(np.log10(np.maximum(lum, 1e-300) / top) / plot.LOG_DECADES + 1, 0, 1)
+    np.testing.assert_allclose(level, expect, atol=1e-12)
+    lit = lum > top * 1e-3
+    np.testing.assert_allclose(toned[lit] / level[lit, None], img[lit] / lum[lit, None],
+                               rtol=1e-10)                      # the same chromaticity
+    assert norm.vmin == pytest.approx(top * 10.0 ** -plot.LOG_DECADES) and norm.vmax == top
+
+
 def test_block_images_of_a_lambertian_layer():
     """f = albedo / (2 pi sum w mu) in Rt only, in order 0 and at every azimuth; order 1 is 0."""
     bsdf = layersim.solve(layersim.Scene.from_dict({"layer": [{"kind": "diffuse",
