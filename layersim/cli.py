@@ -455,6 +455,8 @@ def cmd_plot(args) -> int:
             raise ValueError(f"--order must be >= 0, got {args.order}")
         if not math.isfinite(args.phi_d):
             raise ValueError(f"--phi-d must be a finite angle in degrees, got {args.phi_d}")
+        if not 0.0 < args.percentile <= 100.0:
+            raise ValueError(f"--percentile must be in (0, 100], got {args.percentile:g}")
         out = _image(args.output if args.output else name + "_blocks.png", "-o")
         bsdf = _load(args.source, args)
         if args.order is not None:
@@ -468,7 +470,7 @@ def cmd_plot(args) -> int:
                                  f"0 to {md - 1} (md = {md})")
         from . import plot   # imported when used: matplotlib is slow to import
         plot.plot_blocks(bsdf, out, order=args.order, phi_d=math.radians(args.phi_d),
-                         title=name)
+                         title=name, percentile=args.percentile)
     else:
         theta, phi = _vector(args.wi, "--wi", "THETA,PHI")
         if not 0.0 <= theta <= 180.0 or theta == 90.0:
@@ -717,6 +719,10 @@ def build_parser() -> argparse.ArgumentParser:
                                               "(default: the BSDF at --phi-d)")
     sp.add_argument("--phi-d", type=float, default=0.0,
                     help="with --blocks: azimuth difference in degrees (0 = specular)")
+    sp.add_argument("--percentile", type=float, default=99.0, metavar="P",
+                    help="with --blocks: each panel's colour scale ends at this percentile of "
+                         "its values (default 99, as layerlab; brighter values saturate and "
+                         "the colour bar says so); 100 shows the full range")
     sp.add_argument("--log", action="store_true", help="with --wi: logarithmic colours")
     sp.add_argument("-o", "--output", help="PNG file (default: SOURCE_STEM_slices.png or "
                                            "_blocks.png)")
