@@ -296,7 +296,8 @@ def cmd_bench(args) -> int:
     _output_folder(args.out, "--out")
     results = bench.run(args.out, quick=args.quick, stability=args.stability,
                         backends=backends, scene_dir=args.scenes,
-                        scenes=args.scene, command="layersim " + " ".join(args.argv))
+                        scenes=args.scene, command="layersim " + " ".join(args.argv),
+                        seed=args.seed)
     fails = [c["name"] for c in results["stability"] if c["outcome"] == "fail"]
     print(f"wrote {args.out}/results.json, report.md and plots")
     if fails:
@@ -673,6 +674,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--scenes", help="folder of scene files (default benchmarks/scenes)")
     sp.add_argument("--scene", action="append", help="run only this scene (file stem); "
                     "repeatable")
+    sp.add_argument("--seed", type=int, default=1, help="seed of the Monte Carlo runs "
+                    "(default 1)")
     sp.set_defaults(func=cmd_bench)
 
     sp = _subparser(sub, "design", "inverse design (Bati et al. 2021): stacks whose "

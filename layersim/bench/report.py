@@ -66,7 +66,8 @@ def write(out: Path, machine: dict, scenes: list, stability: list, settings) -> 
                             "n_phi": settings.n_phi, "scales": list(settings.scales),
                             "reference_scale": settings.reference_scale,
                             "particles": list(settings.particles),
-                            "check_particles": settings.check_particles},
+                            "check_particles": settings.check_particles,
+                            "seed": settings.seed},
                "scenes": [_public(s) for s in scenes], "stability": stability}
     (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
     images = {}
