@@ -801,13 +801,25 @@ def _attach_negative_values(argv: list) -> list:
     return out
 
 
+def _check_device(name: str) -> None:
+    """Refuse an unusable ``LAYERSIM_DEVICE`` before the command runs, on one line: bench and
+    design fall back to Monte Carlo when a solve is refused, and would otherwise go on (and
+    print the refusal among their output) instead of stopping; commands that solve nothing
+    are refused too, so that the variable is checked the same way everywhere."""
+    if name != "cpu":
+        from .kernels.runtime import device_for
+        device_for()
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(_attach_negative_values(argv))
     args.argv = argv
     try:
-        memory.cap_arenas(settings().malloc_arenas)     # the command owns its process
+        config = settings()             # a bad LAYERSIM_* value: one line, before any work
+        memory.cap_arenas(config.malloc_arenas)         # the command owns its process
+        _check_device(config.device)
         return args.func(args)
     except (LayersimError, ValueError, OSError) as exc:
         if isinstance(exc, OSError) and exc.strerror and exc.filename:

@@ -337,6 +337,26 @@ def test_eval_with_huge_components_normalises_without_warnings(files, capsys):
     assert f"f = {float(expected):.6g} 1/sr" in out
 
 
+@pytest.mark.parametrize("argv", [
+    ["bench", "--quick", "--out", "{d}/bench-device", "--scene", "vandehulst_slab"],
+    ["design", "{examples}/design_coated_copper.toml"],
+    ["info", "{d}/glass.lsim"],
+    ["export", "{d}/glass.lsim", "-o", "{d}/device.bsdf"],
+])
+def test_an_absent_cuda_device_is_one_line_for_every_command(files, capfd, environment, argv):
+    """LAYERSIM_DEVICE naming a device this machine lacks stops every command on one line
+    before its work, counting the C-level output too (capfd): bench and design used to take
+    the refusal for the scene's, print it among their output and go on with Monte Carlo."""
+    environment.setenv("LAYERSIM_DEVICE", "cuda:99")
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    before = set(files.iterdir())
+    assert cli_main([a.format(d=files, examples=examples) for a in argv]) == 2
+    out, err = capfd.readouterr()
+    assert out == ""
+    _one_line(err, "LAYERSIM_DEVICE='cuda:99'", "use 'cpu'")
+    assert set(files.iterdir()) == before
+
+
 @pytest.mark.parametrize("argv, words", [
     (["eval", "{g}", "--wi", "0,0.5,-0.8", "--wo", "0,0,1"], ("opaque from below", "--wi")),
     (["eval", "{g}", "--wi", "0,0,1", "--wo", "0.3,0,-0.9"], ("opaque from below", "--wo")),
@@ -623,6 +643,11 @@ def _run(args, env=None, cwd=None):
     (["info", "{d}/random.lsim"], {}),
     (["eval", "{d}/glass.toml", "--wi", "0,0,1", "--wo", "0,0,1"], {"LAYERSIM_DEVICE": "tpu"}),
     (["plan", "{d}/glass.toml"], {"LAYERSIM_THREADS": "many"}),
+    # a fresh process initialises Warp: none of its native lines may reach the terminal
+    (["eval", "{d}/glass.lsim", "--wi", "0,0,1", "--wo", "0,0,1"],
+     {"LAYERSIM_DEVICE": "cuda:99"}),
+    (["bench", "--quick", "--out", "{d}/bench-device", "--scene", "vandehulst_slab"],
+     {"LAYERSIM_DEVICE": "cuda:99"}),
 ])
 def test_a_separate_process_prints_one_line_and_no_traceback(files, args, env):
     res = _run([a.format(d=files) for a in args], env, cwd=files)

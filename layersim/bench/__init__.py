@@ -7,7 +7,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from ..config import settings as layersim_settings
 from ..errors import InfeasibleError
+from ..kernels.runtime import device_for
 from . import report, runner, stability as stab
 
 #: Scenes of the quick run (isotropic, solved in seconds).
@@ -42,6 +44,10 @@ def run(out, quick: bool = False, stability: bool = False, backends=("auto",),
     seed : int
         Seed of the Monte Carlo runs (incidence angle ``k`` uses ``seed + k``).
     """
+    if layersim_settings().device != "cpu":
+        # an unusable device is refused here: the runner takes a refused solve for the
+        # scene's and goes on with Monte Carlo alone
+        device_for()
     scene_dir = Path(scene_dir) if scene_dir else default_scene_dir()
     files = sorted(scene_dir.glob("*.toml"))
     if not files:
