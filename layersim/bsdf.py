@@ -214,8 +214,26 @@ class BSDF:
     # ---- importance sampling (layersim.sampling) ----------------------------------------
 
     def sample(self, wi, u):
-        """Importance-sample outgoing directions: returns ``(wo, weight, pdf)`` with
-        ``weight = f(wi, wo) |wo.z| / pdf`` (per channel). See :mod:`layersim.sampling`."""
+        """Importance-sample outgoing directions (:mod:`layersim.sampling`).
+
+        Parameters
+        ----------
+        wi : array_like, shape (..., 3)
+            Unit directions toward the light (local frame).
+        u : array_like, shape (..., 2)
+            Uniform variates in [0, 1), broadcast against ``wi``.
+
+        Returns
+        -------
+        layersim.sampling.Sample
+            ``(wo, weight, pdf)``: ``wo`` (..., 3), ``weight = f(wi, wo) |wo.z| / pdf`` per
+            channel, ``pdf`` (...) in 1/sr, and ``valid`` (...), False for rows where no
+            direction is drawn: ``wi`` on the horizon, or ``wi.z < 0`` when the stack is opaque
+            (no light enters from below). There ``wo = (0, 0, 0)``, ``weight = 0`` and
+            ``pdf = 0``, as Mitsuba 3 returns an invalid sample; no exception, so that the
+            other rows of a batch stay usable. Check ``valid`` (or ``pdf > 0``) before using
+            ``wo``.
+        """
         return sampler_for(self).sample(wi, u)
 
     def pdf(self, wi, wo) -> np.ndarray:

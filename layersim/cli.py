@@ -29,6 +29,7 @@ import argparse
 import math
 import os
 import sys
+import tempfile
 import threading
 from pathlib import Path
 
@@ -100,27 +101,65 @@ def _progress(args) -> ProgressBars:
     return ProgressBars(not getattr(args, "quiet", False) and sys.stderr.isatty())
 
 
-def _output(path, what: str) -> Path:
-    """``path`` of an output file, checked before the work that produces it: its folder
-    exists and is writable, and it is not a folder itself."""
+def _cannot_write(folder: Path) -> str | None:
+    """Why no file can be created in the existing ``folder`` (a phrase), or None. A probe file
+    is created and removed: permission bits do not tell (root passes ``os.access``
+    everywhere, and a read-only or virtual file system such as ``/proc`` refuses files that
+    ``os.access`` allows)."""
+    try:
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".layersim-probe-")
+    except OSError as exc:
+        return f"creating a file in {folder} fails ({exc.strerror or exc})"
+    os.close(fd)
+    os.unlink(probe)
+    return None
+
+
+def _output(path, option: str) -> Path:
+    """``path`` of an output file given by ``option`` (or its default), checked before the
+    work that produces it: its folder exists and takes new files, the file itself (if it
+    exists) can be written, and it is not a folder."""
     path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
+    folder = path.parent
     if path.is_dir():
-        raise ValueError(f"{what} {path} is a folder; give a file name")
+        raise ValueError(f"{option} {path}: is a folder; give a file name")
     if not folder.is_dir():
-        raise ValueError(f"{what} {path}: the folder {folder} does not exist")
-    if not os.access(folder, os.W_OK):
-        raise ValueError(f"{what} {path}: the folder {folder} is not writable")
+        what = "is a file, not a folder" if folder.exists() else "does not exist"
+        raise ValueError(f"{option} {path}: the folder {folder} {what}")
+    if path.exists():
+        try:       # opened for appending, without blocking, and closed: nothing changes
+            os.close(os.open(path, os.O_WRONLY | os.O_APPEND | os.O_NONBLOCK))
+            why = None
+        except OSError as exc:
+            why = f"opening it for writing fails ({exc.strerror or exc})"
+    else:
+        why = _cannot_write(folder)
+    if why:
+        raise ValueError(f"{option} {path}: cannot write there: {why}")
     return path
 
 
-def _image(path) -> Path:
+def _output_folder(path, option: str) -> Path:
+    """``path`` of an output folder given by ``option``, checked before the work: it is a
+    folder that takes new files, or the nearest of its parents that exists does (the folder
+    and its missing parents are created when written)."""
+    path = Path(path)
+    base = next(p for p in [path, *path.absolute().parents] if p.exists())
+    if not base.is_dir():
+        raise ValueError(f"{option} {path}: {base} is a file, not a folder")
+    why = _cannot_write(base)
+    if why:
+        raise ValueError(f"{option} {path}: cannot write there: {why}")
+    return path
+
+
+def _image(path, option: str) -> Path:
     """An image file to write (:func:`_output`) in a format that matplotlib writes."""
     from matplotlib.backend_bases import FigureCanvasBase
-    path = _output(path, "output file")
+    path = _output(path, option)
     formats = FigureCanvasBase.get_supported_filetypes()
     if path.suffix.lower().lstrip(".") not in formats:
-        raise ValueError(f"output file {path}: unknown image format {path.suffix or '(none)'}; "
+        raise ValueError(f"{option} {path}: unknown image format {path.suffix or '(none)'}; "
                          f"use one of {', '.join('.' + f for f in sorted(formats))}")
     return path
 
@@ -177,8 +216,7 @@ def _print_accuracy(info: dict) -> None:
 
 
 def cmd_solve(args) -> int:
-    out = _output(args.output if args.output else Path(args.scene).stem + ".lsim",
-                  "output file")
+    out = _output(args.output if args.output else Path(args.scene).stem + ".lsim", "-o")
     scene = _scene(args.scene)
     like = BSDF.load(args.like) if args.like else None
     print(scene.describe())
@@ -257,16 +295,11 @@ def cmd_bench(args) -> int:
         reason = why_unavailable(missing[0]) or "not available"
         raise ValueError(f"--backend {missing[0]}: not available on this machine (available: "
                          f"{', '.join(here)}): {reason}")
-    out = Path(args.out)
-    # the report creates the folder and its parents: the nearest existing one must take them
-    base = next(p for p in [out, *out.absolute().parents] if p.exists())
-    if not base.is_dir():
-        raise ValueError(f"--out {out}: {base} is a file, not a folder")
-    if not os.access(base, os.W_OK):
-        raise ValueError(f"--out {out}: the folder {base} is not writable")
+    _output_folder(args.out, "--out")
     results = bench.run(args.out, quick=args.quick, stability=args.stability,
                         backends=backends, scene_dir=args.scenes,
-                        scenes=args.scene, command="layersim " + " ".join(args.argv))
+                        scenes=args.scene, command="layersim " + " ".join(args.argv),
+                        seed=args.seed)
     fails = [c["name"] for c in results["stability"] if c["outcome"] == "fail"]
     print(f"wrote {args.out}/results.json, report.md and plots")
     if fails:
@@ -289,8 +322,8 @@ def cmd_design(args) -> int:
         raise ValueError("--plot draws the exact solve's lobes: drop --no-verify")
     if args.candidates < 1:
         raise ValueError(f"--candidates must be >= 1, got {args.candidates}")
-    out = _output(args.output, "output file") if args.output else None
-    image = _image(args.plot) if args.plot else None
+    out = _output(args.output, "-o") if args.output else None
+    image = _image(args.plot, "--plot") if args.plot else None
     found = designs(args.targets)
     for i, d in enumerate(found[:args.candidates]):
         print(f"candidate {i + 1} of {len(found)} (class position {d.choice}):")
@@ -347,20 +380,22 @@ def _load(path, args=None):
         bars.close()
 
 
-def _vector(text: str, name: str, n: int) -> np.ndarray:
+def _vector(text: str, name: str, what: str) -> np.ndarray:
+    """The comma-separated finite numbers of option ``name``, as many as the names in
+    ``what`` (e.g. ``"X,Y,Z"``), which the error message shows."""
+    n = what.count(",") + 1
     try:
         v = np.array([float(x) for x in text.split(",")])
     except ValueError:
         v = np.zeros(0)
     if v.size != n or not np.all(np.isfinite(v)):
-        what = "X,Y,Z" if n == 3 else "THETA,PHI"
         raise ValueError(f"{name} must be {n} comma-separated finite numbers {what}, got "
                          f"{text!r}")
     return v
 
 
 def _unit(text: str, name: str) -> np.ndarray:
-    v = _vector(text, name, 3)
+    v = _vector(text, name, "X,Y,Z")
     scale = float(np.max(np.abs(v)))
     if scale == 0.0:
         raise ValueError(f"{name} must be a nonzero direction")
@@ -376,9 +411,10 @@ def _format(f) -> str:
 def cmd_export(args) -> int:
     if not 0.0 <= args.relerr < 1.0:          # before solving the scene
         raise ValueError(f"--relerr {args.relerr:g}: the relative truncation must be in [0, 1)")
-    out = _output(args.output if args.output else Path(args.source).stem + ".bsdf",
-                  "output file")
-    alpha = _vector(args.alpha, "--alpha", 2) if args.alpha else (0.0, 0.0)
+    out = _output(args.output if args.output else Path(args.source).stem + ".bsdf", "-o")
+    alpha = _vector(args.alpha, "--alpha", "A_TOP,A_BOTTOM") if args.alpha else (0.0, 0.0)
+    if np.any(np.asarray(alpha) < 0.0):
+        raise ValueError(f"--alpha {args.alpha}: roughness hints must be >= 0")
     bsdf = _load(args.source, args)
     if isinstance(bsdf, FourierTable):
         if args.version not in (None, bsdf.version) or args.relerr:
@@ -422,7 +458,9 @@ def cmd_plot(args) -> int:
             raise ValueError(f"--order must be >= 0, got {args.order}")
         if not math.isfinite(args.phi_d):
             raise ValueError(f"--phi-d must be a finite angle in degrees, got {args.phi_d}")
-        out = _image(args.output if args.output else name + "_blocks.png")
+        if not 0.0 < args.percentile <= 100.0:
+            raise ValueError(f"--percentile must be in (0, 100], got {args.percentile:g}")
+        out = _image(args.output if args.output else name + "_blocks.png", "-o")
         bsdf = _load(args.source, args)
         if args.order is not None:
             if not isinstance(bsdf, BSDF):
@@ -435,15 +473,15 @@ def cmd_plot(args) -> int:
                                  f"0 to {md - 1} (md = {md})")
         from . import plot   # imported when used: matplotlib is slow to import
         plot.plot_blocks(bsdf, out, order=args.order, phi_d=math.radians(args.phi_d),
-                         title=name)
+                         title=name, percentile=args.percentile)
     else:
-        theta, phi = _vector(args.wi, "--wi", 2)
+        theta, phi = _vector(args.wi, "--wi", "THETA,PHI")
         if not 0.0 <= theta <= 180.0 or theta == 90.0:
             raise ValueError(f"--wi THETA must be in [0, 180] degrees and not 90 (the horizon), "
                              f"got {theta:g}")
         t, p = math.radians(theta), math.radians(phi)
         wi = np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
-        out = _image(args.output if args.output else name + "_slices.png")
+        out = _image(args.output if args.output else name + "_slices.png", "-o")
         bsdf = _load(args.source, args)
         if getattr(bsdf, "opaque", False) and wi[2] < 0:
             raise ValueError(f"{args.source} is opaque from below: --wi THETA > 90 lights it "
@@ -458,7 +496,7 @@ def cmd_plot(args) -> int:
 
 def cmd_subtract(args) -> int:
     out = _output(args.output if args.output else
-                  f"{Path(args.stack).stem}-minus-{Path(args.known).stem}.lsim", "output file")
+                  f"{Path(args.stack).stem}-minus-{Path(args.known).stem}.lsim", "-o")
     stack = BSDF.load(args.stack)
     known = BSDF.load(args.known)
     result = subtract(stack, known, side=args.side, eps=args.eps, noise=args.noise)
@@ -638,6 +676,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--scenes", help="folder of scene files (default benchmarks/scenes)")
     sp.add_argument("--scene", action="append", help="run only this scene (file stem); "
                     "repeatable")
+    sp.add_argument("--seed", type=int, default=1, help="seed of the Monte Carlo runs "
+                    "(default 1)")
     sp.set_defaults(func=cmd_bench)
 
     sp = _subparser(sub, "design", "inverse design (Bati et al. 2021): stacks whose "
@@ -664,8 +704,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--relerr", type=float, default=0.0,
                     help="version 2: drop each pair's coefficients below this fraction of its "
                          "largest (e.g. 1e-3 as the Layer Laboratory does; default 0 keeps all)")
-    sp.add_argument("--alpha", help="A_TOP,A_BOTTOM: Beckmann-equivalent roughness hints for "
-                                    "the header (default 0,0)")
+    sp.add_argument("--alpha", metavar="A_TOP,A_BOTTOM",
+                    help="Beckmann-equivalent roughness (>= 0) of the top and bottom surface, "
+                         "a hint for renderers written into the header (default 0,0)")
     sp.set_defaults(func=cmd_export)
     sp = _subparser(sub, "eval", "print f(wi, wo) in 1/sr (per channel for RGB)", [quiet])
     sp.add_argument("source", help=src_help)
@@ -683,6 +724,10 @@ def build_parser() -> argparse.ArgumentParser:
                                               "(default: the BSDF at --phi-d)")
     sp.add_argument("--phi-d", type=float, default=0.0,
                     help="with --blocks: azimuth difference in degrees (0 = specular)")
+    sp.add_argument("--percentile", type=float, default=99.0, metavar="P",
+                    help="with --blocks: each panel's colour scale ends at this percentile of "
+                         "its values (default 99, as layerlab; brighter values saturate and "
+                         "the colour bar says so); 100 shows the full range")
     sp.add_argument("--log", action="store_true", help="with --wi: logarithmic colours")
     sp.add_argument("-o", "--output", help="PNG file (default: SOURCE_STEM_slices.png or "
                                            "_blocks.png)")
@@ -730,6 +775,11 @@ def _add_fit_ndf(sub) -> None:
 
 def cmd_fit_ndf(args) -> int:
     from .ndf.workflow import fit_files, parse_grid
+    # np.savez adds .npz to a name without it
+    out = Path(args.output)
+    _output(out if out.suffix == ".npz" else out.with_name(out.name + ".npz"), "-o")
+    if args.plot:
+        _image(args.plot, "--plot")
     for line in fit_files(args.measurements, args.output, args.complete, parse_grid(args.grid),
                           not args.unconstrained, args.symmetry, args.fill, args.partial,
                           args.max_light_theta, args.plot):
@@ -753,13 +803,25 @@ def _attach_negative_values(argv: list) -> list:
     return out
 
 
+def _check_device(name: str) -> None:
+    """Refuse an unusable ``LAYERSIM_DEVICE`` before the command runs, on one line: bench and
+    design fall back to Monte Carlo when a solve is refused, and would otherwise go on (and
+    print the refusal among their output) instead of stopping; commands that solve nothing
+    are refused too, so that the variable is checked the same way everywhere."""
+    if name != "cpu":
+        from .kernels.runtime import device_for
+        device_for()
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parser.parse_args(_attach_negative_values(argv))
     args.argv = argv
     try:
-        memory.cap_arenas(settings().malloc_arenas)     # the command owns its process
+        config = settings()             # a bad LAYERSIM_* value: one line, before any work
+        memory.cap_arenas(config.malloc_arenas)         # the command owns its process
+        _check_device(config.device)
         return args.func(args)
     except (LayersimError, ValueError, OSError) as exc:
         if isinstance(exc, OSError) and exc.strerror and exc.filename:

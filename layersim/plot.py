@@ -7,7 +7,9 @@ and hemispherical slices for one incident direction.
     propagates down), arranged ``Rb | Ttb`` over ``Tbt | Rt`` (``mu_o`` upward), for one Fourier
     order ``l`` (the coefficient ``f_l``) or at one azimuth difference ``phi_d`` (the series
     summed), multiplied by ``|mu_i mu_o|`` to keep grazing values in range; each panel has its
-    own labelled colour scale (0 to its 99th percentile). Opaque stacks show ``Rt`` only.
+    own colour scale, 0 to its 99th percentile by default (``percentile``): the colour bar
+    says so and ends in an arrow where brighter values saturate. Opaque stacks show ``Rt``
+    only.
 :func:`plot_slices`
     ``f(wi, wo)`` over the outgoing hemispheres, on the projected unit disk (``wo.x, wo.y``,
     viewed from above; the transmission disk shows ``wo.z < 0``). On that disk the area element
@@ -124,8 +126,27 @@ def present_blocks(bsdf) -> list[str]:
     return [name for name, _, _ in PANELS]
 
 
+def colour_scale(vals: np.ndarray, signed: bool, percentile: float) -> tuple:
+    """The colour range of one block panel: ``(vmax, extend, note)``. ``vmax`` is the
+    ``percentile`` of the values (of their magnitude when ``signed``; the range is then
+    ``[-vmax, vmax]``, else ``[0, vmax]``), as layerlab's ``plot_layer`` scales each panel;
+    ``extend`` is matplotlib's colour-bar arrow for the sides where values exceed the range
+    (``"neither"`` when none do) and ``note`` says what was clipped ("" when nothing was)."""
+    vmax = float(np.percentile(np.abs(vals) if signed else vals, percentile))
+    vmax = vmax if vmax > 0 else float(np.abs(vals).max() or 1.0)
+    over = float(vals.max()) > vmax * (1 + 1e-12)
+    under = signed and float(vals.min()) < -vmax * (1 + 1e-12)
+    extend = {(True, True): "both", (True, False): "max", (False, True): "min"}.get(
+        (over, under), "neither")
+    note = ""
+    if over or under:
+        note = (f"clipped at {percentile:g}th percentile, max {'|value| ' if signed else ''}"
+                f"{float(np.abs(vals).max()):.3g}")
+    return vmax, extend, note
+
+
 def plot_blocks(bsdf, path, order: int | None = None, phi_d: float = 0.0, samples: int = 200,
-                channel=None, title: str | None = None) -> Path:
+                channel=None, title: str | None = None, percentile: float = 99.0) -> Path:
     """Draw the blocks of the operator into a PNG at ``path``: ``Rb | Ttb`` over ``Tbt | Rt``,
     so that together they cover the ``(mu_i, mu_o)`` square with ``mu_i`` to the right and
     ``mu_o`` upward (layerlab's ``plot_layer`` stacks the rows the other way round); an opaque
@@ -146,7 +167,14 @@ def plot_blocks(bsdf, path, order: int | None = None, phi_d: float = 0.0, sample
         Pixels per panel side.
     channel : None, "luminance" or int
         RGB: what to show (default luminance).
+    percentile : float
+        Each panel's colour scale ends at this percentile of its values (of their magnitude
+        for signed orders), as layerlab's ``plot_layer`` does at 99, so that a narrow peak
+        does not leave the rest of the panel dark; brighter values saturate, which the colour
+        bar's label and arrow show. 100 shows the full range.
     """
+    if not (isinstance(percentile, (int, float)) and 0.0 < percentile <= 100.0):
+        raise ValueError(f"percentile must be in (0, 100], got {percentile!r}")
     images = block_images(bsdf, order, phi_d, samples, channel)
     names = present_blocks(bsdf)
     signed = order is not None and order > 0
@@ -160,16 +188,15 @@ def plot_blocks(bsdf, path, order: int | None = None, phi_d: float = 0.0, sample
             continue
         ax = axes[0, 0] if single else axes[0 if o0 >= 0 else 1, 0 if i0 < 0 else 1]
         vals = images[name]
-        # each panel scaled to its own 99th percentile, as layerlab's plot_layer
-        vmax = float(np.percentile(np.abs(vals) if signed else vals, 99))
-        vmax = vmax if vmax > 0 else float(np.abs(vals).max() or 1.0)
+        vmax, extend, note = colour_scale(vals, signed, percentile)
         im = ax.imshow(vals, extent=[i0, i1, o0, o1], origin="lower", aspect="equal",
                        cmap="RdBu_r" if signed else "viridis",
                        vmin=-vmax if signed else 0.0, vmax=vmax, interpolation="nearest")
         ax.set_title(_TITLES[name])
         ax.set_xlabel(r"$\mu_i$ (incident)")
         ax.set_ylabel(r"$\mu_o$ (outgoing)")
-        fig.colorbar(im, ax=ax, shrink=0.85, label=quantity + " [1/sr]")
+        fig.colorbar(im, ax=ax, shrink=0.85, extend=extend,
+                     label=quantity + " [1/sr]" + (f"\n{note}" if note else ""))
     what = (f"Fourier order $l = {order}$: " + quantity if order is not None else
             quantity + rf" at $\phi_d = {math.degrees(phi_d):g}^\circ$")
     if bsdf.channels == 3:
@@ -213,6 +240,23 @@ def _srgb(lin: np.ndarray) -> np.ndarray:
     return np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * lin ** (1 / 2.4) - 0.055)
 
 
+#: Decades of ``f`` that ``log`` pictures show below the largest value.
+LOG_DECADES = 4
+
+
+def _log_tone(rgb: np.ndarray, lum: np.ndarray, top: float):
+    """Linear RGB colours ``rgb`` (..., 3) of luminance ``lum`` (...) scaled so that their
+    luminance becomes its position on a log scale over :data:`LOG_DECADES` decades below
+    ``top`` (0 at ``top / 10^LOG_DECADES`` and below, 1 at ``top``), keeping each colour's
+    chromaticity; returns the scaled colours and the matching colour-bar norm (LogNorm)."""
+    from matplotlib.colors import LogNorm
+    floor = top * 10.0 ** -LOG_DECADES
+    level = np.clip(np.log10(np.maximum(lum, floor) / floor) / LOG_DECADES, 0.0, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gain = np.where(lum > 0, level / np.where(lum > 0, lum, 1.0), 0.0)
+    return rgb * gain[..., None], LogNorm(floor, top)
+
+
 def plot_slices(bsdf, wi, path, resolution: int = 256, log: bool = False,
                 title: str | None = None) -> Path:
     """Draw hemispherical slices of ``f(wi, .)`` on the projected unit disk into a PNG.
@@ -226,9 +270,10 @@ def plot_slices(bsdf, wi, path, resolution: int = 256, log: bool = False,
     resolution : int
         Pixels per disk side.
     log : bool
-        Colour by ``log10 f`` (glossy lobes span decades; 4 decades shown); RGB images are
-        always linear (the largest luminance maps to 1, sRGB-encoded). Each side has its own
-        scale.
+        Colour by ``log10 f`` (glossy lobes span decades; :data:`LOG_DECADES` shown). RGB
+        images keep each pixel's colour and map its luminance, linearly or (``log``) by its
+        log10 over those decades, to 0..1 (the largest luminance is 1, sRGB-encoded). Each
+        side has its own scale.
     """
     wi = np.asarray(wi, float)
     if wi.shape != (3,) or not np.all(np.isfinite(wi)) or abs(np.linalg.norm(wi) - 1) > 1e-5:
@@ -244,19 +289,24 @@ def plot_slices(bsdf, wi, path, resolution: int = 256, log: bool = False,
         # each side has its own scale (reflection is often far weaker than transmission)
         finite = img[np.isfinite(img)]
         top = float(finite.max()) if finite.size else 0.0
-        floor = top * 1e-4 if top > 0 else 1e-12
+        floor = top * 10.0 ** -LOG_DECADES if top > 0 else 1e-12
         if rgb:
-            lum = img[np.isfinite(img[..., 0])] @ LUMINANCE
-            norm = float(lum.max()) if lum.size and lum.max() > 0 else 1.0
-            lin = np.clip(np.nan_to_num(img, nan=0.0) / norm, 0.0, 1.0)
+            img0 = np.nan_to_num(img, nan=0.0)
+            lum = img0 @ LUMINANCE
+            norm = float(lum.max()) if lum.max() > 0 else 1.0
+            if log:
+                lin, scale = _log_tone(img0, lum, norm)
+                label = r"luminance of $f$ [1/sr], log scale"
+            else:
+                lin, scale = img0 / norm, Normalize(0.0, norm)
+                label = r"luminance of $f$ [1/sr]"
             alpha = np.isfinite(img[..., 0]).astype(float)[..., None]
-            ax.imshow(np.concatenate([_srgb(lin), alpha], axis=-1), extent=[-1, 1, -1, 1],
-                      origin="lower", interpolation="nearest")
-            # the scale of the image: grey levels encoded as the image is, 0 to the largest
+            ax.imshow(np.concatenate([_srgb(np.clip(lin, 0.0, 1.0)), alpha], axis=-1),
+                      extent=[-1, 1, -1, 1], origin="lower", interpolation="nearest")
+            # the scale of the image: grey levels encoded as the image is, up to the largest
             # luminance (which is white)
             grey = ListedColormap(np.repeat(_srgb(np.linspace(0, 1, 256))[:, None], 3, 1))
-            fig.colorbar(ScalarMappable(Normalize(0.0, norm), grey), ax=ax, shrink=0.8,
-                         label=r"luminance of $f$ [1/sr]")
+            fig.colorbar(ScalarMappable(scale, grey), ax=ax, shrink=0.8, label=label)
         elif log:
             im = ax.imshow(np.log10(np.maximum(img, floor)), extent=[-1, 1, -1, 1],
                            origin="lower", cmap="inferno", interpolation="nearest",

@@ -51,11 +51,15 @@ the ``s = 0`` coefficients, an isotropic series sampled as above) and weights by
 ``eval``: ``weight = f(wi, wo) |wo.z| / pdf`` stays unbiased (the average is positive wherever
 the BSDF is), with a variance that grows with the anisotropy.
 
-Invalid queries
+Invalid samples
 ---------------
-``wi`` on the horizon, light from below an opaque stack, or an incident direction from which no
-energy leaves give ``pdf = 0``, ``weight = 0`` and ``wo = (0, 0, 0)`` (a renderer drops such
-samples). Delta parts (the unscattered transmission of media, the mirror reflection of smooth
+``wi`` on the horizon, light from below an opaque stack (``wi.z < 0``: nothing enters it), or an
+incident direction from which no energy leaves give an invalid sample, row by row: ``pdf = 0``,
+``weight = 0`` and ``wo = (0, 0, 0)`` (not a direction), flagged by :attr:`Sample.valid`. This is
+Mitsuba 3's contract (an invalid ``BSDFSample3f`` with zero weight and pdf) rather than an
+exception, so that a batch in which some rows hit an opaque surface from behind keeps its other
+rows, and a single direction behaves as a batch of one; :func:`layersim.directions.unit_directions`
+still raises for ``wi`` that is not a unit vector. Delta parts (the unscattered transmission of media, the mirror reflection of smooth
 interfaces) are not part of ``eval`` and are not sampled: :meth:`layersim.bsdf.BSDF.specular`
 gives their directions and energies. A BSDF with a smooth dielectric boundary is sampled inside
 the boundary and refracted out (:class:`BoundarySampler`).
@@ -66,6 +70,7 @@ from __future__ import annotations
 import copy
 import math
 import weakref
+from typing import NamedTuple
 
 import numpy as np
 
@@ -76,6 +81,31 @@ from .kernels import fourier_sample
 from .operator import BLOCKS
 
 _BLOCK_ID = {name: k for k, name in enumerate(BLOCKS)}
+
+
+class Sample(NamedTuple):
+    """What ``sample(wi, u)`` returns; unpacks as ``wo, weight, pdf``.
+
+    Attributes
+    ----------
+    wo : ndarray, shape (..., 3)
+        Sampled unit directions toward the viewer; ``(0, 0, 0)`` where the sample is invalid.
+    weight : ndarray, shape (...) or (..., 3)
+        ``max(f(wi, wo), 0) |wo.z| / pdf`` per channel; 0 where the sample is invalid.
+    pdf : ndarray, shape (...)
+        Solid-angle density of ``wo`` (1/sr); 0 where the sample is invalid.
+    """
+
+    wo: np.ndarray
+    weight: np.ndarray
+    pdf: np.ndarray
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Boolean array, shape ``pdf.shape``: False where no direction was drawn (``wi`` on
+        the horizon, below an opaque stack, or with no energy leaving); there ``wo`` is
+        ``(0, 0, 0)`` and ``weight`` and ``pdf`` are 0, so a renderer ends the path."""
+        return np.asarray(self.pdf) > 0
 _SAMPLERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
@@ -393,7 +423,8 @@ def _sample_result(target, wi: np.ndarray, wo: np.ndarray, pdf: np.ndarray, shap
     """``(wo, weight, pdf)`` of a batch of samples in the caller's ``shape``: ``weight`` is
     ``f |wo.z| / pdf`` per channel (never negative: the cubic interpolation of ``eval`` may
     undershoot slightly), and samples with ``pdf = 0`` (none drawn) return ``wo = 0`` and
-    weight 0. ``wi``, ``wo`` (Q, 3) and ``pdf`` (Q,) are flat; ``wo`` is modified."""
+    weight 0 (:class:`Sample`). ``wi``, ``wo`` (Q, 3) and ``pdf`` (Q,) are flat; ``wo`` is
+    modified."""
     good = pdf > 0
     wo[~good] = 0.0
     nch = target.channels
@@ -403,8 +434,8 @@ def _sample_result(target, wi: np.ndarray, wo: np.ndarray, pdf: np.ndarray, shap
         f = target.eval(wi[g], wo[g]).reshape(g.size, nch)
         weight[g] = np.maximum(f, 0.0) * (np.abs(wo[g, 2]) / pdf[g])[:, None]
     weight = weight[:, 0] if nch == 1 else weight
-    return (wo.reshape(shape + (3,)), weight.reshape(shape + weight.shape[1:]),
-            pdf.reshape(shape))
+    return Sample(wo.reshape(shape + (3,)), weight.reshape(shape + weight.shape[1:]),
+                  pdf.reshape(shape))
 
 
 def _sample_inputs(wi, u) -> tuple[np.ndarray, np.ndarray, tuple]:

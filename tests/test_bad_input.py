@@ -188,6 +188,71 @@ def test_an_unwritable_output_is_refused_before_the_solve(files, capsys, monkeyp
     assert not (tmp_path / "nonexistent").exists()
 
 
+def _unwritable_places(tmp_path):
+    """Output places where no file can be created, as (path factory, words of the reason):
+    a virtual file system (refuses files that the permission bits allow, also to root), a
+    folder that does not exist, and a "folder" that is a file."""
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    places = [(lambda name: tmp_path / "nonexistent" / name, ("does not exist",)),
+              (lambda name: blocker / name, ("is a file, not a folder",))]
+    if Path("/proc/self").is_dir():
+        places.append((lambda name: Path("/proc") / name, ("cannot write there",)))
+    return places
+
+
+@pytest.mark.parametrize("command, option, name", [
+    (["solve", "{d}/glass.toml"], "-o", "x.lsim"),
+    (["export", "{d}/glass.toml"], "-o", "x.bsdf"),
+    (["plot", "{d}/glass.toml", "--wi", "30,0"], "-o", "x.png"),
+    (["plot", "{d}/glass.toml", "--blocks"], "-o", "x.png"),
+    (["subtract", "{d}/glass.lsim", "{d}/glass.lsim", "--side", "top"], "-o", "x.lsim"),
+    (["design", "{examples}/design_coated_copper.toml"], "-o", "x.toml"),
+    (["design", "{examples}/design_coated_copper.toml"], "--plot", "x.png"),
+    (["fit-ndf", "{d}/view.npz"], "-o", "x.npz"),
+    (["fit-ndf", "{d}/view.npz", "-o", "{tmp}/ndf.npz"], "--plot", "x.png"),
+    (["bench", "--quick"], "--out", "report"),
+])
+def test_every_output_option_is_checked_before_the_work(files, capsys, monkeypatch, tmp_path,
+                                                        command, option, name):
+    """Each output that a command writes is refused, on one line naming the option and why,
+    before the work starts: also where the permission bits would allow it (``/proc``)."""
+    import layersim.bench
+    import layersim.ndf.workflow
+    import layersim.statistical.design     # noqa: F401 (the package's `design` is a function)
+    for module, attr in (("layersim.cli", "solve"), ("layersim.cli", "subtract"),
+                         ("layersim.cli", "_load"), ("layersim.cli", "export")):
+        monkeypatch.setattr(f"{module}.{attr}", _no_solve)
+    monkeypatch.setattr(layersim.bench, "run", _no_solve)
+    monkeypatch.setattr(layersim.ndf.workflow, "fit_files", _no_solve)
+    monkeypatch.setattr(sys.modules["layersim.statistical.design"], "designs", _no_solve)
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    argv = [a.format(d=files, examples=examples, tmp=tmp_path) for a in command]
+    for place, words in _unwritable_places(tmp_path):
+        if option == "--out" and "does not exist" in words:
+            continue                     # the bench creates its folder and missing parents
+        line = _refused(argv + [option, place(name)], capsys, *words)
+        assert line.startswith(f"layersim: error: {option} "), line
+
+
+def test_an_existing_output_file_is_checked_for_writing(files, capsys, monkeypatch, tmp_path):
+    """An existing output that cannot be opened for writing (a pipe that no one reads) is
+    refused before the solve, and an existing writable file is left as it was by the check."""
+    monkeypatch.setattr("layersim.cli.solve", _no_solve)
+    pipe = tmp_path / "pipe"
+    os.mkfifo(pipe)
+    _refused(["solve", files / "glass.toml", "-o", pipe], capsys, f"-o {pipe}",
+             "cannot write there")
+    pipe.unlink()
+    from layersim.cli import _output
+    mine = tmp_path / "old.lsim"
+    mine.write_bytes(b"old")
+    before = mine.stat().st_mtime_ns
+    assert _output(mine, "-o") == mine
+    assert mine.read_bytes() == b"old" and mine.stat().st_mtime_ns == before
+    assert sorted(tmp_path.iterdir()) == [mine]       # the probe file is gone
+
+
 def test_an_unknown_or_absent_backend_is_refused_before_the_bench(capsys, tmp_path,
                                                                   monkeypatch):
     import layersim.bench
@@ -227,6 +292,24 @@ def test_subtract_on_two_discretisations_says_how_to_solve_the_known_layer(files
              cwd=tmp_path)
 
 
+@pytest.mark.parametrize("alpha, words", [
+    ("0.3", ("--alpha", "2 comma-separated finite numbers A_TOP,A_BOTTOM", "'0.3'")),
+    ("0.3,x", ("--alpha", "A_TOP,A_BOTTOM")),
+    ("-0.1,0.2", ("--alpha -0.1,0.2", "roughness hints must be >= 0")),
+])
+def test_export_alpha_is_named_as_the_two_roughness_hints(files, capsys, monkeypatch,
+                                                           tmp_path, alpha, words):
+    """--alpha holds the Beckmann-equivalent roughness of the top and bottom surface (header
+    fields of the .bsdf file), not angles: help and errors say so, before the solve."""
+    monkeypatch.setattr("layersim.cli.solve", _no_solve)
+    line = _refused(["export", files / "glass.toml", "-o", tmp_path / "x.bsdf", "--alpha",
+                     alpha], capsys, *words, cwd=tmp_path)
+    assert "THETA" not in line and "PHI" not in line
+    with pytest.raises(SystemExit):
+        cli_main(["export", "--help"])
+    assert "--alpha A_TOP,A_BOTTOM" in capsys.readouterr().out
+
+
 def test_an_unknown_image_format_is_refused_before_the_solve(files, capsys, monkeypatch,
                                                             tmp_path):
     monkeypatch.setattr("layersim.cli.solve", _no_solve)
@@ -252,6 +335,26 @@ def test_eval_with_huge_components_normalises_without_warnings(files, capsys):
     expected = layersim.BSDF.load(files / "glass.lsim").eval(np.ones(3) / np.sqrt(3),
                                                              [0.0, 0.0, 1.0])
     assert f"f = {float(expected):.6g} 1/sr" in out
+
+
+@pytest.mark.parametrize("argv", [
+    ["bench", "--quick", "--out", "{d}/bench-device", "--scene", "vandehulst_slab"],
+    ["design", "{examples}/design_coated_copper.toml"],
+    ["info", "{d}/glass.lsim"],
+    ["export", "{d}/glass.lsim", "-o", "{d}/device.bsdf"],
+])
+def test_an_absent_cuda_device_is_one_line_for_every_command(files, capfd, environment, argv):
+    """LAYERSIM_DEVICE naming a device this machine lacks stops every command on one line
+    before its work, counting the C-level output too (capfd): bench and design used to take
+    the refusal for the scene's, print it among their output and go on with Monte Carlo."""
+    environment.setenv("LAYERSIM_DEVICE", "cuda:99")
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    before = set(files.iterdir())
+    assert cli_main([a.format(d=files, examples=examples) for a in argv]) == 2
+    out, err = capfd.readouterr()
+    assert out == ""
+    _one_line(err, "LAYERSIM_DEVICE='cuda:99'", "use 'cpu'")
+    assert set(files.iterdir()) == before
 
 
 @pytest.mark.parametrize("argv, words", [
@@ -540,6 +643,11 @@ def _run(args, env=None, cwd=None):
     (["info", "{d}/random.lsim"], {}),
     (["eval", "{d}/glass.toml", "--wi", "0,0,1", "--wo", "0,0,1"], {"LAYERSIM_DEVICE": "tpu"}),
     (["plan", "{d}/glass.toml"], {"LAYERSIM_THREADS": "many"}),
+    # a fresh process initialises Warp: none of its native lines may reach the terminal
+    (["eval", "{d}/glass.lsim", "--wi", "0,0,1", "--wo", "0,0,1"],
+     {"LAYERSIM_DEVICE": "cuda:99"}),
+    (["bench", "--quick", "--out", "{d}/bench-device", "--scene", "vandehulst_slab"],
+     {"LAYERSIM_DEVICE": "cuda:99"}),
 ])
 def test_a_separate_process_prints_one_line_and_no_traceback(files, args, env):
     res = _run([a.format(d=files) for a in args], env, cwd=files)

@@ -173,6 +173,27 @@ def test_invalid_queries(coated_gold):
         coated_gold.pdf(unit(20.0), [0.0, 0.0, 2.0])
 
 
+def test_samples_below_an_opaque_stack_are_flagged_invalid_row_by_row(coated_gold):
+    """wi.z < 0 on an opaque stack: no light enters, so those rows are invalid samples (as
+    Mitsuba 3 returns them: wo = 0, weight = 0, pdf = 0) and ``valid`` says so, while the
+    rows lit from above in the same batch are drawn as usual; one direction alone behaves as
+    a batch of one (no exception)."""
+    assert coated_gold.opaque
+    rng = np.random.default_rng(11)
+    wi = np.concatenate([unit(np.array([20.0, 50.0, 70.0])),
+                         unit(np.array([20.0, 50.0]), below=True)])
+    s = coated_gold.sample(wi, rng.random((5, 2)))
+    assert isinstance(s, layersim.sampling.Sample) and len(s) == 3
+    wo, weight, pdf = s
+    np.testing.assert_array_equal(s.valid, [True, True, True, False, False])
+    assert np.all(pdf[:3] > 0) and np.all(weight[:3] > 0)
+    np.testing.assert_allclose(np.linalg.norm(wo[:3], axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(pdf[:3], coated_gold.pdf(wi[:3], wo[:3]), rtol=1e-10)
+    assert np.all(wo[3:] == 0.0) and np.all(weight[3:] == 0.0) and np.all(pdf[3:] == 0.0)
+    one = coated_gold.sample(unit(30.0, below=True), [0.3, 0.7])
+    assert one.valid.shape == () and not one.valid and one.pdf == 0 and np.all(one.wo == 0)
+
+
 def test_shapes_broadcast(coated_gold):
     wi = unit(np.array([10.0, 20.0, 30.0]))[:, None, :]           # (3, 1, 3)
     u = np.random.default_rng(7).random((4, 2))                     # (4, 2)

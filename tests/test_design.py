@@ -190,3 +190,31 @@ def test_a_design_the_solver_refuses_is_verified_against_monte_carlo():
     (energy, alpha), = res["exact_lobes"]
     assert float(energy[0]) == pytest.approx(0.15, abs=3e-3)      # se ~ 8e-4
     assert 0.02 < float(alpha[0]) < 0.03
+
+
+def test_lobe_plot_legend_names_the_channel_colours_and_line_styles():
+    """design --plot: each channel has its own colour in every panel, and the legend shows
+    those colours (R, G, B) and the two line styles (exact solid, target dashed) in a neutral
+    grey, so that no legend entry claims a colour for what is a line style."""
+    from matplotlib.colors import to_rgba
+    from layersim.statistical.report import CHANNEL_COLOURS, lobes_figure
+    targets = parse_targets(ROOT / "examples" / "design_coated_copper.toml")
+    rng = np.random.default_rng(3)
+    rings = [rng.random((90, 3)) * 1e-3 for _ in targets.lobes]
+    fig = lobes_figure(targets, rings)
+    panels = [ax for ax in fig.axes if ax.get_title().startswith("lobe")]
+    assert len(panels) == len(targets.lobes)
+    for ax in panels:
+        lines = ax.get_lines()
+        assert {to_rgba(l.get_color()) for l in lines} == {to_rgba(c) for c in CHANNEL_COLOURS}
+        assert {l.get_linestyle() for l in lines} == {"-", "--"}
+        legend = {t.get_text(): h for t, h in zip(ax.get_legend().get_texts(),
+                                                  ax.get_legend().legend_handles)}
+        assert list(legend) == ["exact transport", "target", "R channel", "G channel",
+                                "B channel"]
+        for name, colour in zip("RGB", CHANNEL_COLOURS):
+            assert to_rgba(legend[f"{name} channel"].get_color()) == to_rgba(colour)
+        for style in ("exact transport", "target"):
+            assert to_rgba(legend[style].get_color()) not in {to_rgba(c)
+                                                              for c in CHANNEL_COLOURS}
+        assert legend["target"].get_linestyle() == "--"

@@ -229,6 +229,53 @@ def test_slices_integrate_to_the_albedo_and_peak_where_physics_says(glass):
     assert np.hypot(x + s * np.cos(np.radians(30)), y + s * np.sin(np.radians(30))) < 0.06
 
 
+def test_log_slices_of_an_rgb_bsdf_are_logarithmic(glass_files, tmp_path):
+    """--log draws RGB slices on a log scale too: the picture differs from the linear one,
+    and each pixel keeps its colour with its luminance mapped to log10 over LOG_DECADES
+    decades below the largest (0 at the floor, 1 at the top)."""
+    rgb = layersim.BSDF.load(glass_files / "rgb.lsim")
+    wi = unit(20.0)
+    lin = matplotlib.image.imread(plot.plot_slices(rgb, wi, tmp_path / "lin.png"))
+    log = matplotlib.image.imread(plot.plot_slices(rgb, wi, tmp_path / "log.png", log=True))
+    assert lin.shape == log.shape and np.abs(lin - log).max() > 0.2
+    img = np.nan_to_num(plot.slice_images(rgb, wi, resolution=64)["reflection"])
+    lum = img @ layersim.channels.LUMINANCE
+    top = lum.max()
+    toned, norm = plot._log_tone(img, lum, top)
+    level = toned @ layersim.channels.LUMINANCE
+    expect = np.clip(np.log10(np.maximum(lum, 1e-300) / top) / plot.LOG_DECADES + 1, 0, 1)
+    np.testing.assert_allclose(level, expect, atol=1e-12)
+    lit = lum > top * 1e-3
+    np.testing.assert_allclose(toned[lit] / level[lit, None], img[lit] / lum[lit, None],
+                               rtol=1e-10)                      # the same chromaticity
+    assert norm.vmin == pytest.approx(top * 10.0 ** -plot.LOG_DECADES) and norm.vmax == top
+
+
+def test_block_plots_say_where_their_colour_scale_clips(glass, glass_files, tmp_path,
+                                                        capsys):
+    """Each panel's scale ends at the 99th percentile (layerlab's choice): where brighter
+    values saturate the colour bar has an arrow on that side and its label names the
+    percentile and the largest value; --percentile 100 shows the full range, unlabelled."""
+    imgs = plot.block_images(glass, samples=50)
+    vmax, extend, note = plot.colour_scale(imgs["Ttb"], False, 99.0)
+    assert vmax == pytest.approx(np.percentile(imgs["Ttb"], 99)) and vmax < imgs["Ttb"].max()
+    assert extend == "max" and note == f"clipped at 99th percentile, max {imgs['Ttb'].max():.3g}"
+    assert plot.colour_scale(imgs["Ttb"], False, 100.0) == (imgs["Ttb"].max(), "neither", "")
+    signed = plot.block_images(glass, order=1, samples=50)["Ttb"]
+    vmax, extend, note = plot.colour_scale(signed, True, 99.0)
+    assert vmax == pytest.approx(np.percentile(np.abs(signed), 99))
+    assert extend == {(True, True): "both", (True, False): "max", (False, True): "min"}[
+        (signed.max() > vmax, signed.min() < -vmax)] and "|value|" in note
+    d = glass_files
+    for pct in ("99", "100"):
+        assert cli_main(["plot", str(d / "glass.lsim"), "--blocks", "--percentile", pct, "-o",
+                         str(tmp_path / f"{pct}.png")]) == 0
+    a, b = (matplotlib.image.imread(tmp_path / f"{p}.png") for p in ("99", "100"))
+    assert a.shape != b.shape or np.abs(a - b).max() > 0.1
+    assert cli_main(["plot", str(d / "glass.lsim"), "--blocks", "--percentile", "0"]) == 2
+    assert "--percentile must be in (0, 100]" in capsys.readouterr().err
+
+
 def test_block_images_of_a_lambertian_layer():
     """f = albedo / (2 pi sum w mu) in Rt only, in order 0 and at every azimuth; order 1 is 0."""
     bsdf = layersim.solve(layersim.Scene.from_dict({"layer": [{"kind": "diffuse",

@@ -196,6 +196,26 @@ def test_cli_fit_ndf_refuses_an_incomplete_table_and_writes_a_partial_one(tmp_pa
     assert main(["fit-ndf", str(tmp_path / "view.npz"), "-o", str(out), "--grid", "19"]) == 2
 
 
+def test_fit_plot_panels_have_labelled_axes_and_ticks(tmp_path, capsys):
+    """fit-ndf --plot: each panel (D, W) is the projected hemisphere of normals with labelled
+    h_x, h_y axes and ticks from -1 to 1, and the PNG is written."""
+    from layersim.ndf.fitplot import fit_figure
+    g = HalfGrid(19, 36)
+    d = np.ones((19, 36))
+    w = np.where(np.arange(19)[:, None] < 10, 1.0, 0.0) * np.ones((1, 36))
+    fig = fit_figure(g, d, w, title="t")
+    panels = [ax for ax in fig.axes if ax.get_title()]
+    assert [ax.get_title() for ax in panels] == ["D [1/sr]", "confidence W"]
+    for ax in panels:
+        assert "h_x" in ax.get_xlabel() and "h_y" in ax.get_ylabel()
+        assert list(ax.get_xticks()) == [-1.0, -0.5, 0.0, 0.5, 1.0] == list(ax.get_yticks())
+    m = sy.measure(sy.direction(40, 0), sy.fibonacci_lights(300, 85), "ggx", 0.3, 0.5)
+    m.save(tmp_path / "view.npz")
+    assert main(["fit-ndf", str(tmp_path / "view.npz"), "-o", str(tmp_path / "n.npz"),
+                 "--grid", "19x36", "--partial", "--plot", str(tmp_path / "n.png")]) == 0
+    assert (tmp_path / "n.png").stat().st_size > 0
+
+
 @pytest.mark.slow
 def test_cli_fit_ndf_completes_from_rotated_samples_and_plots(tmp_path, capsys):
     g = HalfGrid(31, 60)

@@ -142,6 +142,63 @@ def test_lobes_entry_point_gives_energy_and_roughness_per_channel():
     assert ls[1].roughness[0] > 0.3              # the coat spreads the base lobe
 
 
+@pytest.mark.parametrize("theta, error, words", [
+    (2.0, ValueError, ("theta_i = 2 rad", "[0, pi/2)", "in radians")),
+    (30.0, ValueError, ("theta_i = 30 rad", "30 deg would be 0.5236 rad")),
+    (-0.3, ValueError, ("theta_i = -0.3 rad", "[0, pi/2)")),
+    (math.pi / 2, ValueError, ("horizon",)),
+    (math.nan, ValueError, ("theta_i = nan",)),
+    (math.inf, ValueError, ("theta_i = inf",)),
+    ("0.5", TypeError, ("theta_i must be one angle in radians", "str")),
+    (np.array([0.1, 0.2]), TypeError, ("one angle",)),
+    (True, TypeError, ("one angle",)),
+])
+def test_lobes_refuse_an_angle_that_is_not_an_incidence_in_radians(theta, error, words):
+    """theta_i is one real number in [0, pi/2) radians: past the horizon (2 rad), negative,
+    non-finite or not a number is refused with the value and the range, before the model
+    runs (2 rad used to give lobes, those of theta = pi - 2 mirrored by the cosine)."""
+    for call in (lambda: lobes(SCENE, theta), lambda: StatisticalBSDF(SCENE).lobes(theta)):
+        with pytest.raises(error) as exc:
+            call()
+        for w in words:
+            assert w in str(exc.value), (w, str(exc.value))
+
+
+def test_model_inputs_are_checked_like_the_solved_bsdf():
+    """Directions are unit vectors (..., 3) above the surface, bins are increasing edges within
+    their range, as layersim.BSDF takes them: no NaN or silent zero comes back."""
+    b = StatisticalBSDF(SCENE)
+    up = np.array([0.0, 0.0, 1.0])
+    for wi, words in (([0.0, 0.0, 0.0], "unit vectors"), ([np.nan, 0.0, 1.0], "non-finite"),
+                      ([0.0, 0.0, 1.0, 1.0], "shape"), ([0.0, 0.0, -1.0], "lit from above")):
+        for call in (lambda: b.albedo(wi), lambda: b.eval(wi, up),
+                     lambda: b.bin_energies(wi, [0.0, 1.0], [0.0, 2 * np.pi])):
+            with pytest.raises(ValueError, match=words):
+                call()
+    for wo, words in (([0.0, 0.0, 0.0], "wo must be unit vectors"), ([np.nan, 0, 1], "wo")):
+        with pytest.raises(ValueError, match=words):
+            b.eval(up, wo)
+    with pytest.raises(ValueError, match=r"mu_edges must lie within \[0, 1\]"):
+        b.bin_energies(up, [0.0, 0.5, 2.0], [0.0, 6.0])
+    with pytest.raises(ValueError, match="strictly increasing"):
+        b.bin_energies(up, [0.5, 0.0], [0.0, 6.0])
+    with pytest.raises(ValueError, match="alpha must be a GGX roughness > 0"):
+        from layersim.statistical.lobes import lobe_bins
+        lobe_bins(up, 0.0, [0.0, 1.0], [0.0, 6.0])
+
+
+def test_lobes_near_grazing_say_where_the_model_has_no_finite_width():
+    """Near grazing incidence the variance of light refracted back out through the coat
+    diverges in Belcour's model and the base lobe's width is undefined: an InfeasibleError
+    naming the layer and the angle, not a NaN roughness."""
+    scene = {"layer": [SCENE["layer"][0], SCENE["layer"][2]]}
+    assert np.all(np.isfinite(lobes(scene, math.radians(80.0))[1].roughness))
+    with pytest.raises(layersim.errors.InfeasibleError, match="layer 1 at theta_i = 85 deg"):
+        lobes(scene, math.radians(85.0))
+    with pytest.raises(layersim.errors.InfeasibleError, match="no finite width"):
+        StatisticalBSDF(scene).eval([math.sin(1.5), 0.0, math.cos(1.5)], [0.0, 0.0, 1.0])
+
+
 def test_statistical_bsdf_bins_and_eval_carry_the_lobe_energies():
     b = StatisticalBSDF(SCENE)
     wi = np.array([math.sin(0.5), 0.0, math.cos(0.5)])

@@ -7,7 +7,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from ..config import settings as layersim_settings
 from ..errors import InfeasibleError
+from ..kernels.runtime import device_for
 from . import report, runner, stability as stab
 
 #: Scenes of the quick run (isotropic, solved in seconds).
@@ -20,7 +22,8 @@ def default_scene_dir() -> Path:
 
 
 def run(out, quick: bool = False, stability: bool = False, backends=("auto",),
-        scene_dir=None, scenes=None, command: str | None = None, log=print) -> dict:
+        scene_dir=None, scenes=None, command: str | None = None, log=print,
+        seed: int = 1) -> dict:
     """Run the benchmark and write ``out/results.json``, ``out/report.md`` and PNG plots.
 
     Parameters
@@ -28,8 +31,8 @@ def run(out, quick: bool = False, stability: bool = False, backends=("auto",),
     out : path
         Output folder (created).
     quick : bool
-        Small version (three isotropic scenes, one incidence angle, short ladders): under two
-        minutes on a 2-core CPU.
+        Small version (three isotropic scenes, coarse bins, two rungs per method:
+        :meth:`runner.Settings.quick`): under two minutes on a 2-core CPU.
     stability : bool
         Also run the stability suite.
     backends : sequence of str
@@ -38,7 +41,13 @@ def run(out, quick: bool = False, stability: bool = False, backends=("auto",),
         Folder of ``*.toml`` scenes (default :func:`default_scene_dir`).
     scenes : sequence of str, optional
         Scene names (file stems) to run (default: all, or :data:`QUICK_SCENES` when quick).
+    seed : int
+        Seed of the Monte Carlo runs (incidence angle ``k`` uses ``seed + k``).
     """
+    if layersim_settings().device != "cpu":
+        # an unusable device is refused here: the runner takes a refused solve for the
+        # scene's and goes on with Monte Carlo alone
+        device_for()
     scene_dir = Path(scene_dir) if scene_dir else default_scene_dir()
     files = sorted(scene_dir.glob("*.toml"))
     if not files:
@@ -52,6 +61,7 @@ def run(out, quick: bool = False, stability: bool = False, backends=("auto",),
         files = [f for f in files if f.stem in wanted]
     settings = runner.Settings.quick() if quick else runner.Settings()
     settings.backends = tuple(backends)
+    settings.seed = seed
     machine = report.machine_info(command or " ".join(["layersim"] + sys.argv[1:]))
     results_scenes = []
     for f in files:

@@ -63,7 +63,8 @@ def write(out: Path, machine: dict, scenes: list, stability: list, settings) -> 
                             "n_phi": settings.n_phi, "scales": list(settings.scales),
                             "reference_scale": settings.reference_scale,
                             "particles": list(settings.particles),
-                            "check_particles": settings.check_particles},
+                            "check_particles": settings.check_particles,
+                            "seed": settings.seed},
                "scenes": [_public(s) for s in scenes], "stability": stability}
     (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
     images = {}
@@ -92,39 +93,50 @@ def _plt():
     return plt
 
 
+def error_time_figure(s: dict):
+    """Error against wall time of one scene entry ``s`` of results.json (pyplot figure; the
+    caller saves and closes it): the solver's rungs (labelled n), the solves to a tolerance,
+    the Monte Carlo ladder per backend and the statistical model, titled with the reference
+    (:func:`reference_text`)."""
+    plt = _plt()
+    solver = [r for r in s.get("solver", []) if "error" in r]
+    tols = [r for r in s.get("tolerance", []) if "error" in r]
+    mc = [r for r in s.get("montecarlo", []) if "error" in r]
+    fig, ax = plt.subplots(figsize=(5.5, 4.3))
+    labels = []                          # (text, x, y, above): drawn once x is fixed
+    if solver:
+        ax.loglog([r["seconds"] for r in solver], [r["error"] for r in solver], "o-",
+                  label="Fourier solver")
+        labels += [(f"n={r['n']}", r["seconds"], r["error"], True) for r in solver]
+    if tols:
+        ax.loglog([r["seconds"] for r in tols], [r["error"] for r in tols], "D:",
+                  label="solver to a tolerance (error; tol marked)")
+        labels += [(f"tol {r['tol']:g}", r["seconds"], r["error"], False) for r in tols]
+    for backend in sorted({r["backend"] for r in mc}):
+        rows = [r for r in mc if r["backend"] == backend]
+        ax.loglog([r["seconds"] for r in rows], [r["error"] for r in rows], "s--",
+                  label=f"Monte Carlo ({backend})")
+    stat = s.get("statistical", {})
+    if "error" in stat:
+        ax.loglog([stat["seconds"]], [stat["error"]], "D", label="statistical model")
+    ax.margins(x=0.08, y=0.12)
+    _annotate_inside(ax, labels)
+    ax.set_xlabel("wall time (s)")
+    ax.set_ylabel("relative L2 error of bin energies")
+    ax.set_title(f"{s['name']}\n{reference_text(s)}", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
 def _plots(out: Path, s: dict, settings) -> list[str]:
     plt = _plt()
     names = []
     solver = [r for r in s.get("solver", []) if "error" in r]
-    tols = [r for r in s.get("tolerance", []) if "error" in r]
     mc = [r for r in s.get("montecarlo", []) if "error" in r]
     if solver or mc:
-        fig, ax = plt.subplots(figsize=(5.5, 4))
-        if solver:
-            ax.loglog([r["seconds"] for r in solver], [r["error"] for r in solver], "o-",
-                      label="Fourier solver")
-            for r in solver:
-                ax.annotate(f"n={r['n']}", (r["seconds"], r["error"]), fontsize=7,
-                            textcoords="offset points", xytext=(4, 4))
-        if tols:
-            ax.loglog([r["seconds"] for r in tols], [r["error"] for r in tols], "D:",
-                      label="solver to a tolerance (error; tol marked)")
-            for r in tols:
-                ax.annotate(f"tol {r['tol']:g}", (r["seconds"], r["error"]), fontsize=7,
-                            textcoords="offset points", xytext=(4, -10))
-        for backend in sorted({r["backend"] for r in mc}):
-            rows = [r for r in mc if r["backend"] == backend]
-            ax.loglog([r["seconds"] for r in rows], [r["error"] for r in rows], "s--",
-                      label=f"Monte Carlo ({backend})")
-        stat = s.get("statistical", {})
-        if "error" in stat:
-            ax.loglog([stat["seconds"]], [stat["error"]], "D", label="statistical model")
-        ax.set_xlabel("wall time (s)")
-        ax.set_ylabel("relative L2 error of bin energies")
-        ax.set_title(s["name"])
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
-        fig.tight_layout()
+        fig = error_time_figure(s)
         name = f"{s['name']}_error_time.png"
         fig.savefig(out / name, dpi=110)
         plt.close(fig)
@@ -139,6 +151,33 @@ def _plots(out: Path, s: dict, settings) -> list[str]:
         name = _slices(out, s["name"], panels, settings)
         names.append(name)
     return names
+
+
+def _annotate_inside(ax, labels) -> None:
+    """Label points ``(text, x, y, above)`` on a log-log axis, each on the side of its point
+    that faces the middle of the axis, so that labels of the rightmost points stay inside
+    the figure."""
+    lo, hi = ax.get_xlim()
+    middle = math.sqrt(lo * hi)
+    for text, x, y, above in labels:
+        right = x <= middle
+        ax.annotate(text, (x, y), fontsize=7, textcoords="offset points",
+                    xytext=(4 if right else -4, 4 if above else -10),
+                    ha="left" if right else "right")
+
+
+def reference_text(s: dict) -> str:
+    """What the errors of scene entry ``s`` are measured against, in one line: the solve it
+    uses as reference and how much finer it is than the finest solver rung (errors of a rung
+    close to the reference include the reference's own error), or the Monte Carlo run."""
+    ref = s.get("reference", {})
+    if ref.get("kind") == "solver":
+        rungs = [r["n"] for r in s.get("solver", []) if "n" in r]
+        finer = (f", {ref['n'] / max(rungs):.2g}x the finest rung's n" if rungs else "")
+        return f"reference: solve at n = {ref['n']}, md = {ref['md']}{finer}"
+    if ref.get("kind") == "montecarlo":
+        return f"reference: Monte Carlo, {ref.get('particles', 0):.0e} paths"
+    return "no reference"
 
 
 #: Outgoing elevations (degrees) of the labelled rings of the polar slices.
@@ -232,7 +271,12 @@ def _markdown(results: dict, images: dict, throughput) -> str:
         ref = s.get("reference", {})
         lines += [f"## {s['name']}", ""]
         if ref.get("kind") == "solver":
+            rungs = [r["n"] for r in s.get("solver", []) if "n" in r]
             desc = f"solver at n = {ref['n']}, md = {ref['md']}"
+            if rungs:
+                desc += (f" ({ref['n'] / max(rungs):.2g}x the n of the finest solver rung below; "
+                         "each rung's error includes the reference's own, so a rung close to "
+                         "it can show the reference's error rather than its own)")
             chk = ref.get("montecarlo_check")
             if chk:
                 desc += (f"; checked against {chk['particles']:.0e} Monte Carlo paths "

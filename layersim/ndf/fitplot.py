@@ -28,17 +28,30 @@ def _panel(fig, ax, grid: HalfGrid, values, title, cmap="viridis", vmin=None, vm
     m = ax.pcolormesh(x, y, vals, cmap=cmap, vmin=vmin, vmax=vmax, shading="flat")
     ax.set_aspect("equal")
     ax.set_title(title, fontsize=9)
-    ax.set_xticks([]), ax.set_yticks([])
+    ticks = [-1.0, -0.5, 0.0, 0.5, 1.0]
+    ax.set_xticks(ticks, [f"{t:g}" for t in ticks], fontsize=7)
+    ax.set_yticks(ticks, [f"{t:g}" for t in ticks], fontsize=7)
+    ax.set_xlabel(r"$h_x = \sin\theta_h \cos\phi_h$", fontsize=8)
+    ax.set_ylabel(r"$h_y = \sin\theta_h \sin\phi_h$", fontsize=8)
     fig.colorbar(m, ax=ax, shrink=0.8)
 
 
 def plot_fit(path, grid: HalfGrid, d, w=None, reference=None, log: bool = False,
              title: str = "") -> Path:
-    """Draw D (and W, the reference and the relative error when given) into a PNG.
+    """Draw D (and W, the reference and the relative error when given) into a PNG at
+    ``path``; the arguments are those of :func:`fit_figure`."""
+    path = Path(path)
+    fit_figure(grid, d, w, reference, log, title).savefig(path, dpi=110)
+    return path
+
+
+def fit_figure(grid: HalfGrid, d, w=None, reference=None, log: bool = False,
+               title: str = "") -> Figure:
+    """The figure of :func:`plot_fit`: one panel per table on the projected hemisphere of
+    normals, with labelled ``h_x``, ``h_y`` axes and a colour bar each.
 
     Parameters
     ----------
-    path : output file
     grid : HalfGrid of the tables
     d : array (n_theta, n_phi), the NDF in 1/sr (NaN where undetermined; a filled table shows
         its filled part, which W marks with 0)
@@ -57,12 +70,10 @@ def plot_fit(path, grid: HalfGrid, d, w=None, reference=None, log: bool = False,
         rel = (d - ref) / np.nanmax(ref)
         lim = max(float(np.nanmax(np.abs(rel))), 1e-6) if np.isfinite(rel).any() else 1.0
         panels.append((rel, "(D - ref) / max ref", "RdBu_r", -lim, lim))
-    fig = Figure(figsize=(3.4 * len(panels), 3.2))
+    fig = Figure(figsize=(3.6 * len(panels), 3.4), layout="constrained")
     FigureCanvasAgg(fig)
     for k, (vals, name, cmap, lo, hi) in enumerate(panels):
         _panel(fig, fig.add_subplot(1, len(panels), k + 1), grid, vals, name, cmap, lo, hi)
     if title:
         fig.suptitle(title, fontsize=10)
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    return path
+    return fig

@@ -14,10 +14,13 @@ reports the model's transmitted energy, but ``bin_energies`` has no bottom-side 
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..directions import bin_edges, direction_pairs, unit_directions
+from ..errors import InfeasibleError
 from .forward import add_stack
 from .stack import statistical_stacks
 from .variance import roughness
@@ -41,6 +44,35 @@ def _ggx_albedo(mu: float, alpha: float) -> float:
     return float(ggx_albedo(mu, alpha))
 
 
+def incidence_cosine(theta_i) -> float:
+    """``cos theta_i`` of an incidence angle ``theta_i`` (radians from the normal), checked:
+    one real number in ``[0, pi/2)`` (the model is lit from above; the horizon is excluded),
+    rounded to 12 digits (the key of the cached statistics).
+
+    Raises
+    ------
+    TypeError
+        If ``theta_i`` is not one real number.
+    ValueError
+        If it is not finite or outside ``[0, pi/2)``; an angle that looks like degrees says so.
+    """
+    a = np.asarray(theta_i) if not isinstance(theta_i, (str, bytes)) else None
+    if (a is None or a.shape != () or isinstance(theta_i, bool) or a.dtype == bool
+            or not (np.issubdtype(a.dtype, np.integer) or np.issubdtype(a.dtype, np.floating))):
+        raise TypeError(f"theta_i must be one angle in radians (a real number), got "
+                        f"{type(theta_i).__name__} {theta_i!r:.40}")
+    t = float(a)
+    mu = round(math.cos(t), 12) if math.isfinite(t) else 0.0
+    if not (math.isfinite(t) and 0.0 <= t < 0.5 * math.pi and mu > 0.0):
+        # an angle past the horizon but below 90 may be meant in degrees
+        hint = (f"; theta_i is in radians ({t:g} deg would be {math.radians(t):.4g} rad)"
+                if math.isfinite(t) and 1.6 <= t < 90.0 else "")
+        raise ValueError(f"theta_i = {t:g} rad: the incidence angle must be in [0, pi/2) "
+                         f"(from the normal, the horizon excluded; the statistical model is "
+                         f"lit from above){hint}")
+    return mu
+
+
 #: Gauss-Legendre nodes per bin in the outgoing elevation and azimuth for :func:`lobe_bins`.
 BIN_NODES = 16
 
@@ -52,7 +84,15 @@ def lobe_bins(wi, alpha: float, mu_edges, phi_edges, nodes: int = BIN_NODES) -> 
     nodes per bin in (theta_o, phi_o). Over the whole hemisphere they sum to 1 up to the
     quadrature error (below 1e-4 for alpha >= 0.05 on 18 x 36 bins)."""
     from ..kernels.fgd import ggx_lobe
-    mu_edges, phi_edges = np.asarray(mu_edges, float), np.asarray(phi_edges, float)
+    if not (isinstance(alpha, (int, float, np.number)) and math.isfinite(alpha) and alpha > 0):
+        raise ValueError(f"alpha must be a GGX roughness > 0, got {alpha!r}")
+    wi = unit_directions("wi", wi)
+    if wi.shape != (3,) or wi[2] <= 0.0:
+        raise ValueError(f"wi must be one direction of shape (3,) above the surface (wi.z > 0), "
+                         f"got shape {wi.shape}" + (f", wi.z = {wi[2]:g}" if wi.shape == (3,)
+                                                     else ""))
+    mu_edges = bin_edges("mu_edges", mu_edges, 0.0, 1.0)
+    phi_edges = bin_edges("phi_edges", phi_edges, 0.0, 2.0 * np.pi)
     x, w = np.polynomial.legendre.leggauss(nodes)
     t_edges = np.arccos(np.clip(mu_edges, 0.0, 1.0))          # decreasing in theta
     t0, t1 = t_edges[1:], t_edges[:-1]
@@ -101,39 +141,66 @@ class StatisticalBSDF:
         return [add_stack(s, mu, self.scene.top_ior) for s in self._stacks]
 
     def lobes(self, theta_i: float) -> list[Lobe]:
-        """The lobes at incidence ``theta_i`` (radians from the normal), top first; interfaces
-        no light reaches have none."""
-        stats = self._stats(round(float(np.cos(theta_i)), 12))
+        """The lobes at incidence ``theta_i`` (radians from the normal, in ``[0, pi/2)``), top
+        first; interfaces no light reaches have none.
+
+        Raises
+        ------
+        TypeError, ValueError
+            For an angle that is not one real number in ``[0, pi/2)``
+            (:func:`incidence_cosine`).
+        InfeasibleError
+            Where the model has no finite lobe width: near grazing incidence the variance of
+            light refracted back out through an interface diverges (Belcour 2018's
+            transmission variance grows without bound as the refracted direction nears the
+            horizon), and the lobes below it are undefined (NaN) in the model.
+        """
+        return self._lobes(incidence_cosine(theta_i))
+
+    def _lobes(self, mu: float) -> list[Lobe]:
+        stats = self._stats(mu)
         count = min(len(st.lobes) for st in stats)
         out = []
         for j in range(count):
             e = np.array([st.lobes[j][0] for st in stats])
             v = np.array([st.lobes[j][1] for st in stats])
-            out.append(Lobe(e, v, np.array([roughness(x) for x in v]), stats[0].lobes[j][2]))
+            layer = stats[0].lobes[j][2]
+            if np.any(np.isnan(v)):
+                raise InfeasibleError(
+                    f"Belcour's statistical model has no finite width for the lobe of layer "
+                    f"{layer} at theta_i = {math.degrees(math.acos(mu)):.4g} deg: the variance "
+                    "of the light refracted back out through the layers above diverges near "
+                    "grazing incidence; use a smaller angle or the exact solve "
+                    "(layersim.solve)")
+            out.append(Lobe(e, v, np.array([roughness(x) for x in v]), layer))
         return out
 
     def _squeeze(self, x):
         x = np.asarray(x, dtype=np.float64)
         return x[..., 0] if self.channels == 1 else x
 
-    def _check(self, wi):
-        wi = np.asarray(wi, dtype=np.float64)
-        if wi.shape[-1:] != (3,):
-            raise ValueError(f"wi must have shape (..., 3), got {wi.shape}")
+    @staticmethod
+    def _above(wi: np.ndarray) -> np.ndarray:
+        """``wi`` (validated unit vectors) checked to lie above the surface."""
         if np.any(wi[..., 2] <= 0):
             raise ValueError("the statistical model is lit from above only (wi.z > 0)")
-        return wi / np.linalg.norm(wi, axis=-1, keepdims=True)
+        return wi
+
+    def _check(self, wi):
+        """``wi`` as unit vectors (..., 3) above the surface (as :class:`layersim.BSDF`
+        takes them: :func:`layersim.directions.unit_directions`)."""
+        return self._above(unit_directions("wi", wi))
 
     def eval(self, wi, wo) -> np.ndarray:
-        """Sum of the rough lobes, 1/sr without the cosine, shape ``(...)`` (``(..., 3)`` RGB)."""
+        """Sum of the rough lobes, 1/sr without the cosine, shape ``(...)`` (``(..., 3)`` RGB);
+        ``wi`` and ``wo`` are unit vectors (..., 3), broadcast together, ``wi.z > 0``."""
         from ..kernels.fgd import ggx_lobe
-        wi, wo = np.broadcast_arrays(self._check(wi), np.asarray(wo, dtype=np.float64))
-        shape = wi.shape[:-1]
-        fi, fo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+        fi, fo, shape = direction_pairs(wi, wo)
+        self._above(fi)
         out = np.zeros((fi.shape[0], self.channels))
         for mu in np.unique(np.round(fi[:, 2], 12)):
             sel = np.round(fi[:, 2], 12) == mu
-            for lobe in self.lobes(float(np.arccos(mu))):
+            for lobe in self._lobes(float(mu)):
                 for c in range(self.channels):
                     a = float(lobe.roughness[c])
                     if a <= 0.0 or lobe.energy[c] <= 0.0:
@@ -147,7 +214,7 @@ class StatisticalBSDF:
         wi = self._check(wi)
         e = np.zeros(wi.shape[:-1] + (self.channels,))
         for idx in np.ndindex(wi.shape[:-1]):
-            for lobe in self.lobes(float(np.arccos(wi[idx][2]))):
+            for lobe in self._lobes(round(float(wi[idx][2]), 12)):
                 e[idx] += np.where(lobe.roughness <= 0.0, lobe.energy, 0.0)
         mirror = wi * np.array([-1.0, -1.0, 1.0])
         return {"top": (self._squeeze(e), mirror),
@@ -169,14 +236,18 @@ class StatisticalBSDF:
         """Energy leaving into each ``(mu, phi)`` bin of the top side (the lobes integrated
         with :func:`lobe_bins`; a smooth lobe lands in its mirror direction's bin); the bottom
         side is zeros (the model has no transmitted distribution)."""
-        wi = self._check(wi).reshape(3)
-        mu_edges, phi_edges = np.asarray(mu_edges, float), np.asarray(phi_edges, float)
+        wi = self._check(wi)
+        if wi.shape != (3,):
+            raise ValueError(f"bin_energies takes one incident direction of shape (3,), got "
+                             f"{wi.shape}")
+        mu_edges = bin_edges("mu_edges", mu_edges, 0.0, 1.0)
+        phi_edges = bin_edges("phi_edges", phi_edges, 0.0, 2.0 * np.pi)
         top = np.zeros((mu_edges.size - 1, phi_edges.size - 1, self.channels))
         mirror = np.array([-wi[0], -wi[1], wi[2]])
         phi_m = np.mod(np.arctan2(mirror[1], mirror[0]), 2 * np.pi)
         i_m = min(max(np.searchsorted(mu_edges, mirror[2], "right") - 1, 0), mu_edges.size - 2)
         j_m = min(max(np.searchsorted(phi_edges, phi_m, "right") - 1, 0), phi_edges.size - 2)
-        for lobe in self.lobes(float(np.arccos(wi[2]))):
+        for lobe in self._lobes(round(float(wi[2]), 12)):
             for c in range(self.channels):
                 a = float(lobe.roughness[c])
                 if a <= 0.0:
@@ -187,6 +258,9 @@ class StatisticalBSDF:
 
 
 def lobes(scene, theta_i: float) -> list[Lobe]:
-    """Belcour's statistical lobes of ``scene`` at incidence ``theta_i`` (radians): a list, top
-    first, of :class:`Lobe` with ``energy`` and ``roughness`` per channel."""
+    """Belcour's statistical lobes of ``scene`` at incidence ``theta_i`` (radians from the
+    normal, in ``[0, pi/2)``): a list, top first, of :class:`Lobe` with ``energy`` and
+    ``roughness`` per channel. Raises as :meth:`StatisticalBSDF.lobes`; the angle is checked
+    before the scene is read."""
+    incidence_cosine(theta_i)
     return StatisticalBSDF(scene).lobes(theta_i)

@@ -40,34 +40,60 @@ def verification_lines(targets, result, reference: str = "exact") -> list[str]:
 def plot_lobes(targets, design, result, path) -> None:
     """Target lobes (GGX of the target roughness and energy) against exact transport's lobes
     (the cut-stack differences of :func:`~layersim.statistical.verify.exact_lobes`) at normal
-    incidence: energy per degree of outgoing elevation, one panel per lobe, one line per
-    channel."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from .lobes import lobe_bins
-    from .verify import RING_EDGES, exact_ring_energies
-    theta = 0.5 + np.arange(90)[::-1]          # ring centres, degrees (RING_EDGES increase in mu)
+    incidence, drawn into a PNG at ``path`` (:func:`lobes_figure`)."""
+    from .verify import exact_ring_energies
     rings = exact_ring_energies(design, result["exact_solve"])
+    lobes_figure(targets, rings).savefig(path, dpi=110)
+
+
+#: Line colours of the R, G and B channels (one channel: black).
+CHANNEL_COLOURS = ("tab:red", "tab:green", "tab:blue")
+
+
+def lobes_figure(targets, rings):
+    """The figure of :func:`plot_lobes`: energy per degree of outgoing elevation at normal
+    incidence, one panel per lobe, one colour per channel (:data:`CHANNEL_COLOURS`), exact
+    transport solid and the target dashed; the legend names both the line styles and the
+    channel colours.
+
+    Parameters
+    ----------
+    targets : Targets
+        The parsed targets (:func:`~layersim.statistical.targets.parse_targets`).
+    rings : list of ndarray, each (90, channels)
+        Exact energy per 1-degree ring of the outgoing elevation for each lobe, in the order
+        of :data:`~layersim.statistical.verify.RING_EDGES` (increasing cos theta).
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from .lobes import lobe_bins
+    from .verify import RING_EDGES
+    theta = 0.5 + np.arange(90)[::-1]          # ring centres, degrees (RING_EDGES increase in mu)
     n = len(targets.lobes)
-    fig, axes = plt.subplots(1, n, figsize=(4.2 * n, 3.4), squeeze=False)
-    colours = ["tab:red", "tab:green", "tab:blue"]
+    fig = Figure(figsize=(4.2 * n, 3.4), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, n, squeeze=False)
     wi, edges = np.array([0.0, 0.0, 1.0]), np.array([0.0, 2.0 * math.pi])
     for k, (ax, t) in enumerate(zip(axes[0], targets.lobes)):
         exact = rings[k]
-        for c in range(exact.shape[1]):
-            col = colours[c] if exact.shape[1] == 3 else "k"
-            ax.plot(theta, exact[:, c], color=col, lw=1.5,
-                    label="exact" if c == 0 else None)
-            e = float(np.broadcast_to(t.energy, (exact.shape[1],))[c])
+        nch = exact.shape[1]
+        colours = CHANNEL_COLOURS if nch == 3 else ("k",)
+        for c in range(nch):
+            ax.plot(theta, exact[:, c], color=colours[c], lw=1.5)
+            e = float(np.broadcast_to(t.energy, (nch,))[c])
             if t.roughness > 0:
                 ax.plot(theta, e * lobe_bins(wi, t.roughness, RING_EDGES, edges)[:, 0],
-                        color=col, ls="--", lw=1, label="target" if c == 0 else None)
+                        color=colours[c], ls="--", lw=1)
+        # the legend explains the two line styles in neutral grey, then the channel colours
+        handles = [Line2D([], [], color="0.3", lw=1.5, label="exact transport"),
+                   Line2D([], [], color="0.3", lw=1, ls="--", label="target")]
+        if nch == 3:
+            handles += [Line2D([], [], color=col, lw=3, label=f"{name} channel")
+                        for col, name in zip(colours, "RGB")]
         ax.set_xlim(0, min(90, 6 * max(t.roughness, 0.02) * 180 / math.pi + 5))
-        ax.set_xlabel("theta_o (deg), normal incidence")
+        ax.set_xlabel(r"$\theta_o$ (deg), normal incidence")
         ax.set_ylabel("energy per degree")
         ax.set_title(f"lobe {k + 1}")
-        ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+        ax.legend(handles=handles, fontsize=7)
+    return fig
