@@ -24,7 +24,10 @@ naming the function and line):
   ``int()``/``float()``, and the builtins in :data:`_MATH` plus ``abs``, ``min``, ``max``,
   ``clamp``, ``dot``, ``cross``, ``length``, ``normalize``, ``atomic_add`` (integers only);
 * module-level constants (``wp.constant``) and ``wp.pi``; constant sub-expressions are folded in
-  double precision before being rounded to the target type.
+  double precision before being rounded to the target type;
+* closures (functions built inside a Python function see its captured variables) and
+  ``wp.static(expr)``, evaluated at translation as Warp evaluates it at code generation: an
+  ``if wp.static(...)`` emits only the branch taken.
 
 Literals follow Warp: an untyped float literal is ``float`` (float32), an untyped integer ``int``;
 a literal combined with a typed operand takes that operand's type.
@@ -253,6 +256,7 @@ class Program:
         self._order: list = []              # definitions in dependency order
         self._in_progress: set = set()
         self._kernels: list = []
+        self._names: dict = {}              # C name -> the Python functions that bear it
         self.uses_double = False
         self.uses_atomics64 = False
 
@@ -354,6 +358,12 @@ class Program:
         cname = f"ls_{module}_{pyfunc.__name__}"
         if generic:
             cname += "_" + "".join(_type_code(t) for t in argtypes)
+        # closures of one name (walks built for different features) get distinct C names
+        taken = self._names.setdefault(cname, [])
+        if pyfunc not in taken:
+            taken.append(pyfunc)
+        if taken.index(pyfunc):
+            cname += f"_v{taken.index(pyfunc)}"
         inst = _Instance(cname, [(_c_name(n), t) for n, t in typed])
         self._in_progress.add(key)
         try:
@@ -366,6 +376,11 @@ class Program:
         self._instances[key] = inst
         self._order.append(inst)
         return inst
+
+
+#: What :meth:`_FunctionTranslator.static_value` returns for an expression that is not
+#: ``wp.static(...)``.
+_NOT_STATIC = object()
 
 
 @dataclass(frozen=True)
@@ -397,6 +412,16 @@ def _function_ast(pyfunc) -> ast.FunctionDef:
     return fdef
 
 
+def _scope(pyfunc) -> dict:
+    """The names a function's body sees: its module's globals and, for a closure, the
+    variables it captures (a walk built for a set of features captures them)."""
+    scope = dict(pyfunc.__globals__)
+    if pyfunc.__closure__:
+        scope.update((name, cell.cell_contents) for name, cell in
+                     zip(pyfunc.__code__.co_freevars, pyfunc.__closure__))
+    return scope
+
+
 def parameters(func) -> list:
     """``[(name, OpenCL type or None for Any)]`` of a Warp function, from its annotations."""
     return list(_annotations_of(_python_function(func)))
@@ -410,7 +435,7 @@ def _annotations_of(pyfunc) -> tuple:
         if arg.annotation is None:
             raise CodegenError(f"{pyfunc.__name__}: argument '{arg.arg}' needs an annotation")
         ann = eval(compile(ast.Expression(arg.annotation), "<annotation>", "eval"),
-                   pyfunc.__globals__)
+                   _scope(pyfunc))
         out.append((arg.arg, None if ann is typing.Any else opencl_type(ann)))
     return tuple(out)
 
@@ -424,7 +449,7 @@ class _FunctionTranslator:
         self.inst = inst
         self.types = dict(params)           # python name -> type
         self.params = set(params)
-        self.globals = pyfunc.__globals__
+        self.globals = _scope(pyfunc)
         self.fdef = _function_ast(pyfunc)
         self.first_line = inspect.getsourcelines(pyfunc)[1]
         self.lineno = self.first_line
@@ -478,6 +503,9 @@ class _FunctionTranslator:
                               right=st.value)
             return [pad + s for s in self.assign(st.target, value)]
         if isinstance(st, ast.If):
+            static = self.static_value(st.test)
+            if static is not _NOT_STATIC:      # wp.static(...): only the branch taken
+                return self.block(st.body if static else st.orelse, depth)
             cond = self.cond(st.test)
             lines = [f"{pad}if ({cond}) {{"] + self.block(st.body, depth + 1)
             if st.orelse:
@@ -577,6 +605,20 @@ class _FunctionTranslator:
                 + " return; }"]
 
     # ---- expressions ----------------------------------------------------------------------
+
+    def static_value(self, node):
+        """The value of ``wp.static(expr)``, evaluated in the function's scope as Warp does at
+        code generation, or :data:`_NOT_STATIC` for any other expression."""
+        if not (isinstance(node, ast.Call) and len(node.args) == 1 and not node.keywords
+                and isinstance(node.func, ast.Attribute) and node.func.attr == "static"
+                and isinstance(node.func.value, ast.Name)
+                and self.globals.get(node.func.value.id) is wp):
+            return _NOT_STATIC
+        try:
+            return eval(compile(ast.Expression(node.args[0]), "<wp.static>", "eval"),
+                        self.globals)
+        except Exception as exc:
+            self.fail(f"wp.static({ast.unparse(node.args[0])}) cannot be evaluated: {exc}")
 
     def cond(self, node) -> str:
         """Condition code, parenthesised exactly once (for ``if (...)``/``while (...)``)."""
@@ -679,6 +721,9 @@ class _FunctionTranslator:
                 return _Expr(f"{base.code}[{self.index(node.slice)}]", base.type[:-1])
             self.fail(f"indexing a value of type {base.type}")
         if isinstance(node, ast.Call):
+            static = self.static_value(node)
+            if static is not _NOT_STATIC:
+                return self.constant(static)
             return self.call(node)
         self.fail(f"unsupported expression {type(node).__name__}")
 

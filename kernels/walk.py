@@ -49,9 +49,13 @@ attainable standard error. ``tally`` holds ``n_copies`` replicas (thread ``tid``
 
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
+from functools import lru_cache
+
+import numpy as np
 import warp as wp
 
-from . import compensation, measured, rng, sampling, tabulated
+from . import compensation, measured, physics, rng, sampling, tabulated
 
 wp.set_module_options({"enable_backward": False})
 
@@ -82,132 +86,86 @@ ABSORBED = wp.constant(-1)
 TRUNCATED = wp.constant(-2)
 
 
-@wp.func
-def boundary_scatter(d: wp.vec3, b: int, bnd_i: wp.array(dtype=wp.int32),
-                     bnd_f: wp.array(dtype=wp.float32), u0: wp.float32, u1: wp.float32,
-                     u2: wp.float32, u3: wp.float32):
-    """Interaction of a particle propagating along ``d`` with (non-null) boundary ``b``.
 
-    Returns the new propagation direction and the weight factor ``f |cos| / pdf``.
+
+# ------------------------------------------------------------------------------------------------
+# What a stack's walk needs
+# ------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Features:
+    """The code paths of the walk that a stack uses; a kernel built for these leaves every other
+    path out (:func:`program`), so that a coated conductor runs no tabulated-NDF, measured-base,
+    compensation or medium code, and the compiler allocates registers for what runs.
+
+    Attributes
+    ----------
+    smooth : bool
+        Smooth (alpha 0) interfaces: specular sampling.
+    beckmann, ggx : bool
+        Rough interfaces with that analytic distribution.
+    tabulated : bool
+        Rough interfaces with a tabulated NDF (:mod:`.tabulated`).
+    compensation : bool
+        Energy-compensation lobes (:mod:`.compensation`).
+    diffuse, measured : bool
+        A Lambertian or a measured (:mod:`.measured`) base.
+    media : bool
+        Slabs with ``tau > 0`` (flights and Henyey-Greenstein scattering).
     """
-    kind = bnd_i[BND_I * b]
-    dist = bnd_i[BND_I * b + 1]
-    o = BND_F * b
-    eta = bnd_f[o]
-    k = bnd_f[o + 1]
-    au = bnd_f[o + 2]
-    av = bnd_f[o + 3]
-    wi = -d
-    if kind == DIFFUSE:
-        if wi[2] <= wp.float32(0.0):
-            return d, wp.float32(0.0)
-        return sampling.sample_cosine_hemisphere(u0, u1), bnd_f[o + 6]
-    if kind == MEASURED:                # alpha_u's slot holds the table's offset in bnd_f
-        wm, wm_weight = measured.sample_measured(wi, bnd_f, int(au), u0, u1)
-        return wm, wm_weight
-    if au == wp.float32(0.0):
-        ws, fs = sampling.sample_smooth(wi, eta, k, u0)
-        return ws, fs
-    # the compensation lobe (isotropic, azimuth independent) or the single-scattering one
-    v0 = u0
-    scale = wp.float32(1.0)
-    comp = int(bnd_f[o + 7])
-    if comp > 0:
-        taken, wc, fc, v0, scale = compensation.choose_lobe(wi, bnd_f, comp, u0, u1, u2)
-        if taken:
-            return wc, fc
-    cr = bnd_f[o + 4]
-    sr = bnd_f[o + 5]
-    wl = sampling.to_tangent_frame(wi, cr, sr)
-    if dist == tabulated.TABULATED:     # alpha_u's slot holds the table's offset in bnd_f
-        wt, wt_weight = tabulated.sample_microfacet_tabulated(wl, eta, k, bnd_f, int(au), v0,
-                                                              u1, u3)
-        return sampling.from_tangent_frame(wt, cr, sr), wt_weight * scale
-    wo, weight = sampling.sample_microfacet(wl, eta, k, au, av, dist, v0, u1, u2, u3)
-    return sampling.from_tangent_frame(wo, cr, sr), weight * scale
+
+    smooth: bool = True
+    beckmann: bool = True
+    ggx: bool = True
+    tabulated: bool = True
+    compensation: bool = True
+    diffuse: bool = True
+    measured: bool = True
+    media: bool = True
+
+    @classmethod
+    def every(cls) -> "Features":
+        """Every path: the kernel that runs any stack."""
+        return cls()
+
+    @property
+    def interfaces(self) -> bool:
+        """Any boundary that is not an index-matched pass-through."""
+        return self.smooth or self.rough or self.diffuse or self.measured
+
+    @property
+    def rough(self) -> bool:
+        return self.beckmann or self.ggx or self.tabulated
+
+    def left_out(self) -> list:
+        """Names of the paths a kernel for these features leaves out."""
+        return [f.name for f in fields(self) if not getattr(self, f.name)]
+
+    def __or__(self, other: "Features") -> "Features":
+        return Features(**{f.name: getattr(self, f.name) or getattr(other, f.name)
+                           for f in fields(self)})
 
 
-@wp.func
-def walk_particle(seed_lo: wp.uint32, seed_hi: wp.uint32, p_lo: wp.uint32, p_hi: wp.uint32,
-                  wi: wp.vec3, bnd_i: wp.array(dtype=wp.int32),
-                  bnd_f: wp.array(dtype=wp.float32), slab_f: wp.array(dtype=wp.float32),
-                  n_slabs: int, max_steps: int):
-    """Follow particle ``p = p_hi * 2^32 + p_lo`` from incidence to its fate.
-
-    Returns ``(outcome, d, w, events)``: :data:`EXIT_TOP` / :data:`EXIT_BOTTOM` /
-    :data:`ABSORBED` / :data:`TRUNCATED`, the final propagation direction (= the outgoing
-    direction ``wo`` for exits), the final weight, and the number of scattering events
-    (medium scatterings and interface interactions).
-    """
-    zero = wp.float32(0.0)
-    d = -wi
-    w = wp.float32(1.0)
-    draw = wp.uint32(0)
-    events = int(0)
-    b = int(0)
-    if wi[2] < zero:
-        b = n_slabs
-    s = int(0)
-    t = zero
-    at_boundary = bool(True)
-    for _step in range(max_steps):
-        if at_boundary:
-            if bnd_i[BND_I * b] != NULL:
-                u0, u1, u2, u3 = rng.uniform4(seed_lo, seed_hi, p_lo, p_hi, draw)
-                draw = draw + wp.uint32(1)
-                d, f = boundary_scatter(d, b, bnd_i, bnd_f, u0, u1, u2, u3)
-                events = events + 1
-                w = w * f
-                if w <= zero:
-                    return ABSORBED, d, zero, events
-                if w < RR_WEIGHT:
-                    r0, r1, r2, r3 = rng.uniform4(seed_lo, seed_hi, p_lo, p_hi, draw)
-                    draw = draw + wp.uint32(1)
-                    if r0 * RR_WEIGHT >= w:
-                        return ABSORBED, d, zero, events
-                    w = RR_WEIGHT
-            if d[2] < zero:
-                if b == n_slabs:
-                    return EXIT_BOTTOM, d, w, events
-                s = b
-                t = zero
-            elif d[2] > zero:
-                if b == 0:
-                    return EXIT_TOP, d, w, events
-                s = b - 1
-                t = slab_f[SLAB_F * s]
-            else:
-                return ABSORBED, d, zero, events  # grazing exactly: never leaves the plane
-            at_boundary = False
-        else:
-            tau = slab_f[SLAB_F * s]
-            if tau <= zero:
-                # clear slab: straight to the next boundary
-                b = s
-                if d[2] < zero:
-                    b = s + 1
-                at_boundary = True
-            else:
-                u0, u1, u2, u3 = rng.uniform4(seed_lo, seed_hi, p_lo, p_hi, draw)
-                draw = draw + wp.uint32(1)
-                tn = t + wp.log(u0) * d[2]  # depth grows downwards: l |d.z| with l = -log(u0)
-                if d[2] < zero and tn >= tau:
-                    b = s + 1
-                    at_boundary = True
-                elif d[2] > zero and tn <= zero:
-                    b = s
-                    at_boundary = True
-                else:
-                    t = tn
-                    w = w * slab_f[SLAB_F * s + 1]
-                    d = sampling.sample_hg(d, slab_f[SLAB_F * s + 2], u1, u2)
-                    events = events + 1
-                    if w < RR_WEIGHT:
-                        if u3 * RR_WEIGHT >= w:
-                            return ABSORBED, d, zero, events
-                        w = RR_WEIGHT
-    return TRUNCATED, d, zero, events
-
+def features_of(bnd_i: np.ndarray, bnd_f: np.ndarray, slab_f: np.ndarray,
+                n_slabs: int) -> Features:
+    """The :class:`Features` the records of a flattened stack use (host side)."""
+    records = np.asarray(bnd_i).reshape(-1, int(BND_I))
+    kinds, dists = records[:, 0], records[:, 1]
+    rec = np.asarray(bnd_f)[:(n_slabs + 1) * int(BND_F)].reshape(-1, int(BND_F))
+    microfacet = ((kinds == DIELECTRIC) | (kinds == CONDUCTOR))
+    smooth = microfacet & (rec[:, 2] == 0.0) & (dists != tabulated.TABULATED)
+    rough = microfacet & ~smooth
+    slabs = np.asarray(slab_f).reshape(-1, int(SLAB_F))[:max(n_slabs, 1)]
+    return Features(
+        smooth=bool(smooth.any()),
+        beckmann=bool((rough & (dists == physics.BECKMANN)).any()),
+        ggx=bool((rough & (dists == physics.GGX)).any()),
+        tabulated=bool((rough & (dists == tabulated.TABULATED)).any()),
+        compensation=bool((rough & (rec[:, 7] > 0)).any()),
+        diffuse=bool((kinds == DIFFUSE).any()),
+        measured=bool((kinds == MEASURED).any()),
+        media=bool(n_slabs > 0 and (slabs[:, 0] > 0).any()))
 
 @wp.func
 def find_bin(x: wp.float32, edges: wp.array(dtype=wp.float32), n_edges: int):
@@ -244,44 +202,217 @@ def tally_exit(side: int, d: wp.vec3, w: wp.float32, copy: int,
         wp.atomic_add(tally, base + nb + i * n_phi + j, w2q)
 
 
-@wp.func
-def walk_thread(tid: int, n_threads: int, per_thread: int, first: wp.int64, count: int,
-                seed_lo: wp.uint32, seed_hi: wp.uint32, wi: wp.vec3,
-                bnd_i: wp.array(dtype=wp.int32), bnd_f: wp.array(dtype=wp.float32),
-                slab_f: wp.array(dtype=wp.float32), n_slabs: int, max_steps: int,
-                mu_edges: wp.array(dtype=wp.float32), n_mu_edges: int,
-                phi_edges: wp.array(dtype=wp.float32), n_phi_edges: int, n_copies: int,
-                tally: wp.array(dtype=wp.int64), counters: wp.array(dtype=wp.int64)):
-    """Work of thread ``tid`` of ``n_threads``: particles ``first + tid + j n_threads`` for
-    ``j < per_thread`` that fall below ``first + count``."""
-    copy = tid % n_copies
-    events = wp.int64(0)
-    truncated = wp.int64(0)
-    for j in range(per_thread):
-        i = tid + j * n_threads
-        if i < count:
-            p = first + wp.int64(i)
-            side, d, w, ev = walk_particle(seed_lo, seed_hi, wp.uint32(p),
-                                           wp.uint32(p >> wp.int64(32)), wi, bnd_i, bnd_f,
-                                           slab_f, n_slabs, max_steps)
-            events = events + wp.int64(ev)
-            if side >= 0:
-                tally_exit(side, d, w, copy, mu_edges, n_mu_edges, phi_edges, n_phi_edges,
-                           tally)
-            elif side == TRUNCATED:
-                truncated = truncated + wp.int64(1)
-    wp.atomic_add(counters, 2 * copy, events)
-    wp.atomic_add(counters, 2 * copy + 1, truncated)
+# ------------------------------------------------------------------------------------------------
+# The walk, built for a set of features
+# ------------------------------------------------------------------------------------------------
 
 
-@wp.kernel
-def walk_kernel(n_threads: int, per_thread: int, first: wp.int64, count: int,
-                seed_lo: wp.uint32, seed_hi: wp.uint32, wi: wp.vec3,
-                bnd_i: wp.array(dtype=wp.int32), bnd_f: wp.array(dtype=wp.float32),
-                slab_f: wp.array(dtype=wp.float32), n_slabs: int, max_steps: int,
-                mu_edges: wp.array(dtype=wp.float32), n_mu_edges: int,
-                phi_edges: wp.array(dtype=wp.float32), n_phi_edges: int, n_copies: int,
-                tally: wp.array(dtype=wp.int64), counters: wp.array(dtype=wp.int64)):
-    walk_thread(wp.tid(), n_threads, per_thread, first, count, seed_lo, seed_hi, wi, bnd_i,
-                bnd_f, slab_f, n_slabs, max_steps, mu_edges, n_mu_edges, phi_edges, n_phi_edges,
-                n_copies, tally, counters)
+@dataclass(frozen=True)
+class WalkProgram:
+    """The walk built for :attr:`features`: :attr:`thread` (the Warp function the OpenCL kernel
+    translates) and :attr:`kernel` (the Warp kernel calling it), in a module of their own."""
+
+    features: Features
+    thread: object
+    kernel: object
+
+
+@lru_cache(maxsize=None)
+def program(features: Features) -> WalkProgram:
+    """The walk with only the paths of ``features`` compiled in (``wp.static`` branches of a
+    closure; Warp builds each feature set once and caches it on disk)."""
+    f = features
+    # with one analytic distribution its code is a constant, and the other's branches in
+    # sampling.sample_vndf and physics.smith_g1 fold away
+    one_dist = (physics.BECKMANN if not f.ggx else physics.GGX) \
+        if (f.beckmann != f.ggx and not f.tabulated) else -1
+
+    @wp.func
+    def boundary_scatter(d: wp.vec3, b: int, bnd_i: wp.array(dtype=wp.int32),
+                         bnd_f: wp.array(dtype=wp.float32), u0: wp.float32, u1: wp.float32,
+                         u2: wp.float32, u3: wp.float32):
+        """Interaction of a particle propagating along ``d`` with (non-null) boundary ``b``.
+
+        Returns the new propagation direction and the weight factor ``f |cos| / pdf``.
+        """
+        kind = bnd_i[BND_I * b]
+        dist = bnd_i[BND_I * b + 1]
+        if wp.static(one_dist >= 0):
+            dist = wp.static(one_dist)
+        o = BND_F * b
+        eta = bnd_f[o]
+        k = bnd_f[o + 1]
+        au = bnd_f[o + 2]
+        av = bnd_f[o + 3]
+        wi = -d
+        if wp.static(f.diffuse):
+            if kind == DIFFUSE:
+                if wi[2] <= wp.float32(0.0):
+                    return d, wp.float32(0.0)
+                return sampling.sample_cosine_hemisphere(u0, u1), bnd_f[o + 6]
+        if wp.static(f.measured):
+            if kind == MEASURED:        # alpha_u's slot holds the table's offset in bnd_f
+                wm, wm_weight = measured.sample_measured(wi, bnd_f, int(au), u0, u1)
+                return wm, wm_weight
+        if wp.static(f.smooth):
+            if au == wp.float32(0.0):
+                ws, fs = sampling.sample_smooth(wi, eta, k, u0)
+                return ws, fs
+        if wp.static(f.rough):
+            # the compensation lobe (isotropic, azimuth independent) or the single-scattering one
+            v0 = u0
+            scale = wp.float32(1.0)
+            if wp.static(f.compensation):
+                comp = int(bnd_f[o + 7])
+                if comp > 0:
+                    taken, wc, fc, v0, scale = compensation.choose_lobe(wi, bnd_f, comp, u0, u1,
+                                                                        u2)
+                    if taken:
+                        return wc, fc
+            cr = bnd_f[o + 4]
+            sr = bnd_f[o + 5]
+            wl = sampling.to_tangent_frame(wi, cr, sr)
+            if wp.static(f.tabulated):
+                if dist == tabulated.TABULATED:     # alpha_u's slot: the table's offset
+                    wt, wt_weight = tabulated.sample_microfacet_tabulated(wl, eta, k, bnd_f,
+                                                                          int(au), v0, u1, u3)
+                    return sampling.from_tangent_frame(wt, cr, sr), wt_weight * scale
+            wo, weight = sampling.sample_microfacet(wl, eta, k, au, av, dist, v0, u1, u2, u3)
+            return sampling.from_tangent_frame(wo, cr, sr), weight * scale
+        return d, wp.float32(0.0)       # a kind these features leave out: absorbed
+
+    @wp.func
+    def walk_particle(seed_lo: wp.uint32, seed_hi: wp.uint32, p_lo: wp.uint32,
+                      p_hi: wp.uint32, wi: wp.vec3, bnd_i: wp.array(dtype=wp.int32),
+                      bnd_f: wp.array(dtype=wp.float32), slab_f: wp.array(dtype=wp.float32),
+                      n_slabs: int, max_steps: int):
+        """Follow particle ``p = p_hi * 2^32 + p_lo`` from incidence to its fate.
+
+        Returns ``(outcome, d, w, events)``: :data:`EXIT_TOP` / :data:`EXIT_BOTTOM` /
+        :data:`ABSORBED` / :data:`TRUNCATED`, the final propagation direction (= the outgoing
+        direction ``wo`` for exits), the final weight, and the number of scattering events
+        (medium scatterings and interface interactions).
+        """
+        zero = wp.float32(0.0)
+        d = -wi
+        w = wp.float32(1.0)
+        draw = wp.uint32(0)
+        events = int(0)
+        b = int(0)
+        if wi[2] < zero:
+            b = n_slabs
+        s = int(0)
+        t = zero
+        at_boundary = bool(True)
+        for _step in range(max_steps):
+            if at_boundary:
+                if wp.static(f.interfaces):
+                    if bnd_i[BND_I * b] != NULL:
+                        u0, u1, u2, u3 = rng.uniform4(seed_lo, seed_hi, p_lo, p_hi, draw)
+                        draw = draw + wp.uint32(1)
+                        d, fw = boundary_scatter(d, b, bnd_i, bnd_f, u0, u1, u2, u3)
+                        events = events + 1
+                        w = w * fw
+                        if w <= zero:
+                            return ABSORBED, d, zero, events
+                        if w < RR_WEIGHT:
+                            r0, r1, r2, r3 = rng.uniform4(seed_lo, seed_hi, p_lo, p_hi, draw)
+                            draw = draw + wp.uint32(1)
+                            if r0 * RR_WEIGHT >= w:
+                                return ABSORBED, d, zero, events
+                            w = RR_WEIGHT
+                if d[2] < zero:
+                    if b == n_slabs:
+                        return EXIT_BOTTOM, d, w, events
+                    s = b
+                    t = zero
+                elif d[2] > zero:
+                    if b == 0:
+                        return EXIT_TOP, d, w, events
+                    s = b - 1
+                    t = slab_f[SLAB_F * s]
+                else:
+                    return ABSORBED, d, zero, events  # grazing exactly: never leaves the plane
+                at_boundary = False
+            else:
+                # a clear slab (tau 0, and every slab of a stack without media): straight to
+                # the next boundary
+                clear = True
+                tau = zero
+                if wp.static(f.media):
+                    tau = slab_f[SLAB_F * s]
+                    clear = tau <= zero
+                if clear:
+                    b = s
+                    if d[2] < zero:
+                        b = s + 1
+                    at_boundary = True
+                else:
+                    u0, u1, u2, u3 = rng.uniform4(seed_lo, seed_hi, p_lo, p_hi, draw)
+                    draw = draw + wp.uint32(1)
+                    tn = t + wp.log(u0) * d[2]  # depth grows downwards: l |d.z|, l = -log(u0)
+                    if d[2] < zero and tn >= tau:
+                        b = s + 1
+                        at_boundary = True
+                    elif d[2] > zero and tn <= zero:
+                        b = s
+                        at_boundary = True
+                    else:
+                        t = tn
+                        w = w * slab_f[SLAB_F * s + 1]
+                        d = sampling.sample_hg(d, slab_f[SLAB_F * s + 2], u1, u2)
+                        events = events + 1
+                        if w < RR_WEIGHT:
+                            if u3 * RR_WEIGHT >= w:
+                                return ABSORBED, d, zero, events
+                            w = RR_WEIGHT
+        return TRUNCATED, d, zero, events
+
+    @wp.func
+    def walk_thread(tid: int, n_threads: int, per_thread: int, first: wp.int64, count: int,
+                    seed_lo: wp.uint32, seed_hi: wp.uint32, wi: wp.vec3,
+                    bnd_i: wp.array(dtype=wp.int32), bnd_f: wp.array(dtype=wp.float32),
+                    slab_f: wp.array(dtype=wp.float32), n_slabs: int, max_steps: int,
+                    mu_edges: wp.array(dtype=wp.float32), n_mu_edges: int,
+                    phi_edges: wp.array(dtype=wp.float32), n_phi_edges: int, n_copies: int,
+                    tally: wp.array(dtype=wp.int64), counters: wp.array(dtype=wp.int64)):
+        """Work of thread ``tid`` of ``n_threads``: particles ``first + tid + j n_threads`` for
+        ``j < per_thread`` that fall below ``first + count``."""
+        copy = tid % n_copies
+        events = wp.int64(0)
+        truncated = wp.int64(0)
+        for j in range(per_thread):
+            i = tid + j * n_threads
+            if i < count:
+                p = first + wp.int64(i)
+                side, d, w, ev = walk_particle(seed_lo, seed_hi, wp.uint32(p),
+                                               wp.uint32(p >> wp.int64(32)), wi, bnd_i, bnd_f,
+                                               slab_f, n_slabs, max_steps)
+                events = events + wp.int64(ev)
+                if side >= 0:
+                    tally_exit(side, d, w, copy, mu_edges, n_mu_edges, phi_edges,
+                               n_phi_edges, tally)
+                elif side == TRUNCATED:
+                    truncated = truncated + wp.int64(1)
+        wp.atomic_add(counters, 2 * copy, events)
+        wp.atomic_add(counters, 2 * copy + 1, truncated)
+
+    @wp.kernel(enable_backward=False, module="unique")
+    def walk_kernel(n_threads: int, per_thread: int, first: wp.int64, count: int,
+                    seed_lo: wp.uint32, seed_hi: wp.uint32, wi: wp.vec3,
+                    bnd_i: wp.array(dtype=wp.int32), bnd_f: wp.array(dtype=wp.float32),
+                    slab_f: wp.array(dtype=wp.float32), n_slabs: int, max_steps: int,
+                    mu_edges: wp.array(dtype=wp.float32), n_mu_edges: int,
+                    phi_edges: wp.array(dtype=wp.float32), n_phi_edges: int, n_copies: int,
+                    tally: wp.array(dtype=wp.int64), counters: wp.array(dtype=wp.int64)):
+        walk_thread(wp.tid(), n_threads, per_thread, first, count, seed_lo, seed_hi, wi,
+                    bnd_i, bnd_f, slab_f, n_slabs, max_steps, mu_edges, n_mu_edges, phi_edges,
+                    n_phi_edges, n_copies, tally, counters)
+
+    return WalkProgram(features, walk_thread, walk_kernel)
+
+
+#: The walk with every path: runs any stack (tests, and the OpenCL translator's checks).
+EVERY = program(Features.every())
+walk_thread = EVERY.thread
+walk_kernel = EVERY.kernel

@@ -166,6 +166,7 @@ class _WarpRunner:
         self.name = "warp-cuda" if cuda else "warp-cpu"
         self.device_name = f"{self.device.alias} ({self.device.name})"
         self.launch = launch
+        self.kernel = walk.program(launch.stack.features).kernel
         # GPUs: replicas spread the atomics, a few particles per thread amortise the counters;
         # Warp's CPU device runs a launch serially on one core, so one replica suffices.
         self.n_copies = 256 if cuda else 1
@@ -192,7 +193,7 @@ class _WarpRunner:
         args.update(self.arrays)
         self.arrays["tally"].zero_()
         self.arrays["counters"].zero_()
-        wp.launch(walk.walk_kernel, dim=n_threads, inputs=[args[p] for p in _PARAMS],
+        wp.launch(self.kernel, dim=n_threads, inputs=[args[p] for p in _PARAMS],
                   device=self.device)
         return _reduce(self.arrays["tally"].numpy(), self.arrays["counters"].numpy(),
                        self.n_copies, self.launch.n_bins)
@@ -202,13 +203,14 @@ class _WarpRunner:
 # OpenCL
 # ------------------------------------------------------------------------------------------------
 
-_KERNELS: dict = {}        # id(context) -> the built walk kernel
+_KERNELS: dict = {}        # (id(context), features) -> the built walk kernel
 
 
-def opencl_source() -> str:
-    """OpenCL C source of the walk kernel ``walk``, generated from the Warp functions."""
+def opencl_source(features: walk.Features | None = None) -> str:
+    """OpenCL C source of the walk kernel ``walk`` for ``features`` (default: every path),
+    generated from the Warp functions."""
     prog = Program()
-    prog.add_kernel(walk.walk_thread, name="walk")
+    prog.add_kernel(walk.program(features or walk.Features.every()).thread, name="walk")
     return prog.source()
 
 
@@ -221,9 +223,11 @@ class _OpenCLRunner:
         self.device_name = device_label(device)
         self.ctx = _context_for(device)
         self.queue = cl.CommandQueue(self.ctx)
-        key = id(self.ctx)
+        features = launch.stack.features
+        key = (id(self.ctx), features)
         if key not in _KERNELS:
-            program = cl.Program(self.ctx, opencl_source()).build(options=build_options(device))
+            program = cl.Program(self.ctx, opencl_source(features)).build(
+                options=build_options(device))
             _KERNELS[key] = cl.Kernel(program, "walk")
         self.kernel = _KERNELS[key]
         gpu = bool(device.type & cl.device_type.GPU)

@@ -100,8 +100,11 @@ def simulate(scene: Scene, wi, particles: int, mu_edges=(0.0, 1.0), phi_edges=(0
     t0 = time.perf_counter()
     per_channel = []
     device = ""
+    used = None                     # the walk's code paths any channel needs
     for c in range(scene.channels):
-        launch = Launch(stack=flatten(scene.channel(c)), wi=wi.astype(np.float32),
+        stack = flatten(scene.channel(c))
+        used = stack.features if used is None else used | stack.features
+        launch = Launch(stack=stack, wi=wi.astype(np.float32),
                         mu_edges=mu_edges.astype(np.float32),
                         phi_edges=phi_edges.astype(np.float32), seed=seed, max_steps=max_steps)
         runner = make_runner(name, launch)
@@ -133,7 +136,7 @@ def simulate(scene: Scene, wi, particles: int, mu_edges=(0.0, 1.0), phi_edges=(0
         particles=_stack([t.particles for t in per_channel]),
         events=_stack([t.events for t in per_channel]),
         truncated=_stack(truncated), backend=name, device=device, seconds=seconds, seed=seed,
-        wi=wi, mu_edges=mu_edges, phi_edges=phi_edges)
+        wi=wi, mu_edges=mu_edges, phi_edges=phi_edges, left_out=tuple(used.left_out()))
 
 
 def _run(runner, launch: Launch, particles: int, batch: int, target, progress: bool, label):

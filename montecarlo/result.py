@@ -47,6 +47,9 @@ class MCResult:
     seed : int
     wi : ndarray, shape (3,)
     mu_edges, phi_edges : ndarray
+    left_out : tuple of str
+        The walk's code paths that the kernel was built without, because the scene does not
+        use them (:class:`layersim.kernels.walk.Features`).
     """
 
     reflectance: float | np.ndarray
@@ -67,6 +70,7 @@ class MCResult:
     wi: np.ndarray
     mu_edges: np.ndarray
     phi_edges: np.ndarray
+    left_out: tuple = ()
 
     def z_scores(self, side: str, values) -> np.ndarray:
         """Distances, in standard errors, of ``values`` (bin energies of the same bins from
@@ -92,4 +96,6 @@ class MCResult:
                 f"particles in {self.seconds:.2f} s, seed {self.seed}\n"
                 f"  R = {fmt(self.reflectance, self.reflectance_stderr)}\n"
                 f"  T = {fmt(self.transmittance, self.transmittance_stderr)}\n"
-                f"  A = {fmt(self.absorbed, self.absorbed_stderr)}")
+                f"  A = {fmt(self.absorbed, self.absorbed_stderr)}"
+                + (f"\n  kernel built without: {', '.join(self.left_out)}" if self.left_out
+                   else ""))

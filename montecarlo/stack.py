@@ -59,6 +59,11 @@ class StackArrays:
     n_slabs: int
     opaque: bool
 
+    @property
+    def features(self) -> walk.Features:
+        """The walk's code paths these records use; the kernel leaves the others out."""
+        return walk.features_of(self.bnd_i, self.bnd_f, self.slab_f, self.n_slabs)
+
 
 def _boundary(scene: Scene, i: int | None):
     """(ints, floats) of the boundary made by layer ``i`` (None: null boundary)."""
