@@ -79,7 +79,8 @@ RR_WEIGHT = wp.constant(wp.float32(0.25))
 FIXED_SCALE = wp.constant(wp.float32(4294967296.0))
 TWO_PI = wp.constant(wp.float32(6.283185307179586))
 
-#: Outcomes of :func:`walk_particle`.
+#: Outcomes of a particle's walk (:data:`CONTINUE` while it goes on).
+CONTINUE = wp.constant(-3)
 EXIT_TOP = wp.constant(0)
 EXIT_BOTTOM = wp.constant(1)
 ABSORBED = wp.constant(-1)
@@ -218,9 +219,11 @@ class WalkProgram:
 
 
 @lru_cache(maxsize=None)
-def program(features: Features) -> WalkProgram:
+def program(features: Features, max_registers: int | None = None) -> WalkProgram:
     """The walk with only the paths of ``features`` compiled in (``wp.static`` branches of a
-    closure; Warp builds each feature set once and caches it on disk)."""
+    closure; Warp builds each feature set once and caches it on disk). ``max_registers`` caps
+    the registers per thread of the CUDA kernel (more threads resident per multiprocessor, at
+    the risk of spills)."""
     f = features
     # with one analytic distribution its code is a constant, and the other's branches in
     # sampling.sample_vndf and physics.smith_g1 fold away
@@ -282,29 +285,46 @@ def program(features: Features) -> WalkProgram:
         return d, wp.float32(0.0)       # a kind these features leave out: absorbed
 
     @wp.func
-    def walk_particle(seed_lo: wp.uint32, seed_hi: wp.uint32, p_lo: wp.uint32,
-                      p_hi: wp.uint32, wi: wp.vec3, bnd_i: wp.array(dtype=wp.int32),
-                      bnd_f: wp.array(dtype=wp.float32), slab_f: wp.array(dtype=wp.float32),
-                      n_slabs: int, max_steps: int):
-        """Follow particle ``p = p_hi * 2^32 + p_lo`` from incidence to its fate.
+    def walk_thread(tid: int, n_threads: int, per_thread: int, first: wp.int64, count: int,
+                    seed_lo: wp.uint32, seed_hi: wp.uint32, wi: wp.vec3,
+                    bnd_i: wp.array(dtype=wp.int32), bnd_f: wp.array(dtype=wp.float32),
+                    slab_f: wp.array(dtype=wp.float32), n_slabs: int, max_steps: int,
+                    mu_edges: wp.array(dtype=wp.float32), n_mu_edges: int,
+                    phi_edges: wp.array(dtype=wp.float32), n_phi_edges: int, n_copies: int,
+                    tally: wp.array(dtype=wp.int64), counters: wp.array(dtype=wp.int64)):
+        """Work of thread ``tid`` of ``n_threads``: particles ``first + tid + j n_threads`` for
+        ``j < per_thread`` that fall below ``first + count``, one after the other.
 
-        Returns ``(outcome, d, w, events)``: :data:`EXIT_TOP` / :data:`EXIT_BOTTOM` /
-        :data:`ABSORBED` / :data:`TRUNCATED`, the final propagation direction (= the outgoing
-        direction ``wo`` for exits), the final weight, and the number of scattering events
-        (medium scatterings and interface interactions).
+        One loop iteration is one step of the current particle (a boundary interaction or a
+        flight); a particle that ends is tallied and the next one starts in the same iteration.
+        Threads of a warp thus stay busy until each has walked all its particles, instead of
+        waiting at the end of every particle for the longest walk of the warp.
         """
         zero = wp.float32(0.0)
+        copy = tid % n_copies
+        events_done = wp.int64(0)
+        truncated = wp.int64(0)
+        start_b = int(0)
+        if wi[2] < zero:
+            start_b = n_slabs
+        # the state of the current particle
+        j = int(0)
+        i = tid
+        active = i < count
+        p = first + wp.int64(i)
+        p_lo = wp.uint32(p)
+        p_hi = wp.uint32(p >> wp.int64(32))
         d = -wi
         w = wp.float32(1.0)
         draw = wp.uint32(0)
         events = int(0)
-        b = int(0)
-        if wi[2] < zero:
-            b = n_slabs
+        steps = int(0)
+        b = start_b
         s = int(0)
         t = zero
         at_boundary = bool(True)
-        for _step in range(max_steps):
+        while active:
+            outcome = CONTINUE
             if at_boundary:
                 if wp.static(f.interfaces):
                     if bnd_i[BND_I * b] != NULL:
@@ -314,26 +334,30 @@ def program(features: Features) -> WalkProgram:
                         events = events + 1
                         w = w * fw
                         if w <= zero:
-                            return ABSORBED, d, zero, events
-                        if w < RR_WEIGHT:
+                            outcome = ABSORBED
+                        elif w < RR_WEIGHT:
                             r0, r1, r2, r3 = rng.uniform4(seed_lo, seed_hi, p_lo, p_hi, draw)
                             draw = draw + wp.uint32(1)
                             if r0 * RR_WEIGHT >= w:
-                                return ABSORBED, d, zero, events
-                            w = RR_WEIGHT
-                if d[2] < zero:
-                    if b == n_slabs:
-                        return EXIT_BOTTOM, d, w, events
-                    s = b
-                    t = zero
-                elif d[2] > zero:
-                    if b == 0:
-                        return EXIT_TOP, d, w, events
-                    s = b - 1
-                    t = slab_f[SLAB_F * s]
-                else:
-                    return ABSORBED, d, zero, events  # grazing exactly: never leaves the plane
-                at_boundary = False
+                                outcome = ABSORBED
+                            else:
+                                w = RR_WEIGHT
+                if outcome == CONTINUE:
+                    if d[2] < zero:
+                        if b == n_slabs:
+                            outcome = EXIT_BOTTOM
+                        else:
+                            s = b
+                            t = zero
+                    elif d[2] > zero:
+                        if b == 0:
+                            outcome = EXIT_TOP
+                        else:
+                            s = b - 1
+                            t = slab_f[SLAB_F * s]
+                    else:
+                        outcome = ABSORBED  # grazing exactly: never leaves the plane
+                    at_boundary = False
             else:
                 # a clear slab (tau 0, and every slab of a stack without media): straight to
                 # the next boundary
@@ -364,40 +388,40 @@ def program(features: Features) -> WalkProgram:
                         events = events + 1
                         if w < RR_WEIGHT:
                             if u3 * RR_WEIGHT >= w:
-                                return ABSORBED, d, zero, events
-                            w = RR_WEIGHT
-        return TRUNCATED, d, zero, events
-
-    @wp.func
-    def walk_thread(tid: int, n_threads: int, per_thread: int, first: wp.int64, count: int,
-                    seed_lo: wp.uint32, seed_hi: wp.uint32, wi: wp.vec3,
-                    bnd_i: wp.array(dtype=wp.int32), bnd_f: wp.array(dtype=wp.float32),
-                    slab_f: wp.array(dtype=wp.float32), n_slabs: int, max_steps: int,
-                    mu_edges: wp.array(dtype=wp.float32), n_mu_edges: int,
-                    phi_edges: wp.array(dtype=wp.float32), n_phi_edges: int, n_copies: int,
-                    tally: wp.array(dtype=wp.int64), counters: wp.array(dtype=wp.int64)):
-        """Work of thread ``tid`` of ``n_threads``: particles ``first + tid + j n_threads`` for
-        ``j < per_thread`` that fall below ``first + count``."""
-        copy = tid % n_copies
-        events = wp.int64(0)
-        truncated = wp.int64(0)
-        for j in range(per_thread):
-            i = tid + j * n_threads
-            if i < count:
-                p = first + wp.int64(i)
-                side, d, w, ev = walk_particle(seed_lo, seed_hi, wp.uint32(p),
-                                               wp.uint32(p >> wp.int64(32)), wi, bnd_i, bnd_f,
-                                               slab_f, n_slabs, max_steps)
-                events = events + wp.int64(ev)
-                if side >= 0:
-                    tally_exit(side, d, w, copy, mu_edges, n_mu_edges, phi_edges,
+                                outcome = ABSORBED
+                            else:
+                                w = RR_WEIGHT
+            steps = steps + 1
+            if outcome == CONTINUE and steps >= max_steps:
+                outcome = TRUNCATED
+            if outcome != CONTINUE:
+                events_done = events_done + wp.int64(events)
+                if outcome >= 0:
+                    tally_exit(outcome, d, w, copy, mu_edges, n_mu_edges, phi_edges,
                                n_phi_edges, tally)
-                elif side == TRUNCATED:
+                elif outcome == TRUNCATED:
                     truncated = truncated + wp.int64(1)
-        wp.atomic_add(counters, 2 * copy, events)
+                j = j + 1
+                i = tid + j * n_threads
+                if j >= per_thread or i >= count:
+                    active = False
+                else:
+                    p = first + wp.int64(i)
+                    p_lo = wp.uint32(p)
+                    p_hi = wp.uint32(p >> wp.int64(32))
+                    d = -wi
+                    w = wp.float32(1.0)
+                    draw = wp.uint32(0)
+                    events = int(0)
+                    steps = int(0)
+                    b = start_b
+                    s = int(0)
+                    t = zero
+                    at_boundary = True
+        wp.atomic_add(counters, 2 * copy, events_done)
         wp.atomic_add(counters, 2 * copy + 1, truncated)
 
-    @wp.kernel(enable_backward=False, module="unique")
+    @wp.kernel(enable_backward=False, module="unique", cuda_max_registers=max_registers)
     def walk_kernel(n_threads: int, per_thread: int, first: wp.int64, count: int,
                     seed_lo: wp.uint32, seed_hi: wp.uint32, wi: wp.vec3,
                     bnd_i: wp.array(dtype=wp.int32), bnd_f: wp.array(dtype=wp.float32),

@@ -44,6 +44,12 @@ BACKENDS = ("auto", "warp-cpu", "warp-cuda", "opencl")
 #: An OpenCL CPU device needs this many compute units to be preferred over warp-cpu by "auto".
 OPENCL_CPU_MIN_UNITS = 4
 
+#: Registers per thread of the CUDA walk kernel (None: the compiler's choice).
+CUDA_MAX_REGISTERS = None
+#: Particles each GPU thread walks one after the other (the walk starts the next as soon as
+#: one ends, so threads of a warp stay busy until their last particle).
+GPU_PARTICLES_PER_THREAD = 4
+
 #: Kernel parameters of the walk, in order (the thread index excluded).
 _PARAMS = [name for name, _ in parameters(walk.walk_thread)[1:]]
 
@@ -166,11 +172,12 @@ class _WarpRunner:
         self.name = "warp-cuda" if cuda else "warp-cpu"
         self.device_name = f"{self.device.alias} ({self.device.name})"
         self.launch = launch
-        self.kernel = walk.program(launch.stack.features).kernel
+        self.kernel = walk.program(launch.stack.features,
+                                   CUDA_MAX_REGISTERS if cuda else None).kernel
         # GPUs: replicas spread the atomics, a few particles per thread amortise the counters;
         # Warp's CPU device runs a launch serially on one core, so one replica suffices.
         self.n_copies = 256 if cuda else 1
-        self.per_thread = 4 if cuda else 1
+        self.per_thread = GPU_PARTICLES_PER_THREAD if cuda else 1
         dev = self.device
         st = launch.stack
         self.arrays = dict(
@@ -232,7 +239,7 @@ class _OpenCLRunner:
         self.kernel = _KERNELS[key]
         gpu = bool(device.type & cl.device_type.GPU)
         self.n_copies = 256 if gpu else 4 * max(device.max_compute_units, 1)
-        self.per_thread = 4 if gpu else 1
+        self.per_thread = GPU_PARTICLES_PER_THREAD if gpu else 1
         self.launch = launch
         st = launch.stack
         mf = cl.mem_flags
