@@ -79,8 +79,7 @@ RR_WEIGHT = wp.constant(wp.float32(0.25))
 FIXED_SCALE = wp.constant(wp.float32(4294967296.0))
 TWO_PI = wp.constant(wp.float32(6.283185307179586))
 
-#: Outcomes of a particle's walk (:data:`CONTINUE` while it goes on).
-CONTINUE = wp.constant(-3)
+#: Outcomes of a particle's walk.
 EXIT_TOP = wp.constant(0)
 EXIT_BOTTOM = wp.constant(1)
 ABSORBED = wp.constant(-1)
@@ -171,13 +170,19 @@ def features_of(bnd_i: np.ndarray, bnd_f: np.ndarray, slab_f: np.ndarray,
 @wp.func
 def find_bin(x: wp.float32, edges: wp.array(dtype=wp.float32), n_edges: int):
     """Index of the bin ``[edges[i], edges[i+1])`` holding ``x`` (the last bin is closed), or -1
-    outside ``[edges[0], edges[-1]]``."""
+    outside ``[edges[0], edges[-1]]``. Bisection: the same few steps in every thread of a warp,
+    where a scan would take as many steps as the bin's index."""
     if x < edges[0] or x > edges[n_edges - 1]:
         return -1
-    i = int(0)
-    while i < n_edges - 2 and x >= edges[i + 1]:
-        i = i + 1
-    return i
+    lo = int(0)
+    hi = n_edges - 1            # edges[lo] <= x, and x < edges[hi] or hi is the last edge
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if x >= edges[mid]:
+            lo = mid
+        else:
+            hi = mid
+    return lo
 
 
 @wp.func
@@ -285,46 +290,29 @@ def program(features: Features, max_registers: int | None = None) -> WalkProgram
         return d, wp.float32(0.0)       # a kind these features leave out: absorbed
 
     @wp.func
-    def walk_thread(tid: int, n_threads: int, per_thread: int, first: wp.int64, count: int,
-                    seed_lo: wp.uint32, seed_hi: wp.uint32, wi: wp.vec3,
-                    bnd_i: wp.array(dtype=wp.int32), bnd_f: wp.array(dtype=wp.float32),
-                    slab_f: wp.array(dtype=wp.float32), n_slabs: int, max_steps: int,
-                    mu_edges: wp.array(dtype=wp.float32), n_mu_edges: int,
-                    phi_edges: wp.array(dtype=wp.float32), n_phi_edges: int, n_copies: int,
-                    tally: wp.array(dtype=wp.int64), counters: wp.array(dtype=wp.int64)):
-        """Work of thread ``tid`` of ``n_threads``: particles ``first + tid + j n_threads`` for
-        ``j < per_thread`` that fall below ``first + count``, one after the other.
+    def walk_particle(seed_lo: wp.uint32, seed_hi: wp.uint32, p_lo: wp.uint32,
+                      p_hi: wp.uint32, wi: wp.vec3, bnd_i: wp.array(dtype=wp.int32),
+                      bnd_f: wp.array(dtype=wp.float32), slab_f: wp.array(dtype=wp.float32),
+                      n_slabs: int, max_steps: int):
+        """Follow particle ``p = p_hi * 2^32 + p_lo`` from incidence to its fate.
 
-        One loop iteration is one step of the current particle (a boundary interaction or a
-        flight); a particle that ends is tallied and the next one starts in the same iteration.
-        Threads of a warp thus stay busy until each has walked all its particles, instead of
-        waiting at the end of every particle for the longest walk of the warp.
+        Returns ``(outcome, d, w, events)``: :data:`EXIT_TOP` / :data:`EXIT_BOTTOM` /
+        :data:`ABSORBED` / :data:`TRUNCATED`, the final propagation direction (= the outgoing
+        direction ``wo`` for exits), the final weight, and the number of scattering events
+        (medium scatterings and interface interactions).
         """
         zero = wp.float32(0.0)
-        copy = tid % n_copies
-        events_done = wp.int64(0)
-        truncated = wp.int64(0)
-        start_b = int(0)
-        if wi[2] < zero:
-            start_b = n_slabs
-        # the state of the current particle
-        j = int(0)
-        i = tid
-        active = i < count
-        p = first + wp.int64(i)
-        p_lo = wp.uint32(p)
-        p_hi = wp.uint32(p >> wp.int64(32))
         d = -wi
         w = wp.float32(1.0)
         draw = wp.uint32(0)
         events = int(0)
-        steps = int(0)
-        b = start_b
+        b = int(0)
+        if wi[2] < zero:
+            b = n_slabs
         s = int(0)
         t = zero
         at_boundary = bool(True)
-        while active:
-            outcome = CONTINUE
+        for _step in range(max_steps):
             if at_boundary:
                 if wp.static(f.interfaces):
                     if bnd_i[BND_I * b] != NULL:
@@ -334,30 +322,26 @@ def program(features: Features, max_registers: int | None = None) -> WalkProgram
                         events = events + 1
                         w = w * fw
                         if w <= zero:
-                            outcome = ABSORBED
-                        elif w < RR_WEIGHT:
+                            return ABSORBED, d, zero, events
+                        if w < RR_WEIGHT:
                             r0, r1, r2, r3 = rng.uniform4(seed_lo, seed_hi, p_lo, p_hi, draw)
                             draw = draw + wp.uint32(1)
                             if r0 * RR_WEIGHT >= w:
-                                outcome = ABSORBED
-                            else:
-                                w = RR_WEIGHT
-                if outcome == CONTINUE:
-                    if d[2] < zero:
-                        if b == n_slabs:
-                            outcome = EXIT_BOTTOM
-                        else:
-                            s = b
-                            t = zero
-                    elif d[2] > zero:
-                        if b == 0:
-                            outcome = EXIT_TOP
-                        else:
-                            s = b - 1
-                            t = slab_f[SLAB_F * s]
-                    else:
-                        outcome = ABSORBED  # grazing exactly: never leaves the plane
-                    at_boundary = False
+                                return ABSORBED, d, zero, events
+                            w = RR_WEIGHT
+                if d[2] < zero:
+                    if b == n_slabs:
+                        return EXIT_BOTTOM, d, w, events
+                    s = b
+                    t = zero
+                elif d[2] > zero:
+                    if b == 0:
+                        return EXIT_TOP, d, w, events
+                    s = b - 1
+                    t = slab_f[SLAB_F * s]
+                else:
+                    return ABSORBED, d, zero, events  # grazing exactly: never leaves the plane
+                at_boundary = False
             else:
                 # a clear slab (tau 0, and every slab of a stack without media): straight to
                 # the next boundary
@@ -388,37 +372,37 @@ def program(features: Features, max_registers: int | None = None) -> WalkProgram
                         events = events + 1
                         if w < RR_WEIGHT:
                             if u3 * RR_WEIGHT >= w:
-                                outcome = ABSORBED
-                            else:
-                                w = RR_WEIGHT
-            steps = steps + 1
-            if outcome == CONTINUE and steps >= max_steps:
-                outcome = TRUNCATED
-            if outcome != CONTINUE:
-                events_done = events_done + wp.int64(events)
-                if outcome >= 0:
-                    tally_exit(outcome, d, w, copy, mu_edges, n_mu_edges, phi_edges,
+                                return ABSORBED, d, zero, events
+                            w = RR_WEIGHT
+        return TRUNCATED, d, zero, events
+
+    @wp.func
+    def walk_thread(tid: int, n_threads: int, per_thread: int, first: wp.int64, count: int,
+                    seed_lo: wp.uint32, seed_hi: wp.uint32, wi: wp.vec3,
+                    bnd_i: wp.array(dtype=wp.int32), bnd_f: wp.array(dtype=wp.float32),
+                    slab_f: wp.array(dtype=wp.float32), n_slabs: int, max_steps: int,
+                    mu_edges: wp.array(dtype=wp.float32), n_mu_edges: int,
+                    phi_edges: wp.array(dtype=wp.float32), n_phi_edges: int, n_copies: int,
+                    tally: wp.array(dtype=wp.int64), counters: wp.array(dtype=wp.int64)):
+        """Work of thread ``tid`` of ``n_threads``: particles ``first + tid + j n_threads`` for
+        ``j < per_thread`` that fall below ``first + count``."""
+        copy = tid % n_copies
+        events = wp.int64(0)
+        truncated = wp.int64(0)
+        for j in range(per_thread):
+            i = tid + j * n_threads
+            if i < count:
+                p = first + wp.int64(i)
+                side, d, w, ev = walk_particle(seed_lo, seed_hi, wp.uint32(p),
+                                               wp.uint32(p >> wp.int64(32)), wi, bnd_i, bnd_f,
+                                               slab_f, n_slabs, max_steps)
+                events = events + wp.int64(ev)
+                if side >= 0:
+                    tally_exit(side, d, w, copy, mu_edges, n_mu_edges, phi_edges,
                                n_phi_edges, tally)
-                elif outcome == TRUNCATED:
+                elif side == TRUNCATED:
                     truncated = truncated + wp.int64(1)
-                j = j + 1
-                i = tid + j * n_threads
-                if j >= per_thread or i >= count:
-                    active = False
-                else:
-                    p = first + wp.int64(i)
-                    p_lo = wp.uint32(p)
-                    p_hi = wp.uint32(p >> wp.int64(32))
-                    d = -wi
-                    w = wp.float32(1.0)
-                    draw = wp.uint32(0)
-                    events = int(0)
-                    steps = int(0)
-                    b = start_b
-                    s = int(0)
-                    t = zero
-                    at_boundary = True
-        wp.atomic_add(counters, 2 * copy, events_done)
+        wp.atomic_add(counters, 2 * copy, events)
         wp.atomic_add(counters, 2 * copy + 1, truncated)
 
     @wp.kernel(enable_backward=False, module="unique", cuda_max_registers=max_registers)

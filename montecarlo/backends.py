@@ -44,11 +44,12 @@ BACKENDS = ("auto", "warp-cpu", "warp-cuda", "opencl")
 #: An OpenCL CPU device needs this many compute units to be preferred over warp-cpu by "auto".
 OPENCL_CPU_MIN_UNITS = 4
 
-#: Registers per thread of the CUDA walk kernel (None: the compiler's choice).
-CUDA_MAX_REGISTERS = None
-#: Particles each GPU thread walks one after the other (the walk starts the next as soon as
-#: one ends, so threads of a warp stay busy until their last particle).
-GPU_PARTICLES_PER_THREAD = 4
+#: Registers per thread of the CUDA walk kernel: 64 lets four blocks of 256 threads share a
+#: multiprocessor (three at the compiler's 72-80), 6-12 % more paths/s on an H100; 56 and
+#: below spill (``benchmarks/reports/gpu/walk_tuning_h100.txt``).
+CUDA_MAX_REGISTERS = 64
+#: Particles each GPU thread walks one after the other (amortises the thread's counter atomics).
+GPU_PARTICLES_PER_THREAD = 8
 
 #: Kernel parameters of the walk, in order (the thread index excluded).
 _PARAMS = [name for name, _ in parameters(walk.walk_thread)[1:]]

@@ -151,7 +151,7 @@ def test_kernel_entry_and_source_shape():
     assert "__kernel void walk(" in src
     assert "cl_khr_int64_base_atomics" in src and "cl_khr_fp64" not in src
     # one definition per specialisation, callees before callers
-    assert src.index("ls_rng_philox4x32_10(") < src.index("ls_walk_walk_thread(")
+    assert src.index("ls_rng_philox4x32_10(") < src.index("ls_walk_walk_particle(")
     assert src.count("float ls_physics_smith_lambda_f3ffi(") == 1
 
 
