@@ -192,7 +192,7 @@ def main() -> None:
                     print(f"{name:14} {backend:10} not run: {failed[0][0]} cannot read the scene "
                           f"({failed[0][1]})", flush=True)
                     continue
-                pilot = pilots[1]
+                pilot = new.run(particles=BATCH[backend], **spec)     # sized after the warm-up
                 per_s = BATCH[backend] / max(pilot["seconds"], 1e-9)
                 n = max(1, round(per_s * args.seconds / BATCH[backend])) * BATCH[backend]
                 runs = {"base": [], "new": []}
