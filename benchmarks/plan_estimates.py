@@ -55,6 +55,10 @@ GOLD = [0.143552, 3.98397]
 ALUMINIUM = [[1.65746, 9.22387], [0.880369, 6.26952], [0.521229, 4.837]]
 
 
+#: Environment of the cases that need one.
+ENV = {"gold_under_hg, unparked (coupled)": {"LAYERSIM_PARK_DIR": "off"}}
+
+
 def _car_paint(conductor_roughness=0.25, channels=3, n=None):
     """A car paint: a coat (eta 1.5, alpha 0.05) over an RGB medium (g 0.3) over aluminium."""
     pick = (lambda v: v) if channels == 3 else (lambda v: v[0])
@@ -92,6 +96,8 @@ MED = lambda g, tau=5.0, albedo=0.95: {"kind": "medium", "tau": tau, "albedo": a
 DIEL = lambda a, eta=1.5: {"kind": "dielectric", "ior": eta, "roughness": a}
 
 #: name -> (scene: a dict of Scene.from_dict or {"file": path}, scale of the planned n and md)
+#: Coupled solves park idle blocks in the system's temporary directory; the "unparked" cases
+#: keep them in memory (:data:`ENV`).
 CASES = {
     "vandehulst_slab": (_scene_file("vandehulst_slab"), 1.0),
     "coated_gold": (_scene_file("coated_gold"), 1.0),
@@ -112,6 +118,7 @@ CASES = {
                                                DIEL(0.1, eta=1.0)), 1.0),
     "dielectric 0.3 over medium, n 600": (_layers(DIEL(0.3), MED(0.7, tau=2.0), n=600), 1.0),
     "gold_under_hg (coupled)": (_scene_file("gold_under_hg"), 1.0),
+    "gold_under_hg, unparked (coupled)": (_scene_file("gold_under_hg"), 1.0),
     "additive_validation (coupled)": (_scene_file("additive_validation"), 1.0),
     "brushed_metal (coupled)": (_example("brushed_metal"), 1.0),
     # Zeltner & Jakob 2018, Table 2 rows 4, 5 and 7 (coated gold) at the paper's ms (eq. (25)),
@@ -125,6 +132,9 @@ CASES = {
         DIEL(0.2), {"kind": "medium", "tau": [0.3, 0.8, 1.5], "albedo": [0.9, 0.6, 0.3],
                     "g": 0.3},
         {"kind": "conductor", "ior": ALUMINIUM, "roughness": [0.3, 0.15]}), 1.0),
+    "gold_blue_hg_coated red (coupled)": (_layers(
+        DIEL(0.05), {"kind": "medium", "albedo": 0.6, "g": 0.2, "tau": 1.0},
+        {"kind": "conductor", "ior": GOLD, "roughness": [0.05, 0.3]}), 1.0),
     "gold_blue_hg_coated (coupled, RGB)": (_scene_file("gold_blue_hg_coated"), 1.0),
 }
 
@@ -288,8 +298,8 @@ def main(argv) -> int:
     results = []
     for name in names:
         load = "{:.1f} {:.1f} {:.1f}".format(*os.getloadavg())
-        proc = subprocess.run([sys.executable, __file__, "--child", name], env=env,
-                              capture_output=True, text=True)
+        proc = subprocess.run([sys.executable, __file__, "--child", name],
+                              env={**env, **ENV.get(name, {})}, capture_output=True, text=True)
         if proc.returncode:
             print(f"{name:36s} failed: {proc.stderr.strip().splitlines()[-1]}", flush=True)
             continue

@@ -25,9 +25,10 @@ stack as a whole:
   pair, the block-LU factorisation of the banded adding equations and the sparse products with
   the coupled operands. Memory: a fixed working set of the projection's batches plus the
   larger of the projection of the largest coupled layer and the adding step's solution, which
-  scale with the operators' nonzeros (:func:`layersim.aniso.plan.operator_entries`); when
-  the solve keeps its idle blocks in memory (no parking directory on a disk) the operands of
-  the adding step stay resident beside them (:func:`coupled_bytes`).
+  grow with the operators' nonzeros (:func:`layersim.aniso.plan.operator_entries`) to the
+  power 0.8 (:func:`coupled_scale`); when the solve keeps its idle blocks in memory (no
+  parking directory on a disk) the operands of the adding step stay resident beside them
+  (:func:`coupled_bytes`).
 
 The constants (bytes and seconds per unit of work) are measured: ``python
 benchmarks/plan_estimates.py`` solves the bench scenes and a set of RGB, anisotropic and
@@ -97,12 +98,13 @@ BYTES = {
     "adding_arrays": 10,
     # every solve: bookkeeping beside the operators
     "solve": 2 << 20,
-    # coupled solves: the projection's batches and thread pools; per estimated nonzero of the
-    # largest coupled layer while it is projected, and of the lowest while the adding step
-    # forms and assembles its solution; per nonzero of the operands held in memory
+    # coupled solves: the projection's batches and thread pools; per (estimated nonzeros)^0.8
+    # of the largest coupled layer while it is projected, and of the lowest while the adding
+    # step forms and assembles its solution (coupled_scale); per nonzero of the operands held
+    # in memory where idle blocks cannot be parked
     "coupled_fixed": 70 << 20,
-    "coupled_projection": 10,
-    "coupled_solution": 18,
+    "coupled_projection": 17,
+    "coupled_solution": 27,
     "coupled_resident": 9,
 }
 
@@ -374,7 +376,8 @@ class CoupledStep:
 def coupled_chain(ings: list, md: int, h: int) -> list:
     """The coupled adding steps of a stack with coupled layers, bottom up. The system of a
     step couples the orders ``ms`` of its top plus that of its bottom operand apart; the
-    stack of a step holds about half the nonzeros of its larger operand (measured: 0.2-0.7)."""
+    stack of a step holds at most 0.3 of the estimated nonzeros of its larger operand
+    (measured: 0.19-0.32)."""
     groups = _groups(ings)
     size = lambda g: (_run_entries(g, md, h), 0) if isinstance(g, list) else (g.entries, g.ms)
     below, ms_below = size(groups[-1])
@@ -383,18 +386,33 @@ def coupled_chain(ings: list, md: int, h: int) -> list:
     for g in reversed(groups[:-1]):
         above, ms_above = size(g)
         converted = (above if isinstance(g, list) else 0) + converted_below
-        result = max(above, below) // 2
+        result = int(0.3 * max(above, below))
         steps.append(CoupledStep(above + below, below, ms_above + ms_below, converted, result))
         below, ms_below, converted_below = result, ms_above + ms_below, 0
     return steps
 
 
+#: Exponent of the coupled transients' growth with the operators' nonzeros (see
+#: :func:`coupled_scale`).
+COUPLED_EXPONENT = 0.8
+
+
+def coupled_scale(entries: int) -> float:
+    """``1e6 (entries / 1e6)^0.8``: the measured peaks of the projection and the adding step of
+    coupled solves grow more slowly than the operators' estimated nonzeros (at ``ms`` 6-16
+    and ``n`` 66-390: 21 bytes per estimated nonzero at 17.8 million, 9.5 at 163 million,
+    parked): the products are formed in chunks and the pieces of the out-of-core workspace
+    have bounded sizes, so their transients level off while the stored nonzeros grow."""
+    return 1e6 * (max(entries, 0) / 1e6) ** COUPLED_EXPONENT
+
+
 def coupled_bytes(ings: list, grid: Grid, md: int, channels: int, parked: bool) -> int:
     """Peak bytes of a solve with coupled modes: per channel, its operators built bottom up
     (a coupled projection costs a fixed working set plus ``BYTES["coupled_projection"]`` per
-    estimated nonzero; isotropic ones as in :func:`iso_bytes`), then its adding steps (the
-    fixed working set plus ``BYTES["coupled_solution"]`` per nonzero of the lower operand, and
-    the isotropic operands converted). Without ``parked`` (no parking directory on a disk,
+    :func:`coupled_scale` of its estimated nonzeros; isotropic ones as in :func:`iso_bytes`),
+    then its adding steps (the fixed working set plus ``BYTES["coupled_solution"]`` per
+    :func:`coupled_scale` of the lower operand's nonzeros, and the isotropic operands
+    converted). Without ``parked`` (no parking directory on a disk,
     :func:`layersim.outofcore.parking.park_directory`) the coupled operators and the
     converted isotropic ones stay resident meanwhile. Held throughout: the shared isotropic
     operators and the stacks of the channels done."""
@@ -413,7 +431,7 @@ def coupled_bytes(ings: list, grid: Grid, md: int, channels: int, parked: bool) 
         for ing in reversed(ings):
             if ing.kind == "coupled":
                 peak = max(peak, held + coupled_held + BYTES["coupled_fixed"]
-                           + BYTES["coupled_projection"] * ing.entries)
+                           + BYTES["coupled_projection"] * coupled_scale(ing.entries))
                 coupled_held += resident(ing.entries)
             elif not (c and ing.variants == 1):
                 transient = (interface_transient(ing, md) if ing.kind == "interface" else
@@ -422,7 +440,7 @@ def coupled_bytes(ings: list, grid: Grid, md: int, channels: int, parked: bool) 
                 held += operator_bytes(ing, md, h)
         for step in steps:
             peak = max(peak, held + coupled_held + BYTES["coupled_fixed"]
-                       + BYTES["coupled_solution"] * step.lowest
+                       + BYTES["coupled_solution"] * coupled_scale(step.lowest)
                        + BYTES["nonzero"] * step.converted)
         done += stack_bytes
     return int(peak)
@@ -474,8 +492,8 @@ def lower_bytes(interfaces: list, media: int, grid: Grid, md: int) -> int:
     for alpha, blocks, ms in interfaces:
         pairs = pairs_lower_bound(alpha, blocks, h)
         if ms:
-            peak = max(peak, BYTES["coupled_fixed"]
-                       + BYTES["coupled_projection"] * aplan.FILL * pairs * (2 * ms + 1))
+            peak = max(peak, BYTES["coupled_fixed"] + BYTES["coupled_projection"]
+                       * coupled_scale(aplan.FILL * pairs * (2 * ms + 1)))
         else:
             ing = Ingredient(-1, "interface", blocks, pairs=pairs, stored=pairs)
             peak = max(peak, interface_transient(ing, md))
