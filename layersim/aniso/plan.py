@@ -1,6 +1,6 @@
 """Planning of anisotropic stacks: the coupling width ``ms`` per layer, the truncation of the
-coupled coefficients, and memory estimates (the pre-pass of their Fourier orders is the
-projection's, :func:`layersim.ingredients.aniso_microfacet.series_lengths`).
+coupled coefficients, and the size of coupled operators (the pre-pass of their Fourier orders
+is the projection's, :func:`layersim.ingredients.aniso_microfacet.series_lengths`).
 
 ``ms`` (coupling half-width, modes ``s in [-ms, ms]`` of the azimuth sum) grows with the
 roughness ratio ``r = max(alpha_u / alpha_v, alpha_v / alpha_u)``. Zeltner & Jakob 2018,
@@ -86,39 +86,14 @@ def ms_for_layer(layer) -> int:
 
 
 #: Fraction of the (d, s) coefficients of a pair's rectangle that survive pruning (Zeltner &
-#: Jakob 2018, Table 2: 0.41 for gold (0.05, 0.15), 0.55 for glass (0.3, 0.1)).
+#: Jakob 2018, Table 2: 0.41 for gold (0.05, 0.15), 0.55 for glass (0.3, 0.1)). At
+#: :data:`COUPLED_RELERR` the projected operators hold 0.52-0.82 of :func:`operator_entries`
+#: (``benchmarks/plan_estimates.py`` cases); the cost model (:mod:`layersim.plan.cost`) is
+#: calibrated on this estimate.
 FILL = 0.5
-#: Peak bytes of a solve per (estimated) nonzero of its lowest anisotropic operator (its
-#: reflection is multiplied with the layers above in the adding equations, and the solution
-#: of the adding equations grows with it) and per nonzero of the others (held as 12-byte CSR
-#: entries while the stack is added, plus the products with them). Fitted to the peak resident
-#: memory above the baseline of an imported, warmed-up process on the stacks of Zeltner &
-#: Jakob 2018, Table 2 (``benchmarks/table2.py``, ``benchmarks/memory_phases.py``; the adding
-#: releases its operands as it goes), with margin, so that the estimate is an upper bound
-#: (``benchmarks/table2.txt`` prints it beside the measured peak).
-BYTES_LOWEST, BYTES_OTHER = 60, 18
 
 
 def operator_entries(lengths: np.ndarray, md: int, ms: int) -> int:
     """Estimated nonzeros of an anisotropic interface operator in the slot basis: per pair
     ``(2 min(len, md) - 1) (2 ms + 1)`` coefficients, :data:`FILL` of them nonzero."""
     return int(FILL * np.sum((2 * np.minimum(lengths, md) - 1) * (2 * ms + 1)))
-
-
-def factor_bytes(h: int, md: int, ms_total: int) -> int:
-    """Dense block-LU factors of the adding equations at ``md`` orders: two components per
-    parity (cosine and sine) of ``md / 2`` orders, a band of ``ms_total`` orders each side,
-    blocks of ``h / 2`` active ordinates on average (high orders only scatter near grazing).
-    With a lower bound on ``md`` it bounds the memory of a plan from below before its pre-pass
-    (:func:`layersim.plan.make_plan`)."""
-    blocks = max(1, md // 2)
-    band = 2 * ms_total + 1
-    return int(4 * blocks * band * (0.5 * h) ** 2 * 8)
-
-
-def solve_bytes(entries: list) -> int:
-    """Estimated peak memory of solving a stack whose anisotropic operators (top to bottom)
-    have ``entries`` nonzeros (see :data:`BYTES_LOWEST`)."""
-    if not entries:
-        return 0
-    return int(BYTES_LOWEST * entries[-1] + BYTES_OTHER * sum(entries[:-1]))

@@ -21,13 +21,15 @@ module of this package, and :func:`make_plan` composes them in order:
   projection's pre-pass over every ordinate pair (a public function of the projection
   modules); pairs near the horizon beyond :data:`THETA_FULL` are truncated and tapered, which
   never changes energy, and the plan reports how many.
-* **Memory** (:mod:`.budget`): estimated from the same pre-pass (coefficients actually stored)
-  and refused up front when it exceeds the limit (``LAYERSIM_MAX_MEMORY`` bytes, default: half
-  the available RAM); coupled plans are first checked against a lower bound, before the
-  pre-pass.
-* **Time** (:mod:`.budget`): a cost model of projection, media and adding, calibrated on the
-  CI machine (``benchmarks/time_model.py``); an isotropic plan above the limit
-  (``LAYERSIM_MAX_SECONDS``, default 600 s) is refused before any heavy work.
+* **Memory** (:mod:`.budget`, :mod:`.cost`): the solve's steps priced one by one from the
+  same pre-pass (pairs and coefficients of every interface, the media's orders, operators
+  shared by the channels), and refused up front when the peak exceeds the limit
+  (``LAYERSIM_MAX_MEMORY`` bytes, default: half the available RAM); plans are first checked
+  against a lower bound, before the pre-pass.
+* **Time** (:mod:`.budget`, :mod:`.cost`): a cost model of projection, media and adding
+  (isotropic and coupled), calibrated on the 2-core CI VM
+  (``benchmarks/plan_estimates.py``); a plan above the limit (``LAYERSIM_MAX_SECONDS``,
+  default 600 s) is refused before any heavy work.
 
 A ``[discretization]`` table in the scene overrides ``n``, ``md``, ``ms`` and the quadrature
 rule.
@@ -38,9 +40,9 @@ from __future__ import annotations
 from ..errors import InfeasibleError
 from ..scene import Scene, as_scene
 from ..outofcore.memory import memory_limit
-from .budget import (MD_LOWER_PER_INV_ALPHA, PROJECTION_BYTES, estimate_bytes, estimate_seconds,
-                     lower_bound, refuse_below_lower_bound, refuse_over_limit, refuse_over_time,
-                     work_units)
+from .budget import (MD_LOWER_PER_INV_ALPHA, estimate_bytes, estimate_seconds, lower_bound,
+                     refuse_below_lower_bound, refuse_over_limit, refuse_over_time)
+from .cost import ingredients
 from .coupling import choose_ms, needed_ms
 from .layers import scale_media, survey_layers
 from .model import LayerPlan, Plan
@@ -48,8 +50,7 @@ from .ordinates import DEFAULT_RULE, N_MAX, N_MIN, N_PER_WIDTH, SNELL_N_FACTOR, 
 from .orders import MD_MAX, THETA_FULL, choose_md, interface_lengths, truncation_notes
 
 __all__ = ["Plan", "LayerPlan", "make_plan", "memory_limit", "THETA_FULL", "N_PER_WIDTH",
-           "N_MIN", "N_MAX", "MD_MAX", "MD_LOWER_PER_INV_ALPHA", "PROJECTION_BYTES",
-           "DEFAULT_RULE"]
+           "N_MIN", "N_MAX", "MD_MAX", "MD_LOWER_PER_INV_ALPHA", "DEFAULT_RULE"]
 
 
 def make_plan(scene: Scene, refuse: bool = True) -> Plan:
@@ -108,21 +109,13 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
     md = choose_md(disc, md_needed, notes, overridden)
     ms = choose_ms(disc, layers, ms_needed, notes, overridden)
     truncation_notes(lengths, md, notes, theta_full)
-    memory = estimate_bytes(layers, lengths, grid, md, survey.media_orders, scene.channels,
-                            anisotropic)
-    seconds = work = None
-    if not anisotropic:
-        solved = [lp for lp in layers if lp.action != "left out"]
-        media = [(lp.orders, max(scene.channel(c).layers[lp.index].tau
-                                 for c in range(scene.channels))) for lp in solved
-                 if lp.action == "adding-doubling"]
-        work = work_units(lengths, media, grid, md, len(solved) - 1, scene.channels)
-        seconds = estimate_seconds(work)
+    ings = ingredients(scene, layers, lengths, grid, md)
+    memory = estimate_bytes(ings, grid, md, scene.channels, anisotropic)
+    seconds, work = estimate_seconds(ings, grid, md, scene.channels, anisotropic)
     refused = None
     try:
         refuse_over_limit(memory, grid.n, md, ms, anisotropic)
-        if seconds is not None:
-            refuse_over_time(seconds, grid.n, md)
+        refuse_over_time(seconds, grid.n, md, ms if anisotropic else 0)
     except InfeasibleError as exc:
         exc = with_hints(exc, survey.hints)
         if refuse:

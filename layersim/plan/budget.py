@@ -1,28 +1,24 @@
-"""Memory of a plan: estimated from the projection's pre-pass (coefficients actually stored)
-and refused up front when it exceeds the limit (``layersim.config.settings().max_memory``,
-``LAYERSIM_MAX_MEMORY``; default: half the available memory).
+"""Memory and time of a plan, estimated by :mod:`layersim.plan.cost` from the projection's
+pre-pass, and refused up front when they exceed the limits
+(``layersim.config.settings().max_memory``, ``LAYERSIM_MAX_MEMORY``, default: half the
+available memory; ``max_seconds``, ``LAYERSIM_MAX_SECONDS``, default 600 s).
 """
 
 from __future__ import annotations
 
 import math
 
-import numpy as np
-
-from ..aniso import plan as aplan
 from ..config import settings
 from ..errors import InfeasibleError
 from ..operator import Grid
 from ..outofcore.memory import memory_limit
-from ..scene import Discretization, Scene
+from ..outofcore.parking import park_directory
+from ..scene import Conductor, Discretization, Measured, Scene
+from . import cost
 
 #: Lower bound on the orders a lobe of roughness alpha needs: md >= this / alpha (half the
 #: estimate for a Beckmann lobe at the plan's THETA_FULL), used to refuse before the pre-pass.
 MD_LOWER_PER_INV_ALPHA = 10.0
-#: Peak bytes of projecting an isotropic interface, per (order x h x h) entry: the series of
-#: every block's pairs (~16) plus the dense per-block assembly and its temporaries (~24).
-#: ``benchmarks/memory_phases.py`` compares the estimate with the measured peak.
-PROJECTION_BYTES = 40
 
 
 def lower_bound(disc: Discretization, mono: Scene, layers: list, grid: Grid,
@@ -34,26 +30,30 @@ def lower_bound(disc: Discretization, mono: Scene, layers: list, grid: Grid,
     ``md`` is the scene's ``[discretization] md`` where it gives one; otherwise a lower bound:
     a Beckmann lobe at 80 deg needs ~22.8 / alpha orders (``K ~ sqrt(2 B ln(1/eps))``,
     ``B = tan^2(theta) / (2 alpha^2)``), and half of that is safe. At that ``md`` the memory is
-    bounded from below by the projection of one isotropic interface (:data:`PROJECTION_BYTES`
-    per order and ordinate pair), or by the block-LU factors of the coupled adding equations
-    (:func:`layersim.aniso.plan.factor_bytes`).
+    bounded from below by the projection of one interface with the fewest pairs its roughness
+    allows, or by building one medium (:func:`layersim.plan.cost.lower_bytes`).
     """
     projected = [lp for lp in layers if lp.action.startswith("project")]
     if not projected:
         return None
     # rough interfaces only: a smooth one has no lobe whose orders the bound could count
-    alphas = [min(mono.layers[lp.index].alpha_u, mono.layers[lp.index].alpha_v)
-              for lp in projected]
-    alphas = [a for a in alphas if a > 0]
+    rough = []
+    for lp in projected:
+        layer = mono.layers[lp.index]
+        alpha = min(layer.alpha_u, layer.alpha_v)
+        if alpha > 0:
+            blocks = 1 if isinstance(layer, (Conductor, Measured)) else 4
+            ms = (disc.ms or lp.ms) if lp.ms else 0
+            rough.append((alpha, blocks, ms))
     if disc.md is not None:
         md_lower = disc.md
-    elif alphas:
-        md_lower = max(media_orders, math.ceil(MD_LOWER_PER_INV_ALPHA / min(alphas)))
+    elif rough:
+        md_lower = max(media_orders,
+                       math.ceil(MD_LOWER_PER_INV_ALPHA / min(a for a, _, _ in rough)))
     else:
         md_lower = media_orders
-    if ms_needed:
-        return md_lower, aplan.factor_bytes(grid.h, md_lower, 2 * (disc.ms or ms_needed))
-    return md_lower, PROJECTION_BYTES * md_lower * grid.h * grid.h
+    media = sum(1 for lp in layers if lp.action == "adding-doubling")
+    return md_lower, cost.lower_bytes(rough, media, grid, md_lower)
 
 
 def refuse_below_lower_bound(disc: Discretization, mono: Scene, layers: list, grid: Grid,
@@ -80,42 +80,32 @@ def refuse_below_lower_bound(disc: Discretization, mono: Scene, layers: list, gr
                                                  if ms_needed else ""))
 
 
-def estimate_bytes(layers: list, lengths: list, grid: Grid, md: int, media_orders: int,
-                   channels: int, anisotropic: bool) -> int:
-    """Estimated peak memory of the solve (bytes).
+def estimate_bytes(ings: list, grid: Grid, md: int, channels: int, anisotropic: bool) -> int:
+    """Estimated peak memory of the solve (bytes above the process's own), by
+    :func:`layersim.plan.cost.iso_bytes` or, for coupled modes,
+    :func:`layersim.plan.cost.coupled_bytes`: with idle blocks parked on a disk where the
+    workspace of the solve will be there (:func:`layersim.outofcore.parking.park_directory` of
+    the in-memory estimate, the test the solve makes with the plan's estimate), else
+    resident.
 
     Parameters
     ----------
-    layers : list of LayerPlan
-    lengths : list of (LayerPlan, ndarray)
-        The pre-pass of the projected interfaces (:func:`layersim.plan.orders.interface_lengths`),
-        with the coupled layers' final ``ms``.
+    ings : list of Ingredient
+        The solved layers (:func:`layersim.plan.cost.ingredients`).
     grid : Grid
-    md, media_orders : int
-        Fourier orders of the solve and of the media's phase functions.
+    md : int
+        Fourier orders of the solve.
     channels : int
-        Colour channels (each solved with its own operators).
+        Colour channels (solved one after the other on one plan).
     anisotropic : bool
         Whether the stack is solved with coupled modes.
     """
-    h = grid.h
-    # coefficients of the isotropic interfaces (the coupled ones: layersim.aniso.plan)
-    stored = sum(int(np.minimum(pair_lengths, md).sum())
-                 for lp, pair_lengths in lengths if not lp.ms)
-    media = sum(1 for lp in layers if lp.action == "adding-doubling")
-    stored += media * (4 * media_orders * h * h + 4 * md * h)
-    # the stack itself (assumed as dense as the densest ingredient, at most dense) plus the
-    # adding's temporaries: per order per thread ~12 dense h x h arrays
-    stored_bytes = int(12 * min(stored * 2, 4 * md * h * h)) + 12 * 8 * h * h * 8
-    if anisotropic:
-        entries = [aplan.operator_entries(pair_lengths, md, lp.ms)
-                   for lp, pair_lengths in lengths if lp.ms]
-        stored_bytes += aplan.solve_bytes(entries)
-    else:
-        # projecting an interface holds every block's per-pair series and then, per block,
-        # the dense scatter of the operator's assembly with its temporaries
-        stored_bytes += PROJECTION_BYTES * md * h * h
-    return stored_bytes * max(1, channels)
+    if not anisotropic:
+        return cost.iso_bytes(ings, grid, md, channels)
+    resident = cost.coupled_bytes(ings, grid, md, channels, parked=False)
+    if park_directory(resident) is None:
+        return resident
+    return cost.coupled_bytes(ings, grid, md, channels, parked=True)
 
 
 def refuse_over_limit(memory: int, n: int, md: int, ms: int, anisotropic: bool) -> None:
@@ -138,65 +128,19 @@ def refuse_over_limit(memory: int, n: int, md: int, ms: int, anisotropic: bool) 
 
 # --- time ------------------------------------------------------------------------------------
 #
-# A solve's time is modelled as three parts, each a count of work units times seconds per unit
-# measured on the 2-core CI VM by ``python benchmarks/time_model.py`` (its output,
-# benchmarks/time_model.txt, lists every calibration solve with its measured and estimated
-# parts). The constants are the largest measured seconds per unit, so that the estimate is an
-# upper bound on that machine; a faster machine finishes early.
-
-#: Projection of a rough interface (numeric path, CPU), per stored Fourier coefficient
-#: (``min(series length, md)`` summed over the pre-pass's ordinate pairs) plus
-#: :data:`PAIR_UNITS` per ordinate pair.
-SECONDS_PER_COEFFICIENT = 2.5e-7
-PAIR_UNITS = 20
-#: Adding-doubling of a medium, per ``orders x h^3 x (doublings + 7)`` (the initial slab's
-#: matrix exponential costs about seven doublings).
-SECONDS_PER_MEDIUM_UNIT = 1.1e-9
-#: Adding equations, per ``orders x h^3`` per adding step (dense LU and products).
-SECONDS_PER_ADDING_UNIT = 2.1e-9
+# A solve's time is modelled as three parts (projection, media, adding), each a sum of work
+# units times seconds per unit measured on the shared 2-core CI VM
+# (layersim.plan.cost.SECONDS; benchmarks/plan_estimates.py and its output,
+# benchmarks/plan_estimates.txt, list every case with its estimated and measured time).
 
 
-def work_units(lengths: list, media: list, grid: Grid, md: int, steps: int,
-               channels: int) -> dict:
-    """The work of an isotropic solve, in the units of the time model.
-
-    Parameters
-    ----------
-    lengths : list of (LayerPlan, ndarray)
-        The projected interfaces' pre-pass (:func:`layersim.plan.orders.interface_lengths`).
-    media : list of (int, float)
-        ``(scattering orders, optical thickness)`` of every medium solved by adding-doubling.
-    grid : Grid
-    md : int
-        Fourier orders of the solve.
-    steps : int
-        Adding steps (layers solved minus one).
-    channels : int
-        Colour channels (each solved with its own operators).
-
-    Returns
-    -------
-    dict
-        ``{"projection": ..., "media": ..., "adding": ...}`` work units.
-    """
-    h = grid.h
-    projection = sum(float(np.minimum(pl, md).sum()) + PAIR_UNITS * pl.size for _, pl in lengths)
-    medium = 0.0
-    for orders, tau in media:
-        doublings = max(0, math.ceil(math.log2(max(tau, 1e-300) / (0.5 * grid.mu[0]))))
-        medium += min(orders, md) * float(h) ** 3 * (doublings + 7)
-    adding = max(0, steps) * md * float(h) ** 3
-    return {k: v * max(1, channels) for k, v in
-            (("projection", projection), ("media", medium), ("adding", adding))}
-
-
-def estimate_seconds(units: dict) -> dict:
-    """Seconds of each part of a solve from its :func:`work_units`, and their ``"total"``."""
-    out = {"projection": units["projection"] * SECONDS_PER_COEFFICIENT,
-           "media": units["media"] * SECONDS_PER_MEDIUM_UNIT,
-           "adding": units["adding"] * SECONDS_PER_ADDING_UNIT}
-    out["total"] = sum(out.values())
-    return out
+def estimate_seconds(ings: list, grid: Grid, md: int, channels: int,
+                     anisotropic: bool) -> tuple[dict, dict]:
+    """``(seconds, work)``: the time of each part of a solve (:data:`layersim.plan.cost.PARTS`)
+    and its ``"total"``, and the work units they come from (:func:`layersim.plan.cost.iso_work`,
+    :func:`layersim.plan.cost.coupled_work`)."""
+    work = (cost.coupled_work if anisotropic else cost.iso_work)(ings, grid, md, channels)
+    return cost.seconds(work), work
 
 
 def time_limit() -> float | None:
@@ -216,8 +160,10 @@ _TIME_ADVICE = {
 }
 
 
-def refuse_over_time(seconds: dict, n: int, md: int) -> None:
-    """Refuse a plan whose estimated time exceeds :func:`time_limit`, naming the largest part.
+def refuse_over_time(seconds: dict, n: int, md: int, ms: int = 0) -> None:
+    """Refuse a plan whose estimated time exceeds :func:`time_limit`, naming the largest part
+    (and ``ms``, a coupled plan's coupling half-width, which costs time in every part but the
+    media).
 
     Raises
     ------
@@ -230,8 +176,10 @@ def refuse_over_time(seconds: dict, n: int, md: int) -> None:
     parts = {k: v for k, v in seconds.items() if k != "total"}
     worst = max(parts, key=parts.get)
     raise InfeasibleError(
-        f"the plan (n = {n}, md = {md}) needs about {seconds['total']:.0f} s ("
+        f"the plan (n = {n}, md = {md}{f', ms = {ms}' if ms else ''}) needs about "
+        f"{seconds['total']:.0f} s ("
         + ", ".join(f"{k} {v:.0f} s" for k, v in parts.items())
         + f"), over the limit of {limit:g} s (LAYERSIM_MAX_SECONDS); the {worst} part is the "
         "largest: "
-        + _TIME_ADVICE[worst])
+        + _TIME_ADVICE[worst] + (", or lower ms or the anisotropy"
+                                 if ms and worst != "media" else ""))

@@ -43,8 +43,10 @@ class LayerPlan:
 class Plan:
     """What :func:`layersim.solve` will compute (see :mod:`layersim.plan`).
 
-    ``seconds`` is the time model's estimate by part (:func:`layersim.plan.budget.
-    estimate_seconds`) and ``work`` its work units; both are None for coupled plans.
+    ``memory_bytes`` is the estimated peak memory of the solve and ``seconds`` the time
+    model's estimate by part (:func:`layersim.plan.budget.estimate_seconds`), ``work`` its work
+    units (:mod:`layersim.plan.cost`); ``seconds`` and ``work`` are None for a plan refused
+    before the pre-pass.
     """
 
     rule: str
@@ -88,11 +90,13 @@ class Plan:
                                                           if self.representation != "isotropic"
                                                           else ", ms = 0"),
             f"estimated memory: {self.memory_bytes / 2**20:.1f} MiB",
-            "estimated time: " + ("not modelled for coupled modes" if self.seconds is None else
+            "estimated time: " + ("not estimated (refused before the pre-pass)"
+                                  if self.seconds is None else
                                   f"{self.seconds['total']:.2g} s (projection "
                                   f"{self.seconds['projection']:.2g} s, media "
                                   f"{self.seconds['media']:.2g} s, adding "
-                                  f"{self.seconds['adding']:.2g} s; calibrated on a 2-core VM)"),
+                                  f"{self.seconds['adding']:.2g} s; calibrated on a 2-core "
+                                  "VM)"),
         ]
         for lp in self.layers:
             lines.append(f"  layer {lp.index} ({lp.kind}): {lp.action}"
