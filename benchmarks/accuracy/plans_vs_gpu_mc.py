@@ -4,11 +4,11 @@ Monte Carlo reference at 1e9 paths: per scene of ``benchmarks/scenes/`` and inci
 floor E / N added), the relative L2 difference of bin energies and the albedo difference in
 standard errors; with the solve's error estimate (``layersim.accuracy``) beside it.
 
-Usage (on a GPU machine): python benchmarks/plans_vs_gpu_mc.py [--tol T ...] [paths] [backend]
-[SCENE[:KEY=VALUE,...] ...] (default 1e9, warp-cuda, every scene, tol 1e-3; ``--tol 0``: the
-default plan only). ``KEY=VALUE`` set ``[discretization]`` fields over the planner's (e.g.
-``additive_validation:ms=8`` keeps the planned n and md and widens the coupled modes). Output
-of runs on an NVIDIA H100: benchmarks/plans_vs_gpu_mc.txt.
+Usage (on a GPU machine): python benchmarks/accuracy/plans_vs_gpu_mc.py [--tol T ...] [paths]
+[backend] [SCENE[:KEY=VALUE,...] ...] (default 1e9, warp-cuda, every scene, tol 1e-3;
+``--tol 0``: the default plan only). ``KEY=VALUE`` set ``[discretization]`` fields over the
+planner's (e.g. ``additive_validation:ms=8`` keeps the planned n and md and widens the coupled
+modes). Output of runs on an NVIDIA H100: benchmarks/accuracy/plans_vs_gpu_mc.txt.
 """
 import argparse
 import time
@@ -21,7 +21,7 @@ import layersim
 import layersim.montecarlo as mc
 from layersim.errors import LayersimError
 
-SCENES = Path(__file__).parent / "scenes"
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
 MU_EDGES = np.linspace(0.0, 1.0, 19)
 PHI_EDGES = np.linspace(0.0, 2.0 * np.pi, 37)
 ANGLES = (0.0, 30.0, 60.0)

@@ -1,17 +1,17 @@
 """Bin tables of scenes solved on a ladder of discretisations: the data the error estimate of
-:mod:`layersim.accuracy` is designed and checked on (``benchmarks/estimator_study.py``).
+:mod:`layersim.accuracy` is designed and checked on (``benchmarks/accuracy/estimator_study.py``).
 
 Each scene is solved at the scales :data:`layersim.accuracy.LADDER` of the planner's ``n`` and
 ``md`` (0.354 ... 2.83; rungs the limits refuse are skipped), and the bin table of each solve
 (:func:`layersim.accuracy.bin_table`: 18 x 36 bins per side at 0, 30, 60, 80 degrees) is written,
-with the rung's ``n``, ``md`` and wall time, to ``benchmarks/results/convergence/SCENE.npz``
+with the rung's ``n``, ``md`` and wall time, to ``benchmarks/accuracy/convergence/SCENE.npz``
 (float32, compressed; a scene whose file exists is skipped, so the run can be resumed).
 
 Scenes: the isotropic ones of ``benchmarks/scenes/`` and single layers / coated conductors of a
 wider range of roughness (:data:`EXTRA`), so that the estimate is judged on more than the
 scenes it is reported on.
 
-Usage: python benchmarks/convergence_tables.py [NAME ...]
+Usage: python benchmarks/accuracy/convergence_tables.py [NAME ...]
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ from layersim import accuracy
 from layersim.errors import InfeasibleError
 from layersim.plan import make_plan
 
-SCENES = Path(__file__).parent / "scenes"
-OUT = Path(__file__).parent / "results" / "convergence"
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+OUT = Path(__file__).parent / "convergence"
 GOLD = [0.143552, 3.98397]
 
 #: Scenes of benchmarks/scenes/ used (isotropic: anisotropic references take too long here).

@@ -14,7 +14,7 @@ with ``w = w_o mu_o w_i mu_i`` (cosine-weighted: the norm of the scattering oper
 
 Usage::
 
-    python benchmarks/ms_study.py            # prints the table and the fitted rule
+    python benchmarks/accuracy/ms_study.py            # prints the table and the fitted rule
 """
 
 from __future__ import annotations

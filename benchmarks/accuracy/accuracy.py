@@ -13,10 +13,10 @@ estimates). It prints the estimate, the
 measured error, their ratio (the estimate is meant to lie above the error and within 3 times
 it), the discretisation reached, and the wall time against the default solve's.
 
-Usage: python benchmarks/accuracy.py [--tol T ...] [SCENE ...]   (names in benchmarks/scenes/,
-without .toml; --tol: only these tolerances, default 1e-2 1e-3 1e-4)
-       python benchmarks/accuracy.py --aniso       (the anisotropic scenes of :data:`ANISO`,
-                                                    default plan and :data:`TOLS_ANISO`)
+Usage: python benchmarks/accuracy/accuracy.py [--tol T ...] [SCENE ...]   (names in
+benchmarks/scenes/, without .toml; --tol: only these tolerances, default 1e-2 1e-3 1e-4)
+       python benchmarks/accuracy/accuracy.py --aniso   (the anisotropic scenes of
+:data:`ANISO`, default plan and :data:`TOLS_ANISO`)
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ import layersim
 from layersim import accuracy
 from layersim.errors import InfeasibleError
 
-SCENES = Path(__file__).parent / "scenes"
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
 DEFAULT = ("vandehulst_slab", "dusty_gold", "coated_gold", "coated_hg_diffuse")
 TOLS = (1e-2, 1e-3, 1e-4)
 #: Anisotropic (coupled-mode) scenes: the additive validation stack of Zeltner & Jakob 2018,
@@ -105,7 +105,8 @@ def main() -> None:
     args = parser.parse_args()
     aniso = args.aniso
     scenes = ANISO if aniso else {name: SCENES / f"{name}.toml" for name in args.scenes or DEFAULT}
-    print(f"# python benchmarks/accuracy.py {' '.join(sys.argv[1:])}   ({platform.node()}, "
+    print(f"# python benchmarks/accuracy/accuracy.py {' '.join(sys.argv[1:])}   "
+          f"({platform.node()}, "
           f"{os.cpu_count()} cores: times are wall times, their ratios side by side)")
     print(f"# estimate: {accuracy.SAFETY} x the largest of the distances to companions at "
           + " and ".join(f"{r:.3g} (weight {w:g})" for r, w in accuracy.COMPANIONS)

@@ -4,7 +4,7 @@ that means for companions of the error estimate (``layersim.accuracy.scaled_ms``
 For Beckmann conductors (gold) and dielectrics (eta 1.5) of roughness (0.1, 0.1 r), r = 2, 3,
 4, 6, it computes the relative (cosine-weighted) L2 error ``err(m)`` of keeping ``|s| <= m``
 from the coefficients of one projection at a generous ``ms`` (the method of
-``benchmarks/ms_study.py``, n = 64, md = 128), and prints ``err`` at the planner's ``ms``
+``benchmarks/accuracy/ms_study.py``, n = 64, md = 128), and prints ``err`` at the planner's ``ms``
 (``layersim.aniso.plan.ms_for_layer``) and two modes either side, the decay
 ``K = ms ln(err(ms - 1) / err(ms))`` (``err(m) ~ exp(-K m / ms)``), and, where the truncation
 is the whole error, the ratio estimate / error that the estimate of ``layersim.accuracy``
@@ -13,7 +13,8 @@ second) gives with companions at ``ms sqrt(scale)`` (what ``scaled_ms`` does) an
 ``ms scale``. The distance to a companion at ``m`` is taken as ``err(m) - err(ms)`` (errors
 of the same sign, the smallest distance).
 
-Usage: python benchmarks/aniso_ms_decay.py   (output: benchmarks/aniso_ms_decay.txt)
+Usage: python benchmarks/accuracy/aniso_ms_decay.py
+(output: benchmarks/accuracy/aniso_ms_decay.txt)
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-import ms_study  # noqa: E402  (the truncation errors of benchmarks/ms_study.py)
+import ms_study  # noqa: E402  (the truncation errors of benchmarks/accuracy/ms_study.py)
 
 from layersim import accuracy  # noqa: E402
 from layersim.aniso.plan import ms_for_layer  # noqa: E402

@@ -18,7 +18,7 @@ pair's largest coefficient. Pairs are drawn among those with both elevations wit
 
 Usage::
 
-    python benchmarks/aniso_projection.py
+    python benchmarks/accuracy/aniso_projection.py
 """
 
 from __future__ import annotations

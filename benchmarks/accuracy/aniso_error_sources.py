@@ -19,8 +19,8 @@ incidence and the change of the albedo R. With ``--mc PATHS`` it adds a walk on 
 device (``layersim.montecarlo``) at 0, 30 and 60 degrees and compares the albedos of the
 default plan and of the solve at twice ``n`` with it, in the walk's standard errors.
 
-Usage: python benchmarks/aniso_error_sources.py [--mc PATHS]
-Output of a run: benchmarks/aniso_error_sources.txt.
+Usage: python benchmarks/accuracy/aniso_error_sources.py [--mc PATHS]
+Output of a run: benchmarks/accuracy/aniso_error_sources.txt.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ import layersim.montecarlo as mc
 import layersim.solver as solver
 from layersim import accuracy
 
-SCENE = Path(__file__).parent / "scenes" / "additive_validation.toml"
+SCENE = Path(__file__).resolve().parents[1] / "scenes" / "additive_validation.toml"
 
 
 @contextlib.contextmanager

@@ -12,7 +12,7 @@ bin energies from the ``ms + 4`` solve (18 x 36 bins per side, worst of 0, 30, 6
 Scenes: additive_validation (``benchmarks/scenes/``), brushed gold (Beckmann, alpha 0.1 x 0.2),
 and Table 2 row 5 of Zeltner & Jakob 2018 (dielectric 0.1 over gold 0.1 x 0.3).
 
-Usage: python benchmarks/aniso_ms_cost.py   (output: benchmarks/aniso_ms_cost.txt)
+Usage: python benchmarks/accuracy/aniso_ms_cost.py   (output: benchmarks/accuracy/aniso_ms_cost.txt)
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ from layersim.plan import make_plan
 
 GOLD = [0.143552, 3.98397]
 SCENES = {
-    "additive_validation": Path(__file__).parent / "scenes" / "additive_validation.toml",
+    "additive_validation": Path(__file__).resolve().parents[1] / "scenes"
+                           / "additive_validation.toml",
     "brushed_gold": {"layer": [{"kind": "conductor", "ior": GOLD, "roughness": [0.1, 0.2]}]},
     "table2_row5": {"layer": [{"kind": "dielectric", "ior": 1.5, "roughness": [0.1, 0.1]},
                               {"kind": "conductor", "ior": GOLD, "roughness": [0.1, 0.3]}]},

@@ -1,5 +1,5 @@
 """How the error estimate of :mod:`layersim.accuracy` compares with measured errors, on the
-ladders written by ``benchmarks/convergence_tables.py`` (the data its factor is chosen on).
+ladders written by ``benchmarks/accuracy/convergence_tables.py`` (the data its factor is chosen on).
 
 A case is a scene solved at a rung ``s`` of the ladder that has the two coarser rungs ``s / sqrt 2``
 and ``s / 2`` and a reference at least twice as fine (the finest rung). For each case it
@@ -17,7 +17,7 @@ coarser rungs, and prints
   its measured error against ``tol``, and the time of the rungs climbed relative to the
   planner's default solve.
 
-Usage: python benchmarks/estimator_study.py
+Usage: python benchmarks/accuracy/estimator_study.py
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import numpy as np
 
 from layersim import accuracy
 
-DATA = Path(__file__).parent / "results" / "convergence"
+DATA = Path(__file__).parent / "convergence"
 
 #: Candidate estimates from the distances d1 (to s / sqrt 2) and d2 (to s / 2).
 CANDIDATES = {
@@ -93,9 +93,9 @@ def simulate(tol: float):
 
 def main() -> None:
     rows = list(cases())
-    print("# python benchmarks/estimator_study.py   (shared 2-core CI VM, beside other jobs: "
-          "times are wall times under load; data: "
-          "python benchmarks/convergence_tables.py)")
+    print("# python benchmarks/accuracy/estimator_study.py   (shared 2-core CI VM, beside other "
+          "jobs: times are wall times under load; data: "
+          "python benchmarks/accuracy/convergence_tables.py)")
     weights = ", ".join(f"{w:g} d{i + 1}" for i, (_, w) in enumerate(accuracy.COMPANIONS))
     print(f"# {len(rows)} cases on {len(list(DATA.glob('*.npz')))} ladders; adopted estimate "
           f"{accuracy.SAFETY} x max({weights}) (d1, d2: distances to the companions at n, md "
