@@ -24,12 +24,12 @@ and ``md`` (scaling).
 
 Usage::
 
-    python benchmarks/plan_estimates.py                  # every case
-    python benchmarks/plan_estimates.py car_paint ...    # selected cases
-    python benchmarks/plan_estimates.py --json out.json  # also write the measurements
-    python benchmarks/plan_estimates.py --child NAME     # one case in this process (internal)
+    python benchmarks/speed/plan_estimates.py                  # every case
+    python benchmarks/speed/plan_estimates.py car_paint ...    # selected cases
+    python benchmarks/speed/plan_estimates.py --json out.json  # also write the measurements
+    python benchmarks/speed/plan_estimates.py --child NAME     # one case in this process (internal)
 
-Output in ``benchmarks/plan_estimates.txt``.
+Output in ``benchmarks/speed/plan_estimates.txt``.
 """
 
 from __future__ import annotations
@@ -78,11 +78,11 @@ def _coated_gold(top, bottom, **disc):
 
 
 def _scene_file(name):
-    return {"file": str(HERE / "scenes" / f"{name}.toml")}
+    return {"file": str(HERE.parent / "scenes" / f"{name}.toml")}
 
 
 def _example(name):
-    return {"file": str(HERE.parent / "examples" / f"{name}.toml")}
+    return {"file": str(HERE.parents[1] / "examples" / f"{name}.toml")}
 
 
 def _layers(*layers, **disc):
@@ -122,7 +122,7 @@ CASES = {
     "additive_validation (coupled)": (_scene_file("additive_validation"), 1.0),
     "brushed_metal (coupled)": (_example("brushed_metal"), 1.0),
     # Zeltner & Jakob 2018, Table 2 rows 4, 5 and 7 (coated gold) at the paper's ms (eq. (25)),
-    # and row 6 at the reduced discretisation of benchmarks/table2.py
+    # and row 6 at the reduced discretisation of benchmarks/speed/table2.py
     "Table 2 row 4 (coupled)": (_coated_gold((0.1, 0.1), (0.05, 0.15), ms=6), 1.0),
     "Table 2 row 5 (coupled)": (_coated_gold((0.1, 0.1), (0.1, 0.3), ms=6), 1.0),
     "Table 2 row 7 (coupled)": (_coated_gold((0.3, 0.1), (0.1, 0.3), ms=6), 1.0),
@@ -282,7 +282,7 @@ def main(argv) -> int:
         print(f"unknown case(s): {', '.join(unknown)}; expected: {', '.join(CASES)}")
         return 2
     env = dict(os.environ, LAYERSIM_MAX_MEMORY=str(1 << 50), LAYERSIM_MAX_SECONDS="off")
-    print(f"# python benchmarks/plan_estimates.py {' '.join(sys.argv[1:])}")
+    print(f"# python benchmarks/speed/plan_estimates.py {' '.join(sys.argv[1:])}")
     print(f"# {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC, commit {_commit()}, "
           f"{platform.node()}: {_cpu_model()}, {os.cpu_count()} cores, "
           f"{os.sysconf('SC_PHYS_PAGES') * os.sysconf('SC_PAGE_SIZE') / 2**30:.0f} GiB; "

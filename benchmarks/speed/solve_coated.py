@@ -20,7 +20,7 @@ m = 267 for those rows), 1.3-1.4 s; 0.05/0.05 (n = 394, m = 671) 2.6 s; 0.3/0.3 
 
 Usage::
 
-    python benchmarks/solve_coated.py [--repeat 3] [--json out.json] [--no-reference]
+    python benchmarks/speed/solve_coated.py [--repeat 3] [--json out.json] [--no-reference]
 """
 
 from __future__ import annotations
@@ -129,7 +129,7 @@ def main():
         out = {"machine": {"cpu": platform.processor() or platform.machine(),
                            "cores": os.cpu_count(), "python": platform.python_version(),
                            "numpy": np.__version__, "layersim": layersim.__version__},
-               "command": "python benchmarks/solve_coated.py " + " ".join(
+               "command": "python benchmarks/speed/solve_coated.py " + " ".join(
                    f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items()
                    if v not in (None, False)),
                "rows": rows, "date": time.strftime("%Y-%m-%d")}

@@ -9,9 +9,9 @@ imported numpy, scipy, Warp and layersim and warmed up Warp's kernels.
 
 Usage::
 
-    python benchmarks/memory_phases.py 7            # Table 2 row 7 (benchmarks/table2.py)
-    python benchmarks/memory_phases.py 6 --default  # row 6 at the planner's discretisation
-    python benchmarks/memory_phases.py path/to/scene.toml
+    python benchmarks/speed/memory_phases.py 7            # Table 2 row 7 (table2.py)
+    python benchmarks/speed/memory_phases.py 6 --default  # row 6 at the planner's discretisation
+    python benchmarks/speed/memory_phases.py path/to/scene.toml
 """
 
 from __future__ import annotations

@@ -16,14 +16,14 @@ discretisation.
 
 Usage::
 
-    python benchmarks/table2.py              # all rows (row 6 at a reduced n, see below)
-    python benchmarks/table2.py 4 5          # selected rows
-    python benchmarks/table2.py --row 4      # one row in this process (used internally)
+    python benchmarks/speed/table2.py              # all rows (row 6 at a reduced n, see below)
+    python benchmarks/speed/table2.py 4 5          # selected rows
+    python benchmarks/speed/table2.py --row 4      # one row in this process (used internally)
 
 Row 6 (both layers 1:3 anisotropic, the narrow axis 0.05 in the coating) needs n = 390 and
 md = 426 at the planner's accuracy (the coating's refraction lobe sets n = 390; estimated
 7.0 GiB); that plan takes several minutes on a 2-core machine (``python
-benchmarks/memory_phases.py 6 --default``; figures in docs/performance.md). It is run at
+benchmarks/speed/memory_phases.py 6 --default``; figures in docs/performance.md). It is run at
 ``n = 224, md = 300``: the smallest n at which the coating's discrete operator does not create
 energy (n = 196 and 210 are refused by the energy check: 1.00000x and 1.0012), and marked as
 such.

@@ -14,7 +14,7 @@ blocks and orders of the operator entries B_l[o, i] (energy-weighted coefficient
 Target: on a GPU, the numeric path at equal error >= 10x faster than the host
 semi-analytic path. Usage::
 
-    python benchmarks/projection_paths.py [--n 196] [--md 247] [--devices cpu cuda] [--json F]
+    python benchmarks/speed/projection_paths.py [--n 196] [--md 247] [--devices cpu cuda] [--json F]
 """
 
 from __future__ import annotations
@@ -130,7 +130,7 @@ def main():
         with open(args.json, "w") as fh:
             json.dump({"machine": {"cpu": platform.processor() or platform.machine(),
                                    "python": platform.python_version()},
-                       "command": "python benchmarks/projection_paths.py " + " ".join(
+                       "command": "python benchmarks/speed/projection_paths.py " + " ".join(
                            f"--{k} {v}" for k, v in vars(args).items() if v),
                        "n": args.n, "md": args.md, "rows": rows, "summary": summary}, fh,
                       indent=1)

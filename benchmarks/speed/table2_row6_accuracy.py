@@ -1,5 +1,6 @@
-"""Table 2 row 6 of Zeltner & Jakob 2018 (benchmarks/table2.py): what the reduced discretisation
-that table2.py uses (n = 224, md = 300) changes against the planner's (n = 390, md = 426).
+"""Table 2 row 6 of Zeltner & Jakob 2018 (benchmarks/speed/table2.py): what the reduced
+discretisation that table2.py uses (n = 224, md = 300) changes against the planner's (n = 390,
+md = 426).
 
 Solves both (the second is the long one, several minutes and about 1 GiB above the baseline on a
 2-core machine), then compares ``BSDF.eval`` at 20000 random pairs of directions within 80 degrees
@@ -8,7 +9,8 @@ directional albedo at 12 incident directions.
 
 Usage::
 
-    python benchmarks/table2_row6_accuracy.py      # output: benchmarks/table2_row6_accuracy.txt
+    python benchmarks/speed/table2_row6_accuracy.py
+    # output: benchmarks/speed/table2_row6_accuracy.txt
 """
 from __future__ import annotations
 
@@ -20,7 +22,7 @@ import numpy as np
 
 import layersim
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tests"))
 from conftest import random_directions  # noqa: E402  (the tests' direction sampler)
 
 LAYERS = [{"kind": "dielectric", "ior": 1.5, "roughness": [0.15, 0.05]},

@@ -4,7 +4,7 @@ Each checkout runs in its own worker process (``PYTHONPATH`` set to the checkout
 ``layersim`` is the one imported); the driver sends both the same scenes, alternating base and
 new solve by solve, and keeps the best of ``--repeat`` solves of each after one warm-up solve
 per worker (which compiles the Warp kernels). Rows: the isotropic coated-gold rows of
-``benchmarks/solve_coated.py`` (dielectric eta 1.5 over gold, Beckmann alpha top / bottom) and
+``benchmarks/speed/solve_coated.py`` (dielectric eta 1.5 over gold, Beckmann alpha top / bottom) and
 three scenes of ``benchmarks/scenes/``, each on its planner's own discretisation (n, md).
 
 Per row it prints the best wall and CPU (process) seconds of each checkout, the ratio base/new,
@@ -17,7 +17,8 @@ and the largest relative difference between the two solutions of
 Usage (the base checkout without its own install; it imports this environment's packages)::
 
     git worktree add /tmp/base <commit>          # or: git archive <commit> | tar -x -C /tmp/base
-    python benchmarks/speed_vs_base.py --base /tmp/base [--repeat 3] > benchmarks/speed_vs_base.txt
+    python benchmarks/speed/speed_vs_base.py --base /tmp/base [--repeat 3] \\
+        > benchmarks/speed/speed_vs_base.txt
 """
 
 from __future__ import annotations
@@ -32,14 +33,14 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
+ROOT = HERE.parents[1]
 GOLD = [0.143552, 3.98397]
 COATED = [(0.1, 0.05), (0.1, 0.1), (0.1, 0.3), (0.05, 0.05), (0.3, 0.3)]
 SCENES = ["coated_hg_diffuse.toml", "dusty_gold.toml", "ggx_coated_gold.toml"]
 
 
 def coated(top: float, bottom: float) -> dict:
-    """The scene of a row of ``benchmarks/solve_coated.py`` as a dict."""
+    """The scene of a row of ``benchmarks/speed/solve_coated.py`` as a dict."""
     return {"stack": {"name": f"coated_gold_{top}_{bottom}"}, "layer": [
         {"kind": "dielectric", "ior": 1.5, "roughness": top},
         {"kind": "conductor", "ior": GOLD, "roughness": bottom}]}
@@ -48,7 +49,7 @@ def coated(top: float, bottom: float) -> dict:
 def rows() -> list:
     """``(label, scene)``: a dict, or the path of a TOML file."""
     out = [(f"coated gold {t}/{b}", coated(t, b)) for t, b in COATED]
-    out += [(name[:-5], str(HERE / "scenes" / name)) for name in SCENES]
+    out += [(name[:-5], str(HERE.parent / "scenes" / name)) for name in SCENES]
     return out
 
 
@@ -124,7 +125,7 @@ def main() -> None:
     args = ap.parse_args()
     base, new = Worker(Path(args.base).resolve()), Worker(ROOT)
     print("# speed_vs_base.py: layersim.solve in this checkout (new) against a base checkout")
-    print(f"# command: python benchmarks/speed_vs_base.py --base {args.base} "
+    print(f"# command: python benchmarks/speed/speed_vs_base.py --base {args.base} "
           f"--repeat {args.repeat}" + (f" --only '{args.only}'" if args.only else ""))
     print(f"# machine: shared 2-core CI VM, beside other jobs ({platform.machine()}, "
           f"{os.cpu_count()} cores, Python {platform.python_version()}); "
