@@ -11,8 +11,8 @@ each backend twice:
 
 Usage::
 
-    python benchmarks/opencl_vs_warp.py [PATHS] [--warp warp-cpu] [--scenes NAME ...] \\
-        [--angles 0 30 60 85] > benchmarks/opencl_vs_warp.txt
+    python benchmarks/montecarlo/opencl_vs_warp.py [PATHS] [--warp warp-cpu] [--scenes NAME ...] \\
+        [--angles 0 30 60 85] > benchmarks/montecarlo/opencl_vs_warp.txt
 
 Scenes the Monte Carlo walk cannot run (none at present) are skipped with the reason.
 """
@@ -60,14 +60,14 @@ def main() -> None:
     ap.add_argument("--angles", nargs="*", type=float, default=[0.0, 30.0, 60.0, 85.0])
     args = ap.parse_args()
     paths = int(args.paths)
-    files = sorted((HERE / "scenes").glob("*.toml"))
+    files = sorted((HERE.parent / "scenes").glob("*.toml"))
     if args.scenes:
         files = [f for f in files if f.stem in args.scenes]
     commit = subprocess.run(["git", "-C", str(HERE), "log", "-1", "--format=%h %cs"],
                             capture_output=True, text=True).stdout.strip()
     print("# opencl_vs_warp.py: the OpenCL walk against the Warp walk, 10 x 12 bins per side")
-    print(f"# command: python benchmarks/opencl_vs_warp.py {args.paths:g} --warp {args.warp} "
-          f"--angles {' '.join(f'{a:g}' for a in args.angles)}"
+    print(f"# command: python benchmarks/montecarlo/opencl_vs_warp.py {args.paths:g} "
+          f"--warp {args.warp} --angles {' '.join(f'{a:g}' for a in args.angles)}"
           + (f" --scenes {' '.join(args.scenes)}" if args.scenes else ""))
     print(f"# machine: {platform.machine()}, {os.cpu_count()} cores; commit {commit}; "
           f"date {time.strftime('%Y-%m-%d')}; load average (1 min) {os.getloadavg()[0]:.1f}")

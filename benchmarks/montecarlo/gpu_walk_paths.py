@@ -4,8 +4,9 @@ tabulated NDF, a measured (MERL layout) base and a near-specular conductor under
 For each stack, albedos at 30 and 60 degrees from the solver and from the ``warp-cuda`` walk
 (``paths`` per direction), and their difference in standard errors.
 
-Usage (on a machine with CUDA and Warp): python benchmarks/gpu_walk_paths.py [paths] [backend]
-(default 1e8, warp-cuda). Output of a run on an NVIDIA H100: benchmarks/gpu_walk_paths.txt.
+Usage (on a machine with CUDA and Warp): python benchmarks/montecarlo/gpu_walk_paths.py [paths]
+[backend] (default 1e8, warp-cuda). Output of a run on an NVIDIA H100:
+benchmarks/montecarlo/gpu_walk_paths.txt.
 """
 import os
 import sys
@@ -14,7 +15,7 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "tests"))
 
 import layersim                                    # noqa: E402
 import layersim.montecarlo as mc                   # noqa: E402

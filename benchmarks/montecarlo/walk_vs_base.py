@@ -9,15 +9,15 @@ and backend (which compiles the kernels). Runs use the same seed on both sides, 
 physics and random-number use are unchanged the tallies agree bit for bit, and the table says so
 (``same``); otherwise it gives the largest difference of the bin energies in standard errors.
 
-Scenes: those of ``benchmarks/mc_throughput.py`` (an index-matched HG slab; a coated anisotropic
-conductor), a coated isotropic gold, and an RGB medium between a rough coat and a rough conductor
-(car paint), all lit at 30 degrees, 10 x 12 bins.
+Scenes: those of ``benchmarks/montecarlo/mc_throughput.py`` (an index-matched HG slab; a coated
+anisotropic conductor), a coated isotropic gold, and an RGB medium between a rough coat and a rough
+conductor (car paint), all lit at 30 degrees, 10 x 12 bins.
 
 Usage::
 
     git worktree add /tmp/base <commit>
-    python benchmarks/walk_vs_base.py --base /tmp/base [--backends warp-cpu] [--seconds 3] \\
-        [--repeat 3] > benchmarks/walk_vs_base_cpu.txt
+    python benchmarks/montecarlo/walk_vs_base.py --base /tmp/base [--backends warp-cpu] \\
+        [--seconds 3] [--repeat 3] > benchmarks/montecarlo/walk_vs_base_cpu.txt
 
 On a GPU machine name ``--backends warp-cuda`` (and ``opencl``).
 """
@@ -36,7 +36,7 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
+ROOT = HERE.parents[1]
 GOLD = [0.143552, 3.98397]
 #: Roughly aluminium at red, green and blue (eta + i k near 650 / 550 / 450 nm); the throughput
 #: does not depend on the exact values.
@@ -173,7 +173,7 @@ def main() -> None:
         base = Worker(args.base, Path(tmp) / "base")
         new = Worker(ROOT, Path(tmp) / "new")
         print("# walk_vs_base.py: Monte Carlo walk throughput, this checkout (new) against a base")
-        print("# command: python benchmarks/walk_vs_base.py " + " ".join(sys.argv[1:]))
+        print("# command: python benchmarks/montecarlo/walk_vs_base.py " + " ".join(sys.argv[1:]))
         print(f"# machine: {args.machine or platform.node()} ({platform.machine()}, "
               f"{os.cpu_count()} cores, {platform.processor() or 'cpu'}); Python "
               f"{platform.python_version()}; date {time.strftime('%Y-%m-%d %H:%M')}")

@@ -1,12 +1,13 @@
 """The CUDA walk's launch settings, measured (not a test): paths/s of the warp-cuda walk for
 each register cap (``montecarlo.backends.CUDA_MAX_REGISTERS``) and particles per thread
-(``GPU_PARTICLES_PER_THREAD``), on the scenes of ``benchmarks/walk_vs_base.py`` at 10 x 12 and
-18 x 36 bins, 30 degrees. Best of 3 runs of 2^28 paths after a warm-up; ``same`` says whether the
-bins equal those of the first setting (the settings change scheduling, never the arithmetic).
+(``GPU_PARTICLES_PER_THREAD``), on the scenes of ``benchmarks/montecarlo/walk_vs_base.py`` at
+10 x 12 and 18 x 36 bins, 30 degrees. Best of 3 runs of 2^28 paths after a warm-up; ``same`` says
+whether the bins equal those of the first setting (the settings change scheduling, never the
+arithmetic).
 
 Usage (on a machine with a CUDA GPU)::
 
-    python benchmarks/walk_tuning.py > benchmarks/reports/gpu/walk_tuning_h100.txt
+    python benchmarks/montecarlo/walk_tuning.py > benchmarks/montecarlo/walk_tuning_h100.txt
 """
 
 from __future__ import annotations
@@ -33,8 +34,8 @@ PATHS, BATCH = 1 << 28, 1 << 26
 def main() -> None:
     wi = np.array([math.sin(math.radians(30)), 0.0, math.cos(math.radians(30))])
     print("# walk_tuning.py: warp-cuda walk paths/s per register cap and particles per thread")
-    print(f"# command: python benchmarks/walk_tuning.py; date {time.strftime('%Y-%m-%d %H:%M')}; "
-          f"Python {platform.python_version()}")
+    print(f"# command: python benchmarks/montecarlo/walk_tuning.py; "
+          f"date {time.strftime('%Y-%m-%d %H:%M')}; Python {platform.python_version()}")
     print(f"# in use: cap {backends.CUDA_MAX_REGISTERS}, "
           f"{backends.GPU_PARTICLES_PER_THREAD} particles per thread")
     chosen = (backends.CUDA_MAX_REGISTERS, backends.GPU_PARTICLES_PER_THREAD)

@@ -13,7 +13,8 @@ many cores the run kept busy; the 1-minute load average is recorded too, since o
 on the machine skew CPU timings). Prints a table and writes JSON (device, versions, command,
 results)::
 
-    python benchmarks/mc_throughput.py [--backends warp-cpu opencl] [--seconds 3] [--json out.json]
+    python benchmarks/montecarlo/mc_throughput.py [--backends warp-cpu opencl] [--seconds 3] \\
+        [--json out.json]
 """
 
 from __future__ import annotations
