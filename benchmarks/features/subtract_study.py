@@ -24,7 +24,7 @@ coating, and the error over near-normal directions against a fixed eps.
 
 Usage (machine: shared 2-core CI VM)::
 
-    python benchmarks/subtract_study.py > benchmarks/subtract_study.txt
+    python benchmarks/features/subtract_study.py > benchmarks/features/subtract_study.txt
 """
 
 from __future__ import annotations

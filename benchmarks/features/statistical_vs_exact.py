@@ -12,7 +12,7 @@ reason and checked against the Monte Carlo reference instead (1e6 paths per dire
 same lobe and bin comparisons; its time is that of the whole verification: the walks of the
 cut stacks and of the three angles, and the width fits).
 
-Usage: python benchmarks/statistical_vs_exact.py [paths] [max_seconds]   (default 1e5, 300)
+Usage: python benchmarks/features/statistical_vs_exact.py [paths] [max_seconds]   (default 1e5, 300)
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from layersim.statistical import parse_targets
 from layersim.statistical.design import designs
 from layersim.statistical.verify import montecarlo_solve, verify
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 #: Paths per incident direction of the Monte Carlo reference where the solver refuses a stack.
 MC_REFERENCE_PATHS = 1_000_000
 
@@ -88,7 +88,7 @@ def main() -> None:
     paths = int(float(sys.argv[1])) if len(sys.argv) > 1 else 100_000
     max_seconds = float(sys.argv[2]) if len(sys.argv) > 2 else 300.0
     sets = tomllib.loads((ROOT / "examples" / "design_targets.toml").read_text())["set"]
-    print(f"# python benchmarks/statistical_vs_exact.py {paths:g} {max_seconds:g}  "
+    print(f"# python benchmarks/features/statistical_vs_exact.py {paths:g} {max_seconds:g}  "
           f"# {platform.node()} ({platform.machine()})")
     with configure(max_seconds=max_seconds):
         for i, s in enumerate(sets):

@@ -3,8 +3,8 @@ Beckmann (0.3, 0.15) gold alone and under a coat (alpha 0.2), albedos at 30 and 
 azimuth 0.3 rad), the solver's and the walk's, and their difference. Where the table's offsets
 from the walk equal the analytic lobe's, they are the plan's, not the table's.
 
-Usage: python benchmarks/gpu_tabulated_vs_analytic.py PATHS BACKEND (e.g. 1e8 warp-cuda).
-Output of a run on an NVIDIA H100: benchmarks/gpu_tabulated_vs_analytic.txt.
+Usage: python benchmarks/features/gpu_tabulated_vs_analytic.py PATHS BACKEND (e.g. 1e8 warp-cuda).
+Output of a run on an NVIDIA H100: benchmarks/features/gpu_tabulated_vs_analytic.txt.
 """
 import os
 import sys
@@ -12,7 +12,7 @@ import tempfile
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "tests"))
 
 import layersim                                    # noqa: E402
 import layersim.montecarlo as mc                   # noqa: E402

@@ -14,7 +14,7 @@ normalised result over the covered region and over the whole hemisphere after th
 of what no view reaches, with a flat or a zero condition at the horizon (the normalisation
 depends on the fill, so both errors do).
 
-Usage: python benchmarks/ndf_fit.py [n_theta n_phi]   (default 91 180)
+Usage: python benchmarks/features/ndf_fit.py [n_theta n_phi]   (default 91 180)
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ Monte Carlo standard errors, and the fraction of populated bins (8 x 12 per side
 sigma (sigma: Monte Carlo standard error with the Poisson floor E / N of a bin receiving energy
 E per path). The specular (delta) parts sit in the bins of their directions on both sides.
 
-Usage: python benchmarks/smooth_vs_mc.py [paths] [backend]   (default 1e7, auto)
+Usage: python benchmarks/features/smooth_vs_mc.py [paths] [backend]   (default 1e7, auto)
 """
 
 from __future__ import annotations

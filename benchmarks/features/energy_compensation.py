@@ -1,6 +1,7 @@
 """Energy-loss compensation (``energy_compensation``): conservation and solver vs Monte Carlo.
 
-Usage: ``python benchmarks/energy_compensation.py [PATHS] [BACKEND]`` (default 1e7 warp-cpu).
+Usage: ``python benchmarks/features/energy_compensation.py [PATHS] [BACKEND]`` (default 1e7
+warp-cpu).
 Prints
 
 1. single rough dielectric interfaces (Beckmann and GGX, alpha 0.1-1, eta 1.1-3), lit from
@@ -136,8 +137,8 @@ def part_mc(paths: int, backend: str):
 def main():
     paths = int(float(sys.argv[1])) if len(sys.argv) > 1 else 10_000_000
     backend = sys.argv[2] if len(sys.argv) > 2 else "warp-cpu"
-    print("machine: shared 2-core CI VM; command: python benchmarks/energy_compensation.py "
-          f"{paths:.0e} {backend}\n")
+    print("machine: shared 2-core CI VM; command: "
+          f"python benchmarks/features/energy_compensation.py {paths:.0e} {backend}\n")
     part_mirror()
     part_stack()
     part_dielectric()

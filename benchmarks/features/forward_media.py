@@ -14,8 +14,8 @@ normal incidence (``R0``, ``T0``) and at the ordinate nearest 60 degrees (``R60`
 Part 3 is the measurement behind ``layersim.plan.layers.DELTA_M_MOMENTS``: g = 0.99 alone,
 delta-M scaled with N = n - 1 moments for n = 16 ... 196.
 
-Run: ``python benchmarks/forward_media.py [--particles 4000000]``; output in
-``benchmarks/forward_media.txt``.
+Run: ``python benchmarks/features/forward_media.py [--particles 4000000]``; output in
+``benchmarks/features/forward_media.txt``.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Albedos of layerlab's validation stacks with and without energy compensation.
 
-Usage: ``python benchmarks/compensation_layerlab.py``. Coated gold (coating eta 1.5 over gold,
-red channel of layerlab's tutorial sec. 6.4) at the roughness pairs 0.1/0.1, 0.1/0.3, 0.3/0.3,
+Usage: ``python benchmarks/features/compensation_layerlab.py``. Coated gold (coating eta 1.5 over
+gold, red channel of layerlab's tutorial sec. 6.4) at the roughness pairs 0.1/0.1, 0.1/0.3, 0.3/0.3,
 and the Henyey-Greenstein slab under a rough coating on a diffuse base
 (``benchmarks/scenes/coated_hg_diffuse.toml``): reflectance at 0, 30, 60 and 80 degrees with
 ``energy_compensation`` "none", "layerlab" and "multiple-scattering". These are the numbers to
@@ -34,7 +34,8 @@ def coated_hg(mode: str) -> dict:
 
 
 def main():
-    print("machine: shared 2-core CI VM; command: python benchmarks/compensation_layerlab.py")
+    print("machine: shared 2-core CI VM; command: "
+          "python benchmarks/features/compensation_layerlab.py")
     print("reflectance at 0 / 30 / 60 / 80 deg")
     cases = [(f"coated gold {t:g}/{b:g}", lambda m, t=t, b=b: coated_gold(t, b, m))
              for t, b in ((0.1, 0.1), (0.1, 0.3), (0.3, 0.3))]

@@ -15,10 +15,10 @@ Its second part does the same for near-specular gold (alpha 0.005, 0.001 and 1:1
 alone (its exact microfacet lobe at evaluation) and as the base of a rough (alpha 0.1, 0.3),
 near-specular (0.005) or smooth coat, where the solve takes it as a mirror with the rough
 reflected energy; its last lines are the plan's ``MEASURED_CONDUCTOR_ERROR``
-(``benchmarks/near_specular_conductors.txt``: ``python benchmarks/near_specular.py 1e7 warp-cpu
-conductors``).
+(``benchmarks/features/near_specular_conductors.txt``: ``python
+benchmarks/features/near_specular.py 1e7 warp-cpu conductors``).
 
-Usage: python benchmarks/near_specular.py [paths] [backend] [coats|conductors|all]
+Usage: python benchmarks/features/near_specular.py [paths] [backend] [coats|conductors|all]
 (default 1e6, auto, all)
 """
 

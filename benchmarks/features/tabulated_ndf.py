@@ -1,7 +1,7 @@
 """Tabulated NDFs and measured bases against their analytic counterparts (docs/method.md,
 "Tabulated NDFs and measured bases"): solver eval error, albedos and solve time.
 
-Usage: .venv/bin/python benchmarks/tabulated_ndf.py > benchmarks/tabulated_ndf.txt
+Usage: .venv/bin/python benchmarks/features/tabulated_ndf.py > benchmarks/features/tabulated_ndf.txt
 """
 
 import os
@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tests"))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "tests"))
 
 import layersim                                    # noqa: E402
 from layersim.merl import half_diff, read_merl, write_merl     # noqa: E402
@@ -36,7 +36,7 @@ def rel_l2(fa, fb):
 
 def main():
     print(f"# machine: shared 2-core CI VM ({platform.machine()}); "
-          "command: .venv/bin/python benchmarks/tabulated_ndf.py")
+          "command: .venv/bin/python benchmarks/features/tabulated_ndf.py")
     tmp = tempfile.mkdtemp()
     wi, wo = upper(4000), upper(4000)
     for name, fn in (("beckmann", beckmann), ("ggx", ggx)):
