@@ -23,7 +23,7 @@ from .tabulated import measured_plan, tabulated_plan
 
 #: Legendre moments a delta-M scaled medium needs (the accuracy target that sets its share of
 #: ``n``): for g = 0.99, tau 5, albedo 0.95 the albedo at normal incidence moves by 3e-5 from
-#: N = 31 to N = 195 moments (by 2.3e-4 from 15 to 31); ``benchmarks/forward_media.py``. A
+#: N = 31 to N = 195 moments (by 2.3e-4 from 15 to 31); ``benchmarks/features/forward_media.py``. A
 #: grid of ``n`` Gauss-Lobatto ordinates represents ``n - 1`` moments, so the planner's
 #: smallest grid (64) already meets it.
 DELTA_M_MOMENTS = 32
@@ -307,7 +307,7 @@ def _near_specular_conductor(scene: Scene, i: int, layer, survey: Survey) -> boo
     blurred by a rough interface above it (:func:`_blurred_below`) and both its roughnesses be
     at most :data:`~layersim.lobe.NEAR_SPECULAR_BASE_ALPHA`; behind a smooth or near-specular coat
     the lobe is seen directly, and near the coat's critical angle part of it is trapped, which
-    a mirror does not reproduce (``benchmarks/near_specular.txt``)."""
+    a mirror does not reproduce (``benchmarks/features/near_specular.txt``)."""
     if not isinstance(layer, Conductor):
         return False
     lo, hi = min(layer.alpha_u, layer.alpha_v), max(layer.alpha_u, layer.alpha_v)
