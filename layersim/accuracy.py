@@ -14,9 +14,9 @@ companion, where ``d2 / 5`` takes over (:data:`COMPANIONS` holds the weights).
 The factor is measured, not derived: convergence is not monotone (a narrow lobe moves across
 bin edges and between ordinates as ``n`` changes, and an incident direction between ordinates is
 interpolated), so the ratio of the error to ``d1`` spreads over 0.2 ... 1.4 on the ladders of 18
-scenes in ``benchmarks/estimator_study.txt``. There the estimate lies above the error (against a
-solve at twice ``n`` and ``md``) in 41 of 42 cases, the exception a solve whose error grew with
-``n``; ``d1`` alone misses twice as often, and Richardson-type weightings miss more. No
+scenes in ``benchmarks/accuracy/estimator_study.txt``. There the estimate lies above the error
+(against a solve at twice ``n`` and ``md``) in 41 of 42 cases, the exception a solve whose error
+grew with ``n``; ``d1`` alone misses twice as often, and Richardson-type weightings miss more. No
 estimate made from coarser solves follows the error within a constant factor while the error
 itself jumps between neighbouring discretisations: the estimate is within 3 times the error in
 about 60 % of the cases. The estimate per angle (``per_angle``) is less reliable than the
@@ -95,7 +95,7 @@ def scaled(scene: Scene, n: int, md: int, scale: float, ms: int | None = None) -
     half-width to :func:`scaled_ms` of it.
 
     The truncation of the coupled modes at the planner's ``ms`` dominates the error of
-    anisotropic stacks (``benchmarks/aniso_error_sources.txt``): a companion on the same
+    anisotropic stacks (``benchmarks/accuracy/aniso_error_sources.txt``): a companion on the same
     ``ms`` cannot see it, and a rung of the ladder on the same ``ms`` cannot reduce it.
     ``ms`` = 0 or None (isotropic) leaves the scene's ``ms`` as it is."""
     n = max(8, 2 * int(round(n * scale / 2.0)))
@@ -112,7 +112,7 @@ def scaled_ms(ms: int, scale: float) -> int:
 
     The relative L2 error of keeping ``|s| <= m`` falls like ``exp(-K m / ms)`` near the
     planner's ``ms`` (Zeltner & Jakob 2018, eq. (25) plus ``layersim.aniso.plan.MS_MARGIN``),
-    with ``K`` = 5.4-6.8 for roughness ratios 2-6 (``benchmarks/aniso_ms_decay.txt``).
+    with ``K`` = 5.4-6.8 for roughness ratios 2-6 (``benchmarks/accuracy/aniso_ms_decay.txt``).
     Scaling ``m`` by ``sqrt(scale)`` then multiplies that error by ``exp(K (1 - sqrt(scale)))``:
     2-3 at ``scale = 1/sqrt 2`` and 5-7 at ``1/2``, near what scaling ``n`` and ``md`` does to an
     error falling like ``n^-2``, which the weights of :data:`COMPANIONS` assume."""

@@ -17,7 +17,7 @@ roughness is applied where it is observable:
   internal_reflectance`).
 
 The error of this split against the Monte Carlo walk (exact for any roughness) is measured by
-``benchmarks/near_specular.py`` and reported by the plan (:data:`MEASURED_ERROR`).
+``benchmarks/features/near_specular.py`` and reported by the plan (:data:`MEASURED_ERROR`).
 
 Both energies are integrals over microfacet normals in slope space (Heitz 2014, sec. 5): the
 slope distribution ``P22`` is mapped to the unit square by its radial inverse CDF
@@ -47,7 +47,7 @@ NEAR_SPECULAR_ALPHA = 0.03
 #: below the spacing of the ordinates and the lobes of the rough layers inside.
 NEAR_SPECULAR_WIDE_MAX = 0.1
 
-#: Measured error of the split against Monte Carlo (``benchmarks/near_specular.txt``, 1e7
+#: Measured error of the split against Monte Carlo (``benchmarks/features/near_specular.txt``, 1e7
 #: paths per direction, incidence 5-80 deg): for a coat (eta 1.5) over rough gold (alpha 0.2),
 #: ``(wider alpha, largest |albedo difference|, smallest fraction of populated 18 x 36 bins
 #: within 3 sigma)``; isotropic coats at 0.001, 0.005 and 0.02, 1:10 anisotropic ones (0.001,
@@ -71,7 +71,8 @@ def near_specular_error(alpha: float) -> str:
     """Report line: the split's measured error against Monte Carlo (:data:`MEASURED_ERROR`)
     at the wider roughness ``alpha``, interpolated in ``log alpha`` (clamped to the measured
     range)."""
-    return _error_line(MEASURED_ERROR, alpha, "over rough gold", "near_specular.txt")
+    return _error_line(MEASURED_ERROR, alpha, "over rough gold",
+                       "benchmarks/features/near_specular.txt")
 
 
 def _error_line(table, alpha: float, where: str, output: str) -> str:
@@ -82,7 +83,7 @@ def _error_line(table, alpha: float, where: str, output: str) -> str:
     order = np.argsort(a)
     err = np.interp(la, np.log(a[order]), dr[order])
     ok = np.interp(la, np.log(a[order]), frac[order])
-    return (f"measured against Monte Carlo {where} (benchmarks/{output}): "
+    return (f"measured against Monte Carlo {where} ({output}): "
             f"albedo within {err:.1e}, {100 * ok:.0f} % of bins within 3 sigma")
 
 
@@ -95,7 +96,7 @@ def _error_line(table, alpha: float, where: str, output: str) -> str:
 NEAR_SPECULAR_BASE_ALPHA = 0.015
 
 #: Measured error of a near-specular conductor base (a mirror with the rough reflectance)
-#: under a coat, against Monte Carlo (``benchmarks/near_specular_conductors.txt``), as
+#: under a coat, against Monte Carlo (``benchmarks/features/near_specular_conductors.txt``), as
 #: :data:`MEASURED_ERROR`: ``(wider alpha of the conductor, largest |albedo difference|,
 #: smallest fraction of populated bins within 3 sigma)``, 1e7 paths per direction at 5-80 deg,
 #: gold under coats of alpha 0.1 and 0.3 (eta 1.5). Part of it is the coats' own plan: smooth gold
@@ -111,7 +112,7 @@ def near_specular_conductor_error(alpha: float) -> str:
     """Report line: the measured error of a near-specular conductor base
     (:data:`MEASURED_CONDUCTOR_ERROR`) at its wider roughness ``alpha``."""
     return _error_line(MEASURED_CONDUCTOR_ERROR, alpha, "under a coat",
-                       "near_specular_conductors.txt")
+                       "benchmarks/features/near_specular_conductors.txt")
 
 
 _X_TABLE = 129

@@ -30,7 +30,7 @@ from .scene import Scene, as_scene
 
 #: Projection methods for interfaces: "numeric" samples the BSDF per pair at a rate set by the
 #: analytically known length of its series, then an FFT (default: more accurate at equal or
-#: lower cost on the CPU, and much faster on a GPU; benchmarks/projection_paths.py);
+#: lower cost on the CPU, and much faster on a GPU; benchmarks/speed/projection_paths.py);
 #: "semi-analytic" multiplies exact peak series by fitted smooth factors (Zeltner & Jakob 2018, sec. 4.1).
 PROJECTIONS = ("numeric", "semi-analytic")
 

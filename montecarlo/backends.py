@@ -18,7 +18,7 @@ Backends
                  walk; else warp-cpu.
 
 Why the CPU threshold: PoCL's float32 math library is several times slower than Warp's, so per
-core PoCL reaches well under half of warp-cpu's paths/s (``benchmarks/mc_throughput.py``;
+core PoCL reaches well under half of warp-cpu's paths/s (``benchmarks/montecarlo/mc_throughput.py``;
 figures in docs/performance.md) and only beats single-threaded warp-cpu with three or more
 cores; four keeps a margin.
 """
@@ -46,7 +46,7 @@ OPENCL_CPU_MIN_UNITS = 4
 
 #: Registers per thread of the CUDA walk kernel: 64 lets four blocks of 256 threads share a
 #: multiprocessor (three at the compiler's 72-80), 6-12 % more paths/s on an H100; 56 and
-#: below spill (``benchmarks/reports/gpu/walk_tuning_h100.txt``).
+#: below spill (``benchmarks/montecarlo/walk_tuning_h100.txt``).
 CUDA_MAX_REGISTERS = 64
 #: Particles each GPU thread walks one after the other (amortises the thread's counter atomics).
 GPU_PARTICLES_PER_THREAD = 8

@@ -74,7 +74,7 @@ def build_options(device) -> list:
     offers them. OpenCL's default allows 2.5-3 ulp there (Warp's CUDA code is correctly rounded),
     which biases the exit azimuths of walks at normal incidence on NVIDIA GPUs (bins beyond 4
     sigma from warp-cuda at 1e7 paths); the option costs some throughput on the coated scenes
-    (``benchmarks/mc_throughput.py``; figures in docs/performance.md)."""
+    (``benchmarks/montecarlo/mc_throughput.py``; figures in docs/performance.md)."""
     import pyopencl as cl
     if device.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT:
         return ["-cl-fp32-correctly-rounded-divide-sqrt"]

@@ -64,7 +64,7 @@ def test_solver_reads_back_the_analytic_brdf(merl_file):
     # n = 128 and directions within 85 deg of the normal: at the planner's n = 64 (its minimum)
     # the worst point, within a degree of the normal, is 5 % off (interpolation between
     # ordinates; 0.3 % RMS), and closer to the horizon the azimuthal truncation of every
-    # projected lobe sets in (benchmarks/tabulated_ndf.txt)
+    # projected lobe sets in (benchmarks/features/tabulated_ndf.txt)
     scene = layersim.Scene.from_dict({"layer": [{"kind": "measured", "file": str(merl_file)}],
                                       "discretization": {"n": 128}})
     assert scene.channels == 3

@@ -87,7 +87,7 @@ def _agrees_with_monte_carlo(scene, bsdf, wi, seed: int, slack: float,
 @pytest.mark.slow
 def test_near_specular_coat_agrees_with_monte_carlo_and_survives_save(tmp_path):
     """alpha 0.005 over rough gold at 40 degrees: albedo within 4 standard errors of 1e6
-    paths plus the split's measured error at this roughness (benchmarks/near_specular.txt:
+    paths plus the split's measured error at this roughness (benchmarks/features/near_specular.txt:
     5e-5), bins within 3 sigma in >= 97 % of the populated 9 x 12 bins."""
     scene = _scene(0.005)
     bsdf = layersim.solve(scene)
@@ -169,8 +169,9 @@ def test_near_specular_conductor_behind_a_smooth_coat_is_refused_with_the_reason
 @pytest.mark.slow
 def test_near_specular_conductor_under_a_rough_coat_agrees_with_monte_carlo():
     """Gold of alpha 0.005 under a coat of alpha 0.1 at 30 degrees: albedo within 4 standard
-    errors of 1e6 paths (plus 2e-4: the mirror's measured error, benchmarks/near_specular.txt),
-    bins within 3 sigma in >= 97 % of the populated 9 x 12 bins."""
+    errors of 1e6 paths (plus 2e-4: the mirror's measured error,
+    benchmarks/features/near_specular.txt), bins within 3 sigma in >= 97 % of the populated
+    9 x 12 bins."""
     scene = _gold(0.005, coat=0.1)
     assert make_plan(scene).near_specular == (1,)
     _agrees_with_monte_carlo(scene, layersim.solve(scene), _dir(30.0), seed=11, slack=2e-4)

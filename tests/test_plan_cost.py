@@ -1,6 +1,6 @@
 """The structure of the plan's cost model (layersim.plan.cost): what its memory and time
 estimates count and how they scale. The estimates themselves are measured against solves in
-benchmarks/plan_estimates.py, not here."""
+benchmarks/speed/plan_estimates.py, not here."""
 
 import numpy as np
 import pytest

@@ -130,7 +130,8 @@ MC_SCENES = {
 @pytest.mark.parametrize("name", sorted(MC_SCENES))
 def test_smooth_stacks_agree_with_monte_carlo(name):
     """Albedos within 4 standard errors, bin energies (specular deltas in their bins) within 3
-    sigma in >= 99 % of the populated bins, at 5e5 paths (benchmarks/smooth_vs_mc.py: 1e7)."""
+    sigma in >= 99 % of the populated bins, at 5e5 paths
+    (benchmarks/features/smooth_vs_mc.py: 1e7)."""
     import layersim.montecarlo as mc
     scene = layersim.Scene.from_dict({"layer": MC_SCENES[name]})
     bsdf = layersim.solve(scene)

@@ -5,7 +5,7 @@ is the projection's, :func:`layersim.ingredients.aniso_microfacet.series_lengths
 ``ms`` (coupling half-width, modes ``s in [-ms, ms]`` of the azimuth sum) grows with the
 roughness ratio ``r = max(alpha_u / alpha_v, alpha_v / alpha_u)``. Zeltner & Jakob 2018,
 eq. (25), fit ``ms = ceil(2.58 r - 1.82)`` as the smallest ``ms`` with a relative L2 error
-below 1 %. ``benchmarks/ms_study.py`` (relative cosine-weighted L2 norm of the dropped
+below 1 %. ``benchmarks/accuracy/ms_study.py`` (relative cosine-weighted L2 norm of the dropped
 ``f_{d,s}`` of Beckmann and GGX conductors and Beckmann dielectrics, r = 1.5 ... 6,
 alpha_min = 0.1 and 0.2) confirms the fit where ``max(alpha) <= 0.5`` and shows that rougher
 layers need one more mode to stay below 1 %: :func:`ms_one_percent` adds it. 1 % of the
@@ -28,12 +28,12 @@ MS_ROUGH = 0.5
 #: Target of the ms rule: relative (cosine-weighted) L2 error of the dropped coefficients.
 MS_TARGET = 0.01
 #: Modes the planner keeps beyond the 1 % rule. Each mode divides the error of the dropped
-#: coefficients by 1.4-3 for roughness ratios 6-2 (``benchmarks/aniso_ms_decay.txt``), and two
-#: modes take the bin energies' truncation error from about 1.5e-3 to 1.4-2.8e-4
-#: (``benchmarks/aniso_ms_cost.txt``), for 1.2-1.3 times the solve time and 1.3-1.4 times the
-#: memory estimate. Against 1e9 Monte Carlo paths per direction, Zeltner & Jakob 2018's additive
-#: validation stack (Fig. 9a) has 54-76 % of its bins within 3 standard errors with the 1 % rule
-#: and 100 % with two more modes (``benchmarks/plans_vs_gpu_mc.txt``).
+#: coefficients by 1.4-3 for roughness ratios 6-2 (``benchmarks/accuracy/aniso_ms_decay.txt``),
+#: and two modes take the bin energies' truncation error from about 1.5e-3 to 1.4-2.8e-4
+#: (``benchmarks/accuracy/aniso_ms_cost.txt``), for 1.2-1.3 times the solve time and 1.3-1.4
+#: times the memory estimate. Against 1e9 Monte Carlo paths per direction, Zeltner & Jakob
+#: 2018's additive validation stack (Fig. 9a) has 54-76 % of its bins within 3 standard errors
+#: with the 1 % rule and 100 % with two more modes (``benchmarks/accuracy/plans_vs_gpu_mc.txt``).
 MS_MARGIN = 2
 #: Relative truncation of each ordinate pair's coefficients ``f_{d,s}`` on the coupled path
 #: (projection and the pre-pass that sets ``md``); the isotropic path keeps
@@ -71,7 +71,7 @@ def ms_one_percent(layer) -> int:
     """The smallest coupling half-width of an interface whose dropped coefficients stay below
     :data:`MS_TARGET`: :func:`ms_for_ratio` of its roughness ratio (Zeltner & Jakob 2018, eq.
     (25)), plus one mode if its roughest axis exceeds :data:`MS_ROUGH`
-    (``benchmarks/ms_study.py``)."""
+    (``benchmarks/accuracy/ms_study.py``)."""
     ms = ms_for_ratio(anisotropy_ratio(layer))
     if ms and max(layer.alpha_u, layer.alpha_v) > MS_ROUGH:
         ms += 1
@@ -88,7 +88,7 @@ def ms_for_layer(layer) -> int:
 #: Fraction of the (d, s) coefficients of a pair's rectangle that survive pruning (Zeltner &
 #: Jakob 2018, Table 2: 0.41 for gold (0.05, 0.15), 0.55 for glass (0.3, 0.1)). At
 #: :data:`COUPLED_RELERR` the projected operators hold 0.52-0.82 of :func:`operator_entries`
-#: (``benchmarks/plan_estimates.py`` cases); the cost model (:mod:`layersim.plan.cost`) is
+#: (``benchmarks/speed/plan_estimates.py`` cases); the cost model (:mod:`layersim.plan.cost`) is
 #: calibrated on this estimate.
 FILL = 0.5
 

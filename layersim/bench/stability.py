@@ -122,7 +122,7 @@ def cases() -> list:
         Case("smooth_coating_gold", [diel(1.5, 0.0), cond(GOLD, 0.2)],
              "smooth coating over rough gold (alpha 0.2)"),
         # near-specular coats (layersim.lobe); not at 0 deg, where the walk itself dips
-        # (benchmarks/near_specular.py)
+        # (benchmarks/features/near_specular.py)
         Case("near_specular_coat_0.001", [diel(1.5, 0.001), cond(GOLD, 0.2)],
              "coat alpha 0.001 over rough gold (alpha 0.2): near-specular split",
              angles=(5.0, 45.0, 80.0)),

@@ -26,7 +26,7 @@ frame). The BSDF is split by the kernels into ``f = smooth * peak(q)``
    coefficients at ``|s| ~ Q_s / 2`` exceed :data:`S_ALIAS` of their largest are recomputed with
    twice as many samples.
 5. ``|s| <= ms`` is kept (the L2 fraction dropped is recorded, see
-   ``benchmarks/ms_study.py``); ``d`` is truncated at the series length (``relerr``, see
+   ``benchmarks/accuracy/ms_study.py``); ``d`` is truncated at the series length (``relerr``, see
    :data:`layersim.aniso.plan.COUPLED_RELERR`) and at
    ``md`` (Lanczos sigma factors, as for isotropic interfaces).
 

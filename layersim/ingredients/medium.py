@@ -57,8 +57,8 @@ PHASE_TOLERANCE = 1e-10
 #: Largest |g| solved with the whole Legendre series (to :data:`PHASE_TOLERANCE`); above it the
 #: phase function is delta-M scaled to the moments the grid represents. The series needs
 #: ~1/(1 - g) terms (273 at g = 0.9, 574 at 0.95, 3092 at 0.99), each one more Fourier order of
-#: the whole stack; ``benchmarks/forward_media.py`` measures both treatments (time and albedo
-#: against Monte Carlo) and docs/method.md gives the figures behind this value.
+#: the whole stack; ``benchmarks/features/forward_media.py`` measures both treatments (time and
+#: albedo against Monte Carlo) and docs/method.md gives the figures behind this value.
 G_EXACT_MAX = 0.9
 #: Smallest g solved at all: a backward peak is not a forward delta, so delta-M does not apply,
 #: and the whole series is used down to this value, where its discrete phase matrices are still

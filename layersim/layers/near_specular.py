@@ -83,7 +83,7 @@ def plan_conductor(scene, i: int, layer, survey) -> bool:
     blurred by a rough interface above it (:func:`_blurred_below`) and both its roughnesses be
     at most :data:`~layersim.lobe.NEAR_SPECULAR_BASE_ALPHA`; behind a smooth or near-specular coat
     the lobe is seen directly, and near the coat's critical angle part of it is trapped, which
-    a mirror does not reproduce (``benchmarks/near_specular.txt``)."""
+    a mirror does not reproduce (``benchmarks/features/near_specular.txt``)."""
     lo, hi = min(layer.alpha_u, layer.alpha_v), max(layer.alpha_u, layer.alpha_v)
     if lo > NEAR_SPECULAR_ALPHA:
         return False

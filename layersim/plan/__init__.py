@@ -28,7 +28,7 @@ module of this package, and :func:`make_plan` composes them in order:
   against a lower bound, before the pre-pass.
 * **Time** (:mod:`.budget`, :mod:`.cost`): a cost model of projection, media and adding
   (isotropic and coupled), calibrated on the 2-core CI VM
-  (``benchmarks/plan_estimates.py``); a plan above the limit (``LAYERSIM_MAX_SECONDS``,
+  (``benchmarks/speed/plan_estimates.py``); a plan above the limit (``LAYERSIM_MAX_SECONDS``,
   default 600 s) is refused before any heavy work.
 
 A ``[discretization]`` table in the scene overrides ``n``, ``md``, ``ms`` and the quadrature

@@ -130,8 +130,8 @@ def refuse_over_limit(memory: int, n: int, md: int, ms: int, anisotropic: bool) 
 #
 # A solve's time is modelled as three parts (projection, media, adding), each a sum of work
 # units times seconds per unit measured on the shared 2-core CI VM
-# (layersim.plan.cost.SECONDS; benchmarks/plan_estimates.py and its output,
-# benchmarks/plan_estimates.txt, list every case with its estimated and measured time).
+# (layersim.plan.cost.SECONDS; benchmarks/speed/plan_estimates.py and its output,
+# benchmarks/speed/plan_estimates.txt, list every case with its estimated and measured time).
 
 
 def estimate_seconds(ings: list, grid: Grid, md: int, channels: int,

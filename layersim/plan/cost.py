@@ -31,10 +31,10 @@ stack as a whole:
   (:func:`coupled_bytes`).
 
 The constants (bytes and seconds per unit of work) are measured: ``python
-benchmarks/plan_estimates.py`` solves the bench scenes and a set of RGB, anisotropic and
+benchmarks/speed/plan_estimates.py`` solves the bench scenes and a set of RGB, anisotropic and
 scaled stacks in fresh processes and prints each estimate beside the measured peak resident
 memory (above the baseline of a warmed-up process) and time (output in
-``benchmarks/plan_estimates.txt``). Seconds are fitted to the CPU time (user + system) of
+``benchmarks/speed/plan_estimates.txt``). Seconds are fitted to the CPU time (user + system) of
 each part on the shared 2-core CI VM (AMD EPYC, two threads), which the other jobs on that
 machine do not inflate as they do the wall time; on the idle machine the wall time of the
 media and the isotropic adding equals it, and that of the projection and the coupled adding,
@@ -57,7 +57,7 @@ from ..operator import Grid
 from ..scene import Medium, Scene
 
 #: Seconds per unit of work on the 2-core CI VM (see the module docstring and
-#: ``benchmarks/plan_estimates.txt``).
+#: ``benchmarks/speed/plan_estimates.txt``).
 SECONDS = {
     # isotropic projection, per significant ordinate pair (all blocks) and Fourier order
     "pair_orders": 4.2e-8,

@@ -31,7 +31,7 @@ def needed_ms(layers: list, left_out: list, notes: list) -> int:
     notes.append(f"coupled modes: ms = {ms} set by layer {driver.index} "
                  f"({driver.kind}), roughness ratio -> ms = ceil({aplan.MS_SLOPE} r "
                  f"{aplan.MS_OFFSET:+g}) (Zeltner & Jakob 2018, eq. (25)), +1 above alpha "
-                 f"{aplan.MS_ROUGH:g} (benchmarks/ms_study.py): relative L2 error < 1 %; "
+                 f"{aplan.MS_ROUGH:g} (benchmarks/accuracy/ms_study.py): relative L2 error < 1 %; "
                  f"+{aplan.MS_MARGIN} modes for bin energies to ~2e-4; "
                  f"coefficients below {aplan.COUPLED_RELERR:g} of their ordinate pair's "
                  "largest are dropped (layersim.aniso.plan.COUPLED_RELERR)")

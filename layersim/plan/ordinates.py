@@ -20,7 +20,7 @@ N_MIN, N_MAX = 64, 4096
 DEFAULT_RULE = "gauss-lobatto"
 #: Factor on ``n`` for stacks with a smooth dielectric boundary (Snell-matched grid): the
 #: ordinates outside the escape cone serve only the light trapped by total internal reflection.
-#: With it, three stacks agree with Monte Carlo at 1e7 paths (benchmarks/smooth_vs_mc.txt).
+#: With it, three stacks agree with Monte Carlo at 1e7 paths (benchmarks/features/smooth_vs_mc.txt).
 SNELL_N_FACTOR = 2
 
 
