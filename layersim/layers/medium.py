@@ -21,9 +21,9 @@ __all__ = ["Medium", "MediumKind"]
 
 #: Legendre moments a delta-M scaled medium needs (the accuracy target that sets its share of
 #: ``n``): for g = 0.99, tau 5, albedo 0.95 the albedo at normal incidence moves by 3e-5 from
-#: N = 31 to N = 195 moments (by 2.3e-4 from 15 to 31); ``benchmarks/features/forward_media.py``. A
-#: grid of ``n`` Gauss-Lobatto ordinates represents ``n - 1`` moments, so the planner's
-#: smallest grid (64) already meets it.
+#: N = 31 to N = 195 moments (by 2.3e-4 from 15 to 31);
+#: ``benchmarks/features/forward_media.py``. A grid of ``n`` Gauss-Lobatto ordinates represents
+#: ``n - 1`` moments, so the planner's smallest grid (64) already meets it.
 DELTA_M_MOMENTS = 32
 
 
