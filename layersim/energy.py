@@ -20,6 +20,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sps
 
+from .errors import InfeasibleError
+
 
 def node_energy(op, w_top: np.ndarray, w_bot: np.ndarray):
     """R + T per incident ordinate from the top and from the bottom after scaling by the
@@ -68,3 +70,45 @@ def limit_energy(op, tolerance: float = 1e-13, iterations: int = 200):
         if blk is not None:
             op.blocks[name] = [(left @ mat @ right).tocsr() for mat in blk]
     return excess, int(np.count_nonzero(w_top < 1.0) + np.count_nonzero(w_bot < 1.0))
+
+
+#: Discrete energy excess (R + T - 1) beyond which an interface operator is refused as
+#: under-resolved; smaller excesses (quadrature error at the horizon) are removed by
+#: :func:`limit_energy`, which keeps reciprocity, and reported in the BSDF's ``info["notes"]``.
+ENERGY_REFUSE = 1e-2
+
+
+def check_operator_energy(op, i: int, layer, n: int) -> list[str]:
+    """Refuse the operator of layer ``i`` if it grossly over-counts energy (its lobes are
+    narrower than the spacing of ``n`` ordinates); remove small excesses where the
+    representation can (:meth:`~layersim.operator.Operator.limit_energy`), and return notes
+    saying what was done or left (they go into the BSDF's ``info["notes"]``).
+
+    Raises
+    ------
+    InfeasibleError
+        Naming the layer, its roughness and ``n``.
+    """
+    alb = op.albedo()       # azimuthally uniform illumination
+    worst = max(float((alb[r] + (alb[t] if t in alb else 0.0)).max())
+                for r, t in (("Rt", "Ttb"), ("Rb", "Tbt")) if r in alb)
+    if worst > 1.0 + ENERGY_REFUSE:
+        raise InfeasibleError(
+            f"layer {i} ({layer.kind}): with n = {n} ordinates the discrete operator "
+            f"reflects and transmits {worst:.7g} times the incident energy: its lobes "
+            f"(roughness {layer.alpha_u:g}" + (f", {layer.alpha_v:g}" if layer.anisotropic
+                                               else "")
+            + ") are narrower than the ordinate spacing; raise n in "
+            "[discretization] (or remove the override and let the planner choose)")
+    limited = op.limit_energy()
+    if limited is None:
+        if worst > 1.0 + 1e-6:
+            return [f"layer {i}: the quadrature over-counts energy by {worst - 1:.2g} "
+                    "(coupled-mode operator: not corrected; raise n to reduce it)"]
+        return []
+    excess, scaled = limited
+    if scaled:
+        return [f"layer {i}: the quadrature over-counted energy by up to {excess:.2g} at "
+                f"{scaled} ordinate(s) (lobes at the horizon); scaled down symmetrically "
+                "(reciprocity kept)"]
+    return []

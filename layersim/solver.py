@@ -13,32 +13,19 @@ from threadpoolctl import threadpool_limits
 
 from . import accuracy, adding
 from .aniso import adding as aniso_adding
-from .aniso.plan import COUPLED_RELERR, STACK_RELERR, STACK_RELERR_INTERMEDIATE
+from .aniso.plan import STACK_RELERR, STACK_RELERR_INTERMEDIATE
 from .bsdf import BSDF, channel_pairs
 from .config import settings
 from .errors import InfeasibleError
-from .ingredients import diffuse_operator, interface_operator, medium_operator
-from .ingredients.compensation import compensate
-from .ingredients.aniso_microfacet import AnisoProjectionStats, aniso_interface_operator
+from .ingredients.aniso_microfacet import AnisoProjectionStats
 from .ingredients.microfacet import ProjectionStats
-from .ingredients.numeric import numeric_interface_operator
-from .ingredients.smooth import boundary_reflector, smooth_conductor_operator
-from .ingredients import tabulated
-from .ingredients.measured import measured_operator
-from .lobe import NearSpecularLobe
 from .kernels.runtime import device_for
+from .layers import OperatorJob, kind_of
 from .operator import IsoOperator, Operator, common_representation
 from .outofcore import memory
 from .outofcore.workspace import Workspace
 from .plan import Plan, make_plan
-from .scene import Conductor, Dielectric, Diffuse, Measured, Medium, Scene, as_scene
-
-
-#: Discrete energy excess (R + T - 1) beyond which an interface operator is refused as
-#: under-resolved; smaller excesses (quadrature error at the horizon) are removed by
-#: :func:`layersim.energy.limit_energy`, which keeps reciprocity, and reported in the BSDF's
-#: ``info["notes"]``.
-ENERGY_REFUSE = 1e-2
+from .scene import Scene, as_scene
 
 
 #: Projection methods for interfaces: "numeric" samples the BSDF per pair at a rate set by the
@@ -51,64 +38,11 @@ PROJECTIONS = ("numeric", "semi-analytic")
 def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionStats,
                     projection: str = "numeric", device=None,
                     workspace: Workspace | None = None, notes: list | None = None):
-    """The operator of layer ``i``; diagnostics of interfaces are appended to ``notes``."""
-    notes = [] if notes is None else notes
-    layer = scene.layers[i]
-    eta_above = scene.ior_above(i)
-    if isinstance(layer, Conductor) and layer.smooth:
-        return smooth_conductor_operator(grid, plan.md, scene.relative_ior(i), eta_above)
-    if isinstance(layer, Conductor) and i in plan.near_specular:
-        return _near_specular_conductor(grid, plan.md, layer, scene.relative_ior(i), eta_above,
-                                        alone=i == 0)
-    if isinstance(layer, Dielectric) and (layer.smooth or i in plan.near_specular):
-        side = "top" if i == 0 else "bottom"
-        inside = layer.ior.real if side == "top" else eta_above
-        # a near-specular coat: its rough internal reflectance (layersim.lobe)
-        lobe = plan.lobes.get(side) if i in plan.near_specular else None
-        R = None if lobe is None else NearSpecularLobe(**lobe).internal_reflectance(grid.mu)
-        return boundary_reflector(grid, plan.md, side, inside / plan.boundary[side], inside, R)
-    if isinstance(layer, (Dielectric, Conductor)) and layer.anisotropic:
-        lp = next(lp for lp in plan.layers if lp.index == i)
-        op = aniso_interface_operator(grid, plan.md, lp.ms, layer, eta_above, stats,
-                                      relerr=COUPLED_RELERR, workspace=workspace,
-                                      projector=None if layer.ndf is None else
-                                      tabulated.projector(layer, eta_above, device))
-        notes += _check_energy(op, i, layer, plan)
-        return op
-    if isinstance(layer, (Dielectric, Conductor)):
-        if projection == "numeric":
-            op = numeric_interface_operator(grid, plan.md, layer, eta_above, stats,
-                                            device=device)
-        else:
-            op = interface_operator(grid, plan.md, layer, eta_above, stats)
-        # the compensation fills what the (energy-limited) single-scattering operator loses
-        notes += _check_energy(op, i, layer, plan)
-        op, note = compensate(op, layer, eta_above)
-        notes += [f"layer {i}: {note}"] if note else []
-        return op
-    if isinstance(layer, Medium):
-        return medium_operator(grid, plan.md, layer.albedo, layer.g, layer.tau, eta_above,
-                               name=f"layer {i} (medium)")
-    if isinstance(layer, Diffuse):
-        return diffuse_operator(grid, layer.albedo, eta_above)
-    if isinstance(layer, Measured):
-        op = measured_operator(grid, plan.md, layer, eta_above, device=device)
-        notes += _check_energy(op, i, layer, plan)
-        return op
-    raise TypeError(f"layer {i}: no operator for kind {layer.kind!r}")  # pragma: no cover
-
-
-def _near_specular_conductor(grid, m: int, layer, eta: complex, eta_above: float,
-                             alone: bool) -> IsoOperator:
-    """A near-specular conductor (:func:`layersim.plan.layers._near_specular_conductor`): a
-    mirror whose reflectance is the rough reflected energy; ``alone``, its exact lobe
-    replaces that mirror when the BSDF is evaluated (:attr:`Operator.lobes`)."""
-    lobe = NearSpecularLobe(eta.real, layer.alpha_u, layer.alpha_v, layer.distribution,
-                            layer.rotation, k=eta.imag)
-    op = smooth_conductor_operator(grid, m, eta, eta_above, lobe.reflectance(grid.mu))
-    if alone:
-        op.lobes = {"top": lobe.params()}
-    return op
+    """The operator of layer ``i``, built by its kind (:meth:`layersim.layers.LayerKind.
+    operator`); diagnostics of interfaces are appended to ``notes``."""
+    job = OperatorJob(plan, grid, scene, i, stats, projection, device, workspace,
+                      [] if notes is None else notes)
+    return kind_of(scene.layers[i]).operator(job)
 
 
 @contextlib.contextmanager
@@ -132,36 +66,6 @@ def _singular_as_infeasible(where: str, advice: str):
 _ADDING_ADVICE = ("the layers trap light without loss between them; give a medium an albedo "
                   "slightly below 1, a conductor some absorption, or change n / md in "
                   "[discretization]")
-
-
-def _check_energy(op, i: int, layer, plan: Plan) -> list[str]:
-    """Refuse an interface operator that grossly over-counts energy (its lobes are narrower
-    than the ordinate spacing); remove small excesses where the representation can
-    (:meth:`~layersim.operator.Operator.limit_energy`), and return notes saying what was done
-    or left (they go into the BSDF's ``info["notes"]``)."""
-    alb = op.albedo()       # azimuthally uniform illumination
-    worst = max(float((alb[r] + (alb[t] if t in alb else 0.0)).max())
-                for r, t in (("Rt", "Ttb"), ("Rb", "Tbt")) if r in alb)
-    if worst > 1.0 + ENERGY_REFUSE:
-        raise InfeasibleError(
-            f"layer {i} ({layer.kind}): with n = {plan.n} ordinates the discrete operator "
-            f"reflects and transmits {worst:.7g} times the incident energy: its lobes "
-            f"(roughness {layer.alpha_u:g}" + (f", {layer.alpha_v:g}" if layer.anisotropic
-                                               else "")
-            + ") are narrower than the ordinate spacing; raise n in "
-            "[discretization] (or remove the override and let the planner choose)")
-    limited = op.limit_energy()
-    if limited is None:
-        if worst > 1.0 + 1e-6:
-            return [f"layer {i}: the quadrature over-counts energy by {worst - 1:.2g} "
-                    "(coupled-mode operator: not corrected; raise n to reduce it)"]
-        return []
-    excess, scaled = limited
-    if scaled:
-        return [f"layer {i}: the quadrature over-counted energy by up to {excess:.2g} at "
-                f"{scaled} ordinate(s) (lobes at the horizon); scaled down symmetrically "
-                "(reciprocity kept)"]
-    return []
 
 
 def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,

@@ -1,9 +1,11 @@
 """Scene -> flat kernel parameters of the random walk (see :mod:`layersim.kernels.walk`).
 
-The walk sees the stack as slabs between boundaries. Reading the validated layers top to bottom:
+The walk sees the stack as slabs between boundaries. Reading the validated layers top to bottom,
+each layer's kind gives its record (:meth:`layersim.layers.LayerKind.walk_boundary`,
+``walk_slab``):
 
-* an interface layer (dielectric, conductor, diffuse) is a boundary; two adjacent interfaces get a
-  zero-thickness clear slab (of the index in between) between them;
+* an interface layer (dielectric, conductor, diffuse, measured) is a boundary; two adjacent
+  interfaces get a zero-thickness clear slab (of the index in between) between them;
 * a medium layer is a slab; a medium without an interface above (or below) it gets an
   index-matched *null* boundary there, which particles cross unchanged;
 * the stack ends with a boundary: the last interface, or a null boundary below a final medium,
@@ -16,15 +18,14 @@ is exactly 1 is a null boundary: nothing changes index there, so light passes st
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..compensation.walk import append_tables
-from ..kernels import tabulated, walk
-from ..kernels.physics import DISTRIBUTION_CODES
-from ..scene import Conductor, Dielectric, Diffuse, Measured, Medium, Scene
+from ..kernels import walk
+from ..layers import WalkBoundary, kind_of
+from ..scene import Scene
 
 __all__ = ["StackArrays", "flatten"]
 
@@ -65,37 +66,16 @@ class StackArrays:
         return walk.features_of(self.bnd_i, self.bnd_f, self.slab_f, self.n_slabs)
 
 
-def _boundary(scene: Scene, i: int | None):
-    """(ints, floats) of the boundary made by layer ``i`` (None: null boundary)."""
-    floats = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
+#: The record of a null boundary: an index-matched pass-through.
+NULL_BOUNDARY = WalkBoundary((walk.NULL, 0), (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0))
+
+
+def _boundary(scene: Scene, i: int | None) -> WalkBoundary:
+    """The boundary made by layer ``i`` (its kind's record; None, or a kind's None: a null
+    boundary)."""
     if i is None:
-        return [walk.NULL, 0], floats
-    layer = scene.layers[i]
-    if isinstance(layer, Diffuse):
-        floats[6] = layer.albedo
-        return [walk.DIFFUSE, 0], floats
-    if isinstance(layer, Measured):     # its table follows the records, like an NDF's
-        return [walk.MEASURED, 0], floats, _MeasuredChannel(layer.data, layer.channel)
-    eta = scene.relative_ior(i)
-    if isinstance(layer, Dielectric) and eta.real == 1.0:
-        return [walk.NULL, 0], floats
-    kind = walk.CONDUCTOR if isinstance(layer, Conductor) else walk.DIELECTRIC
-    floats[:6] = [eta.real, eta.imag if kind == walk.CONDUCTOR else 0.0, layer.alpha_u,
-                  layer.alpha_v, math.cos(layer.rotation), math.sin(layer.rotation)]
-    if layer.ndf is not None:       # alpha_u's slot gets the table's offset in flatten()
-        return [kind, tabulated.TABULATED], floats, layer.ndf
-    return [kind, DISTRIBUTION_CODES[layer.distribution]], floats
-
-
-@dataclass(frozen=True)
-class _MeasuredChannel:
-    """One channel of a measured BRDF, packed like an NDF table for :func:`_append_tables`."""
-
-    data: object
-    channel: int
-
-    def packed(self, dtype):
-        return self.data.packed(self.channel, dtype)
+        return NULL_BOUNDARY
+    return kind_of(scene.layers[i]).walk_boundary(scene, i) or NULL_BOUNDARY
 
 
 def _append_tables(boundaries: list, bnd_f: np.ndarray) -> np.ndarray:
@@ -104,8 +84,8 @@ def _append_tables(boundaries: list, bnd_f: np.ndarray) -> np.ndarray:
     parts = [bnd_f]
     size = bnd_f.size
     for b, record in enumerate(boundaries):
-        if len(record) == 3:
-            packed = record[2].packed(np.float32)
+        if record.table is not None:
+            packed = record.table.packed(np.float32)
             bnd_f[walk.BND_F * b + 2] = size
             parts.append(packed)
             size += packed.size
@@ -119,11 +99,12 @@ def flatten(scene: Scene) -> StackArrays:
     boundaries, slabs, owners = [], [], []
     last = None                      # what was appended last: "boundary" or "slab"
     for i, layer in enumerate(scene.layers):
-        if isinstance(layer, Medium):
+        kind = kind_of(layer)
+        if kind.walk_role == "slab":
             if last != "boundary":       # top of the stack, or a medium right below a medium
                 boundaries.append(_boundary(scene, None))
                 owners.append(None)
-            slabs.append([layer.tau, layer.albedo, layer.g])
+            slabs.append(list(kind.walk_slab(layer)))
             last = "slab"
         else:
             if last == "boundary":       # two interfaces in a row: zero-thickness clear gap
@@ -134,8 +115,8 @@ def flatten(scene: Scene) -> StackArrays:
     if last == "slab":
         boundaries.append(_boundary(scene, None))
         owners.append(None)
-    bnd_i = np.array([x for b in boundaries for x in b[0]], dtype=np.int32)
-    bnd_f = np.array([x for b in boundaries for x in b[1]], dtype=np.float32)
+    bnd_i = np.array([x for b in boundaries for x in b.ints], dtype=np.int32)
+    bnd_f = np.array([x for b in boundaries for x in b.floats], dtype=np.float32)
     bnd_f = append_tables(scene, owners, _append_tables(boundaries, bnd_f), walk.BND_F)
     slab_f = np.array([x for s in slabs for x in s] or [0.0, 1.0, 0.0], dtype=np.float32)
     assert len(boundaries) == len(slabs) + 1

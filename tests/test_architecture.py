@@ -174,3 +174,30 @@ def test_no_private_api_of_other_packages():
             if any(n.startswith("_") and not n.startswith("__") for n in names):
                 found.append(f"{module}:{node.lineno}: {ast.unparse(node)}")
     assert found == []
+
+
+def test_only_the_layer_kinds_branch_on_the_kind():
+    """What a layer kind is lives in its module of :mod:`layersim.layers`; every other module asks
+    the registry (``kind_of(layer)``) or a record's properties (``opaque``, ``is_interface``)
+    instead of testing which kind a layer is."""
+    records = {"Dielectric", "Conductor", "Medium", "Diffuse", "Measured", "Interface", "Layer"}
+    kind_names = {"dielectric", "conductor", "medium", "diffuse", "measured"}
+    found = []
+    for module, path in MODULES.items():
+        if module.startswith("layersim.layers"):
+            continue
+        tree = ast.parse(path.read_text())
+        imported = {a.asname or a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
+                    and n.module and n.module.split(".")[-1] in ("scene", "layers")
+                    for a in n.names} & records
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                    and node.func.id == "isinstance" and len(node.args) == 2):
+                names = {n.id for n in ast.walk(node.args[1]) if isinstance(n, ast.Name)}
+                if names & imported:
+                    found.append(f"{module}:{node.lineno}: {ast.unparse(node)}")
+            if isinstance(node, ast.Compare) and any(
+                    isinstance(c, ast.Constant) and c.value in kind_names
+                    for c in [node.left, *node.comparators]) and "kind" in ast.unparse(node):
+                found.append(f"{module}:{node.lineno}: {ast.unparse(node)}")
+    assert found == []

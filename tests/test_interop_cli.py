@@ -113,12 +113,12 @@ def test_eval_prints_one_value_per_channel(glass_files, capsys):
 
 def test_energy_notes_go_into_the_bsdf_info_and_info_prints_them(glass_files, glass, tmp_path,
                                                                   capsys):
-    from layersim.solver import _check_energy
+    from layersim.energy import check_operator_energy
     scene = layersim.Scene.from_toml(glass_files / "glass.toml")
     plan = layersim.make_plan(scene)
     before = list(plan.notes)
     over = glass.operators[0].map_blocks(lambda mat: mat * 1.002)   # 0.2 % too much energy
-    notes = _check_energy(over, 0, scene.layers[0], plan)
+    notes = check_operator_energy(over, 0, scene.layers[0], plan.n)
     assert len(notes) == 1 and "over-counted energy" in notes[0]
     assert plan.notes == before                                      # the plan is not touched
     alb = over.albedo()

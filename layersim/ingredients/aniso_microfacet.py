@@ -53,7 +53,6 @@ from ..kernels import projection as kproj
 from ..operator import Grid
 from ..outofcore.assemble import from_parts
 from ..outofcore.workspace import Workspace
-from ..scene import Conductor
 from ..threads import parallel_map
 from .microfacet import L_FIT as ISO_L_FIT
 from .microfacet import (ENERGY_DROP, RELERR, SUPPORT_TOLERANCE, TAPER_THRESHOLD,
@@ -184,7 +183,7 @@ def series_lengths(grid: Grid, layer, eta_above: float, ms: int, relerr: float):
         :func:`layersim.ingredients.microfacet.series_lengths` returns it.
     """
     eta = complex(layer.ior) / eta_above
-    names = ("Rt",) if isinstance(layer, Conductor) else ("Rt", "Rb", "Ttb", "Tbt")
+    names = ("Rt",) if layer.opaque else ("Rt", "Rb", "Ttb", "Tbt")
     fw = grid.flux_weight
     lengths, mu_min = [], []
     qs = max(8, _qs_for(ms) // 2)
@@ -573,7 +572,7 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
     t0 = time.perf_counter()
     eta = complex(layer.ior) / eta_above
     au, av, dist = layer.alpha_u, layer.alpha_v, layer.distribution
-    opaque = isinstance(layer, Conductor)
+    opaque = layer.opaque
     names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
     N = basis.n_slots(md) * grid.h
     col_scale = slot_column_scale(grid, md)

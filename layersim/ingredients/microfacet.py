@@ -33,7 +33,6 @@ from ..config import settings
 from ..kernels import projection as kproj
 from ..kernels.runtime import device_for
 from ..operator import Grid, IsoOperator
-from ..scene import Conductor
 from ..threads import parallel_map
 
 #: Relative truncation of each pair's cosine series (|f_l| < RELERR |f_0| are dropped).
@@ -177,7 +176,7 @@ def series_lengths(grid: Grid, layer, eta_above: float, relerr: float = RELERR):
         which sets how wide the lobe is in azimuth).
     """
     eta = complex(layer.ior) / eta_above
-    names = ("Rt",) if isinstance(layer, Conductor) else ("Rt", "Rb", "Ttb", "Tbt")
+    names = ("Rt",) if layer.opaque else ("Rt", "Rb", "Ttb", "Tbt")
     dist = layer.distribution
     fw = grid.flux_weight
     lengths, mu_min = [], []
@@ -386,7 +385,7 @@ def interface_setup(layer, eta_above: float):
     distribution, roughness, whether it is opaque and the blocks it has."""
     if layer.anisotropic or layer.smooth:
         raise ValueError("interface_operator projects isotropic rough interfaces only")
-    opaque = isinstance(layer, Conductor)
+    opaque = layer.opaque
     names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
     return complex(layer.ior) / eta_above, layer.distribution, layer.alpha, opaque, names
 

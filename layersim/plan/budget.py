@@ -13,7 +13,7 @@ from ..errors import InfeasibleError
 from ..operator import Grid
 from ..outofcore.memory import memory_limit
 from ..outofcore.parking import park_directory
-from ..scene import Conductor, Discretization, Measured, Scene
+from ..scene import Discretization, Scene
 from . import cost
 
 #: Lower bound on the orders a lobe of roughness alpha needs: md >= this / alpha (half the
@@ -42,7 +42,7 @@ def lower_bound(disc: Discretization, mono: Scene, layers: list, grid: Grid,
         layer = mono.layers[lp.index]
         alpha = min(layer.alpha_u, layer.alpha_v)
         if alpha > 0:
-            blocks = 1 if isinstance(layer, (Conductor, Measured)) else 4
+            blocks = 1 if layer.opaque else 4
             ms = (disc.ms or lp.ms) if lp.ms else 0
             rough.append((alpha, blocks, ms))
     if disc.md is not None:

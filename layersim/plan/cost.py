@@ -54,7 +54,7 @@ from ..adding import ORDER_BATCH_ELEMENTS, SPARSE_MIN_H, sparse_density
 from ..aniso import plan as aplan
 from ..ingredients.medium import hg_scaling
 from ..operator import Grid
-from ..scene import Conductor, Diffuse, Measured, Medium, Scene
+from ..scene import Medium, Scene
 
 #: Seconds per unit of work on the 2-core CI VM (see the module docstring and
 #: ``benchmarks/speed/plan_estimates.txt``).
@@ -117,8 +117,9 @@ class Ingredient:
     ----------
     index : int
         Position in the stack.
-    kind : str
-        ``"interface"`` (isotropic projection), ``"coupled"`` (coupled-mode projection),
+    form : str
+        The operator's form, whatever the layer's kind: ``"interface"`` (isotropic
+        projection), ``"coupled"`` (coupled-mode projection),
         ``"medium"`` (adding-doubling) or ``"diagonal"`` (diffuse base, smooth or
         near-specular interfaces: a diagonal or a single order, built in no time).
     blocks : int
@@ -142,7 +143,7 @@ class Ingredient:
     """
 
     index: int
-    kind: str
+    form: str
     blocks: int = 4
     variants: int = 1
     pairs: int = 0
@@ -177,23 +178,23 @@ def ingredients(scene: Scene, layers: list, lengths: list, grid: Grid, md: int) 
         i = lp.index
         layer = monos[0].layers[i]
         variants = len({(m.layers[i], m.ior_above(i)) for m in monos})
-        blocks = 1 if isinstance(layer, (Conductor, Diffuse, Measured)) else 4
+        blocks = 1 if layer.opaque else 4
         ing = Ingredient(i, "diagonal", blocks, variants)
         if i in prepass:
             pair_lengths = np.minimum(prepass[i], md)
             ing.pairs = int(pair_lengths.size)
             ing.stored = int(pair_lengths.sum())
             if lp.ms:
-                ing.kind, ing.ms = "coupled", lp.ms
+                ing.form, ing.ms = "coupled", lp.ms
                 ing.entries = aplan.operator_entries(prepass[i], md, lp.ms)
                 ing.coefficients = int(np.sum((2 * pair_lengths - 1) * (2 * lp.ms + 1)))
             else:
-                ing.kind = "interface"
+                ing.form = "interface"
             # pairs whose series reach order l, per block
             reach = np.bincount(pair_lengths, minlength=md + 1)[::-1].cumsum()[::-1]
             ing.profile = np.minimum(reach[1:md + 1] / blocks, h * h)
         elif lp.action == "adding-doubling":
-            ing.kind = "medium"
+            ing.form = "medium"
             ing.orders = [_scattering_orders(m.layers[i], grid, md) for m in
                           {(m.layers[i], m.ior_above(i)): m for m in monos}.values()]
             # R and T dense in the scattering orders, the unscattered beam on T's diagonal
@@ -287,8 +288,8 @@ def iso_bytes(ings: list, grid: Grid, md: int, channels: int) -> int:
         for ing, size in zip(reversed(ings), reversed(sizes)):
             if c and ing.variants == 1:
                 continue            # built for the first channel, kept for all
-            transient = (interface_transient(ing, md) if ing.kind == "interface" else
-                         medium_transient(ing, md, h) if ing.kind == "medium" else 0)
+            transient = (interface_transient(ing, md) if ing.form == "interface" else
+                         medium_transient(ing, md, h) if ing.form == "medium" else 0)
             peak = max(peak, held + transient)
             held += size
         stack = 0
@@ -307,14 +308,14 @@ def iso_work(ings: list, grid: Grid, md: int, channels: int) -> dict:
     steps = adding_chain(ings, md, grid.h)
     return {
         "pair_orders": float(sum(i.variants * i.pairs * md for i in ings
-                                 if i.kind == "interface")),
-        "medium_cubes": float(sum(sum(i.orders) * h ** 3 for i in ings if i.kind == "medium")),
+                                 if i.form == "interface")),
+        "medium_cubes": float(sum(sum(i.orders) * h ** 3 for i in ings if i.form == "medium")),
         "medium_entries": float(sum(i.variants * md * h * h for i in ings
-                                    if i.kind == "medium")),
+                                    if i.form == "medium")),
         "dense_cubes": channels * float(sum(s.dense_orders for s in steps)) * h ** 3,
         "sparse_nonzeros": channels * float(sum(s.sparse_nonzeros for s in steps)),
         "adding_orders": channels * float(len(steps) * md),
-        "interfaces": float(sum(i.variants for i in ings if i.kind == "interface")),
+        "interfaces": float(sum(i.variants for i in ings if i.form == "interface")),
         "solve": 1.0,
     }
 
@@ -343,7 +344,7 @@ def _groups(ings: list) -> list:
     coupled ingredient."""
     groups: list = []
     for ing in ings:
-        if ing.kind == "coupled":
+        if ing.form == "coupled":
             groups.append(ing)
         elif groups and isinstance(groups[-1], list):
             groups[-1].append(ing)
@@ -422,20 +423,20 @@ def coupled_bytes(ings: list, grid: Grid, md: int, channels: int, parked: bool) 
     steps = coupled_chain(ings, md, h)
     stack_bytes = BYTES["nonzero"] * steps[-1].result if steps else 0
     shared = sum(operator_bytes(i, md, h) for i in ings
-                 if i.kind != "coupled" and i.variants == 1)
+                 if i.form != "coupled" and i.variants == 1)
     held = peak = BYTES["solve"]
     done = 0
     for c in range(channels):
         held = BYTES["solve"] + done + (shared if c else 0)
         coupled_held = 0
         for ing in reversed(ings):
-            if ing.kind == "coupled":
+            if ing.form == "coupled":
                 peak = max(peak, held + coupled_held + BYTES["coupled_fixed"]
                            + BYTES["coupled_projection"] * coupled_scale(ing.entries))
                 coupled_held += resident(ing.entries)
             elif not (c and ing.variants == 1):
-                transient = (interface_transient(ing, md) if ing.kind == "interface" else
-                             medium_transient(ing, md, h) if ing.kind == "medium" else 0)
+                transient = (interface_transient(ing, md) if ing.form == "interface" else
+                             medium_transient(ing, md, h) if ing.form == "medium" else 0)
                 peak = max(peak, held + coupled_held + transient)
                 held += operator_bytes(ing, md, h)
         for step in steps:
@@ -460,7 +461,7 @@ def coupled_work(ings: list, grid: Grid, md: int, channels: int) -> dict:
             work[k] += v
     steps = coupled_chain(ings, md, grid.h)
     work["coupled_coefficients"] = float(sum(i.variants * i.coefficients for i in ings
-                                             if i.kind == "coupled"))
+                                             if i.form == "coupled"))
     work["coupled_entries"] = channels * float(sum(s.entries for s in steps))
     work["factor_cubes"] = channels * float(sum(2 * md * s.band ** 2 * (h / 2) ** 3
                                                 for s in steps))

@@ -4,39 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ..layers.base import LayerPlan
 from ..operator import Grid
 
-
-@dataclass
-class LayerPlan:
-    """What the solve does with one layer of the stack.
-
-    Attributes
-    ----------
-    index : int
-        Position in the stack (0 = top).
-    kind : str
-        The scene layer's kind (``"dielectric"``, ``"conductor"``, ``"medium"``, ``"diffuse"``).
-    action : str
-        ``"project"``, ``"project (coupled modes)"``, ``"adding-doubling"``, ``"diffuse"`` or
-        ``"left out"``.
-    detail : str
-        One line of what the action depends on, for the report.
-    width : float or None
-        Narrowest angular lobe of the layer (radians), when it competes to set ``n``.
-    orders : int
-        Fourier orders the layer needs (from the projection's pre-pass for interfaces).
-    ms : int
-        Coupling half-width of an anisotropic interface (0 otherwise).
-    """
-
-    index: int
-    kind: str
-    action: str
-    detail: str = ""
-    width: float | None = None
-    orders: int = 1
-    ms: int = 0
+__all__ = ["LayerPlan", "Plan"]
 
 
 @dataclass

@@ -20,9 +20,9 @@ import numpy as np
 from ..aniso import plan as aplan
 from ..errors import InfeasibleError
 from ..ingredients import aniso_microfacet, microfacet
+from ..layers import kind_of
 from ..operator import Grid
 from ..scene import MAX_ORDERS, Discretization, Scene
-from .tabulated import equivalent_lobe
 
 #: Lobes with both elevations within this angle (degrees) of the normal keep all their
 #: Fourier orders.
@@ -43,7 +43,8 @@ def interface_lengths(grid: Grid, mono: Scene, layers: list,
     for lp in layers:
         if not lp.action.startswith("project"):
             continue
-        layer, eta_above = equivalent_lobe(mono.layers[lp.index]), mono.ior_above(lp.index)
+        layer = mono.layers[lp.index]
+        layer, eta_above = kind_of(layer).equivalent_lobe(layer), mono.ior_above(lp.index)
         if lp.ms:
             lengths, mu_min = aniso_microfacet.series_lengths(grid, layer, eta_above, lp.ms,
                                                               aplan.COUPLED_RELERR)

@@ -12,11 +12,10 @@ import math
 
 from ..errors import InfeasibleError
 from ..operator import Grid
+from ..layers.base import N_PER_WIDTH
 from ..quadrature import SNELL, snell_rule
 from ..scene import Discretization
 
-#: Ordinates per unit of inverse lobe width (see the module docstring).
-N_PER_WIDTH = 6.5
 N_MIN, N_MAX = 64, 4096
 DEFAULT_RULE = "gauss-lobatto"
 #: Factor on ``n`` for stacks with a smooth dielectric boundary (Snell-matched grid): the

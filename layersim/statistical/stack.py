@@ -8,7 +8,8 @@ is refused with an error naming the layer and the field.
 from __future__ import annotations
 
 from ..errors import SceneError
-from ..scene import Conductor, Dielectric, Medium, Scene, as_scene
+from ..layers import kind_of
+from ..scene import Scene, as_scene
 from .atomic import Absorber, Interface
 
 
@@ -21,21 +22,10 @@ def _layer(scene: Scene, i: int, layer, source):
         return UnsupportedStack(why + " (Belcour's statistical model: GGX interfaces and "
                                 "non-scattering absorbing media only)", layer=i,
                                 kind=layer.kind, field=fld, source=source)
-    if isinstance(layer, Medium):
-        if layer.albedo > 0.0:
-            raise refuse("albedo", f"a scattering medium (albedo {layer.albedo:g}) is not "
-                                   "represented; use albedo = 0")
-        return Absorber(layer.tau)
-    if isinstance(layer, (Dielectric, Conductor)):
-        if layer.distribution != "ggx":
-            raise refuse("distribution", f"'{layer.distribution}' is not represented; use "
-                                         "distribution = \"ggx\"")
-        if layer.anisotropic:
-            raise refuse("roughness", "anisotropic roughness is not represented")
-        if layer.alpha_u > 1.0:
-            raise refuse("roughness", f"{layer.alpha_u:g} is beyond the FGD table (<= 1)")
-        return Interface(complex(layer.ior), layer.alpha_u)
-    raise refuse("kind", f"a {layer.kind} layer is not represented")
+    atom = kind_of(layer).statistical_atom(layer, refuse)
+    if atom[0] == "absorber":
+        return Absorber(*atom[1:])
+    return Interface(*atom[1:])
 
 
 def statistical_stacks(scene) -> tuple[tuple, ...]:

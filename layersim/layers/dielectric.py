@@ -1,0 +1,79 @@
+"""The dielectric interface: into a dielectric of real absolute index ``ior``, rough (Beckmann,
+GGX or tabulated microfacets; Walter et al. 2007) or smooth.
+
+Index-matched interfaces are exact no-ops and left out; a smooth one is a boundary of the stack
+(:mod:`.smooth`), a near-specular top coat is split into smooth transport and its lobe
+(:mod:`.near_specular`); every other one is projected (:mod:`.interface`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from . import near_specular, smooth
+from .base import LayerPlan
+from .fields import MAX_IOR, Field, per_channel, real
+from .interface import Interface, InterfaceKind
+from .registry import register
+
+__all__ = ["Dielectric", "DielectricKind"]
+
+
+@dataclass(frozen=True)
+class Dielectric(Interface):
+    """Rough (or smooth) interface into a dielectric of real index ``ior``."""
+
+    kind = "dielectric"
+
+    def index_below(self, eta_above: float) -> float:
+        return self.ior.real
+
+
+class DielectricKind(InterfaceKind):
+    name = "dielectric"
+    record = Dielectric
+    fields = (Field("ior", "absolute index of refraction of the dielectric below",
+                    parse=None, required=True, per_channel=True, fit=True),
+              ) + InterfaceKind.common_fields
+
+    def parse_ior(self, ctx, value) -> list:
+        return per_channel(ctx, "ior", value, lambda c, f, v: complex(
+            real(lo=0.0, hi=MAX_IOR, lo_open=True)(c, f, v)))
+
+    def describe_ior(self, per_channel) -> str:
+        return self.values(per_channel, lambda x: f"{x.ior.real:g}")
+
+    def plan_special(self, scene, i, layer, survey) -> bool:
+        if all(scene.channel(c).relative_ior(i) == 1.0 for c in range(scene.channels)):
+            survey.left_out.append(f"layer {i} (dielectric): index-matched interface (relative "
+                                   "index 1) is an exact no-op")
+            survey.layers.append(LayerPlan(i, self.name, "left out", "index-matched"))
+            return True
+        if layer.smooth:
+            smooth.plan_dielectric(scene, i, layer, survey)
+            return True
+        return near_specular.plan_coat(scene, i, layer, survey)
+
+    def lobe(self, layer, eta_rel):
+        """About ``alpha |1 - 1/eta|`` in refraction (the refracted direction moves by that
+        fraction of the facet tilt); infinite for an index-matched interface."""
+        eta = eta_rel.real
+        if eta == 1.0:
+            return math.inf, ""
+        return (layer.lobe_width() * abs(1.0 - 1.0 / max(eta, 1.0 / eta)), "refraction lobe")
+
+    def special_operator(self, job):
+        if job.layer.smooth:
+            return smooth.dielectric_operator(job)
+        if job.index in job.plan.near_specular:
+            return near_specular.coat_operator(job)
+        return None
+
+    def walk_boundary(self, scene, i):
+        if scene.relative_ior(i).real == 1.0:    # nothing changes index: a pass-through
+            return None
+        return super().walk_boundary(scene, i)
+
+
+register(DielectricKind())

@@ -1,0 +1,263 @@
+"""What dielectric and conductor interfaces share: the record (index, roughness, distribution,
+rotation, energy compensation, NDF table), its fields, and how a rough interface is planned,
+projected and walked.
+
+A rough interface is projected onto the Fourier basis (numerically or semi-analytically,
+:mod:`layersim.ingredients.numeric`, :mod:`layersim.ingredients.microfacet`; with coupled modes
+where it is anisotropic or tabulated, :mod:`layersim.ingredients.aniso_microfacet`), its energy
+checked, and its compensation lobe added (:mod:`layersim.compensation`). The variants live in
+their own modules: :mod:`.smooth` (roughness 0), :mod:`.near_specular` (roughness up to 0.03),
+:mod:`.tabulated` (a measured NDF); :mod:`.dielectric` and :mod:`.conductor` choose among them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..aniso import plan as aplan
+from ..aniso.plan import COUPLED_RELERR
+from ..energy import check_operator_energy
+from ..ingredients import tabulated as tabulated_projection
+from ..ingredients.aniso_microfacet import aniso_interface_operator
+from ..ingredients.compensation import compensate
+from ..ingredients.microfacet import interface_operator
+from ..ingredients.numeric import numeric_interface_operator
+from ..kernels import walk
+from ..kernels.physics import DISTRIBUTION_CODES
+from ..kernels.tabulated import TABULATED
+from . import tabulated
+from .base import Layer, LayerKind, LayerPlan, WalkBoundary
+from .fields import Field, choice, real, roughness
+
+__all__ = ["Interface", "InterfaceKind", "DISTRIBUTIONS", "COMPENSATIONS"]
+
+#: Microfacet normal distributions understood by the solver and the random walk.
+DISTRIBUTIONS = ("beckmann", "ggx", "tabulated")
+#: Energy-loss compensation terms of rough interfaces (``energy_compensation``, in [stack] or
+#: per layer; :mod:`layersim.compensation`).
+COMPENSATIONS = ("none", "layerlab", "multiple-scattering")
+
+
+@dataclass(frozen=True)
+class Interface(Layer):
+    ior: complex = 1.0
+    """Absolute index of the medium below the interface (complex ``eta + i k`` for conductors)."""
+    alpha_u: float = 0.0
+    alpha_v: float = 0.0
+    distribution: str = "beckmann"
+    rotation: float = 0.0
+    """Rotation of the tangent frame (radians) about the normal: alpha_u acts along
+    ``(cos rotation, sin rotation, 0)``."""
+    energy_compensation: str = "none"
+    """Energy-loss compensation of a rough interface (:data:`COMPENSATIONS`;
+    :mod:`layersim.compensation`), applied by the solver and the Monte Carlo walk alike."""
+    ndf: Any = field(default=None, compare=False)
+    """The :class:`layersim.ndf.NDFTable` of ``distribution = "tabulated"`` (its ``alpha_u``,
+    ``alpha_v`` are then the table's equivalent Beckmann roughness, which sizes the plan)."""
+
+    @property
+    def is_interface(self) -> bool:
+        return True
+
+    @property
+    def smooth(self) -> bool:
+        return self.alpha_u == 0.0 and self.alpha_v == 0.0
+
+    @property
+    def anisotropic(self) -> bool:
+        # a table is projected with coupled modes whatever its shape (it may depend on phi)
+        return self.alpha_u != self.alpha_v or self.ndf is not None
+
+    @property
+    def alpha(self) -> float:
+        """Isotropic roughness; valid only when ``alpha_u == alpha_v``."""
+        if self.anisotropic:
+            raise ValueError("alpha is undefined for an anisotropic interface; use alpha_u/alpha_v")
+        return self.alpha_u
+
+    def lobe_width(self) -> float:
+        """The narrower roughness (radians of slope spread)."""
+        return min(self.alpha_u, self.alpha_v)
+
+
+class InterfaceKind(LayerKind):
+    """Dielectric and conductor interfaces; subclasses declare ``ior`` and choose the smooth and
+    near-specular variants."""
+
+    #: The fields both interfaces declare (a subclass adds ``ior`` in front).
+    common_fields = (
+        Field("roughness", "microfacet roughness alpha, or [alpha_u, alpha_v] (anisotropic)",
+              parse=roughness, default=0.0, fit=True),
+        Field("distribution", "microfacet normal distribution",
+              parse=choice(DISTRIBUTIONS, "distribution"), default="beckmann"),
+        Field("ndf", "the NDF table of distribution = \"tabulated\": an .npz path or an inline "
+                     "{theta, phi, D} table"),
+        Field("rotation", "rotation of the tangent frame about the normal", unit="degrees",
+              parse=real(lo=-360.0, hi=360.0), default=0.0, fit=True),
+        Field("energy_compensation", "energy-loss compensation of the rough interface "
+                                     "(default: [stack] energy_compensation)"),
+    )
+
+    # ---- scene -----------------------------------------------------------------------------
+
+    def build(self, ctx, values, raw, defaults) -> list:
+        au, av = values["roughness"]
+        dist = values["distribution"]
+        table = tabulated.parse_ndf(ctx, raw, dist)
+        if table is not None:
+            au, av = table.equivalent_alpha()
+        rot = math.radians(values["rotation"])
+        comp = self._compensation(ctx, raw.get("energy_compensation",
+                                               defaults.get("energy_compensation", "none")),
+                                  au, av)
+        if table is not None and comp != "none":
+            raise ctx.error("energy_compensation",
+                            f"{comp!r} is not available for a tabulated NDF (its albedo tables "
+                            "are those of Beckmann and GGX interfaces): set "
+                            "energy_compensation = \"none\" on this layer")
+        return [self.record(ior=e, alpha_u=au, alpha_v=av, distribution=dist, rotation=rot,
+                            energy_compensation=comp, ndf=table)
+                for e in self.parse_ior(ctx, raw["ior"])]
+
+    @staticmethod
+    def _compensation(ctx, value, au: float, av: float) -> str:
+        """A value of ``energy_compensation``; anisotropic roughness is refused (the albedo
+        tables are those of isotropic interfaces)."""
+        if value not in COMPENSATIONS:
+            raise ctx.error("energy_compensation", f"unknown compensation {value!r}; expected "
+                                                   "one of " + ", ".join(COMPENSATIONS))
+        if value != "none" and au != av:
+            raise ctx.error("energy_compensation",
+                            f"{value!r} is not available for anisotropic roughness "
+                            f"[{au:g}, {av:g}]: set energy_compensation = \"none\" on this "
+                            "layer (or use an isotropic roughness)")
+        return value
+
+    def parse_ior(self, ctx, value) -> list:
+        """The per-channel indices of the ``ior`` field."""
+        raise NotImplementedError
+
+    def describe(self, per_channel) -> str:
+        layer = per_channel[0]
+        rough = ("smooth" if layer.smooth else
+                 f"alpha={layer.alpha_u:g}" if not layer.anisotropic else
+                 f"alpha=({layer.alpha_u:g}, {layer.alpha_v:g})")
+        extra = f", {layer.distribution}" if not layer.smooth else ""
+        if layer.ndf is not None:
+            rough, extra = layer.ndf.describe(), ""
+        if layer.rotation:
+            extra += f", rotated {math.degrees(layer.rotation):g} deg"
+        if layer.energy_compensation != "none" and not layer.smooth:
+            extra += f", energy compensation {layer.energy_compensation}"
+        return f"{layer.kind} ior={self.describe_ior(per_channel)}, {rough}{extra}"
+
+    def describe_ior(self, per_channel) -> str:
+        raise NotImplementedError
+
+    # ---- plan ------------------------------------------------------------------------------
+
+    def survey(self, scene, i, survey) -> None:
+        layer = scene.channel(0).layers[i]
+        if self.plan_special(scene, i, layer, survey):
+            return
+        eta_rel = scene.channel(0).relative_ior(i)
+        width, what = self.lobe(layer, eta_rel)
+        survey.widths.append((width, i, self.name, what))
+        if layer.ndf is not None:
+            survey.layers.append(tabulated.plan(i, layer, eta_rel, width))
+        elif layer.anisotropic:
+            ms = aplan.ms_for_layer(layer)
+            rot = f", rotated {math.degrees(layer.rotation):g} deg" if layer.rotation else ""
+            survey.layers.append(LayerPlan(
+                i, self.name, "project (coupled modes)",
+                f"{layer.distribution} alpha=({layer.alpha_u:g}, {layer.alpha_v:g}){rot}, "
+                f"relative index {_fmt_eta(eta_rel)}; ratio "
+                f"{aplan.anisotropy_ratio(layer):.3g} -> ms = {ms}", width=width, ms=ms))
+        else:
+            survey.layers.append(LayerPlan(i, self.name, "project",
+                                           f"{layer.distribution} alpha={layer.alpha_u:g}, "
+                                           f"relative index {_fmt_eta(eta_rel)}"
+                                           + compensation_text(layer), width=width))
+
+    def plan_special(self, scene, i: int, layer, survey) -> bool:
+        """Plan the kind's exact variants (index-matched, smooth, near-specular) and return
+        True, or False to leave the layer to the projection."""
+        return False
+
+    def lobe(self, layer, eta_rel: complex) -> tuple[float, str]:
+        """Angular width (radians) of the narrowest lobe of the rough interface and its name."""
+        raise NotImplementedError
+
+    def equivalent_lobe(self, layer):
+        return layer if layer.ndf is None else tabulated.equivalent_lobe(layer)
+
+    # ---- solve -----------------------------------------------------------------------------
+
+    def operator(self, job):
+        layer, plan, eta_above = job.layer, job.plan, job.eta_above
+        special = self.special_operator(job)
+        if special is not None:
+            return special
+        if layer.anisotropic:
+            lp = job.layer_plan
+            op = aniso_interface_operator(
+                job.grid, plan.md, lp.ms, layer, eta_above, job.stats, relerr=COUPLED_RELERR,
+                workspace=job.workspace,
+                projector=None if layer.ndf is None else
+                tabulated_projection.projector(layer, eta_above, job.device))
+            job.notes += check_operator_energy(op, job.index, layer, plan.n)
+            return op
+        if job.projection == "numeric":
+            op = numeric_interface_operator(job.grid, plan.md, layer, eta_above, job.stats,
+                                            device=job.device)
+        else:
+            op = interface_operator(job.grid, plan.md, layer, eta_above, job.stats)
+        # the compensation fills what the (energy-limited) single-scattering operator loses
+        job.notes += check_operator_energy(op, job.index, layer, plan.n)
+        op, note = compensate(op, layer, eta_above)
+        job.notes += [f"layer {job.index}: {note}"] if note else []
+        return op
+
+    def special_operator(self, job):
+        """The operator of an exact variant planned by :meth:`plan_special`, or None."""
+        return None
+
+    # ---- walk ------------------------------------------------------------------------------
+
+    def walk_boundary(self, scene, i) -> WalkBoundary:
+        layer = scene.layers[i]
+        eta = scene.relative_ior(i)
+        floats = (eta.real, eta.imag if layer.opaque else 0.0, layer.alpha_u, layer.alpha_v,
+                  math.cos(layer.rotation), math.sin(layer.rotation), 0.0, 0.0)
+        code = walk.CONDUCTOR if layer.opaque else walk.DIELECTRIC
+        if layer.ndf is not None:       # alpha_u's slot gets the table's offset in flatten()
+            return WalkBoundary((code, TABULATED), floats, layer.ndf)
+        return WalkBoundary((code, DISTRIBUTION_CODES[layer.distribution]), floats)
+
+    # ---- statistical model -----------------------------------------------------------------
+
+    def statistical_atom(self, layer, refuse):
+        if layer.distribution != "ggx":
+            raise refuse("distribution", f"'{layer.distribution}' is not represented; use "
+                                         "distribution = \"ggx\"")
+        if layer.anisotropic:
+            raise refuse("roughness", "anisotropic roughness is not represented")
+        if layer.alpha_u > 1.0:
+            raise refuse("roughness", f"{layer.alpha_u:g} is beyond the FGD table (<= 1)")
+        return ("interface", complex(layer.ior), layer.alpha_u)
+
+
+def compensation_text(layer) -> str:
+    """The plan's words for a rough interface's energy compensation (empty for none)."""
+    mode = layer.energy_compensation
+    if mode == "none":
+        return ""
+    what = {"multiple-scattering": "Kulla & Conty 2017 multiple-scattering lobe",
+            "layerlab": "layerlab's near-diffuse correction"}[mode]
+    return f"; energy compensation {mode!r} ({what}, order 0, solver and Monte Carlo)"
+
+
+def _fmt_eta(eta: complex) -> str:
+    return f"{eta.real:.4g}" if eta.imag == 0 else f"{eta.real:.4g}+{eta.imag:.4g}i"
