@@ -14,7 +14,7 @@ from threadpoolctl import threadpool_limits
 from . import accuracy, adding
 from .aniso import adding as aniso_adding
 from .aniso.plan import COUPLED_RELERR, STACK_RELERR, STACK_RELERR_INTERMEDIATE
-from .bsdf import BSDF, channel_pairs
+from .bsdf import BSDF, channel_pairs, refuse_boundary
 from .config import settings
 from .errors import InfeasibleError
 from .ingredients import diffuse_operator, interface_operator, medium_operator
@@ -58,8 +58,7 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     if isinstance(layer, Conductor) and layer.smooth:
         return smooth_conductor_operator(grid, plan.md, scene.relative_ior(i), eta_above)
     if isinstance(layer, Conductor) and i in plan.near_specular:
-        return _near_specular_conductor(grid, plan.md, layer, scene.relative_ior(i), eta_above,
-                                        alone=i == 0)
+        return _near_specular_conductor(grid, plan.md, layer, scene.relative_ior(i), eta_above)
     if isinstance(layer, Dielectric) and (layer.smooth or i in plan.near_specular):
         side = "top" if i == 0 else "bottom"
         inside = layer.ior.real if side == "top" else eta_above
@@ -98,17 +97,31 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     raise TypeError(f"layer {i}: no operator for kind {layer.kind!r}")  # pragma: no cover
 
 
-def _near_specular_conductor(grid, m: int, layer, eta: complex, eta_above: float,
-                             alone: bool) -> IsoOperator:
+def _near_specular_conductor(grid, m: int, layer, eta: complex,
+                             eta_above: float) -> IsoOperator:
     """A near-specular conductor (:func:`layersim.plan.layers._near_specular_conductor`): a
-    mirror whose reflectance is the rough reflected energy; ``alone``, its exact lobe
-    replaces that mirror when the BSDF is evaluated (:attr:`Operator.lobes`)."""
-    lobe = NearSpecularLobe(eta.real, layer.alpha_u, layer.alpha_v, layer.distribution,
+    mirror whose reflectance is the rough reflected energy; alone, its exact lobe replaces
+    that mirror when the BSDF is evaluated (:func:`_lobes`)."""
+    lobe = _conductor_lobe(layer, eta)
+    return smooth_conductor_operator(grid, m, eta, eta_above, lobe.reflectance(grid.mu))
+
+
+def _conductor_lobe(layer, eta: complex) -> NearSpecularLobe:
+    """The microfacet reflection lobe of the conductor ``layer`` at relative index ``eta``."""
+    return NearSpecularLobe(eta.real, layer.alpha_u, layer.alpha_v, layer.distribution,
                             layer.rotation, k=eta.imag)
-    op = smooth_conductor_operator(grid, m, eta, eta_above, lobe.reflectance(grid.mu))
-    if alone:
-        op.lobes = {"top": lobe.params()}
-    return op
+
+
+def _lobes(plan: Plan, mono: Scene) -> dict:
+    """The near-specular lobes that the BSDF of the one-channel scene ``mono`` evaluates
+    (:attr:`BSDF.lobes`): under a smooth boundary the plan's (a near-specular coat); a
+    near-specular conductor on top (alone: nothing below it is seen) its own lobe, which its
+    operator's mirror stands for; else none."""
+    if plan.boundary:
+        return dict(plan.lobes)
+    if 0 in plan.near_specular and isinstance(mono.layers[0], Conductor):
+        return {"top": _conductor_lobe(mono.layers[0], mono.relative_ior(0)).params()}
+    return {}
 
 
 @contextlib.contextmanager
@@ -329,10 +342,6 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
                                              "layers below it", _ADDING_ADVICE):
                     stack = adding.add(op, stack, threads)
         del ops
-        if plan.boundary:
-            # the blocks hold the radiance inside the smooth boundaries (layersim.boundary)
-            stack.boundary = dict(plan.boundary)
-            stack.lobes = dict(plan.lobes)
         t_adding += time.perf_counter() - t0
         progress("adding", c + 1, len(monos), f"channel {c}" if len(monos) > 1 else "")
         stacks.append(stack)
@@ -359,7 +368,9 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
         s = info["seconds"]
         print(f"solved in {s['total']:.2f} s (plan {s['plan']:.2f} s, layers {s['layers']:.2f} s, "
               f"adding {s['adding']:.2f} s)")
-    return BSDF(stacks, plan, info)
+    # the operators hold the radiance inside the smooth boundaries (layersim.boundary)
+    return BSDF(stacks, plan, info, boundary=plan.boundary,
+                lobes=[_lobes(plan, mono) for mono in monos])
 
 
 def _add_mixed(ops, owned, threads, workspace=None):
@@ -428,6 +439,7 @@ def add(top, bottom, threads: int | None = None):
         return _ADDERS[common_representation(top, bottom)](top, bottom, threads)
     if not (isinstance(top, BSDF) and isinstance(bottom, BSDF)):
         raise TypeError("add() takes two BSDF objects (from layersim.solve) or two operators")
+    refuse_boundary("add", top, bottom)
     pairs = channel_pairs(top, bottom, "cannot add a {a}-channel BSDF to a {b}-channel one")
     channels = len(pairs)
     ops = [add(a, b, threads) for a, b in pairs]
