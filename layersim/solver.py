@@ -239,9 +239,8 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
         plain = functools.partial(solve, threads=threads, projection=projection,
                                   device=device, progress=progress)
         if tol is not None:
-            return accuracy.solve_to_tolerance(scene, tol, plain,
-                                               log=print if verbose else None)
-        return accuracy.with_estimate(scene, plain, plain(scene))
+            return _solve_to_tolerance(scene, tol, plain, log=print if verbose else None)
+        return _with_estimate(scene, plain, plain(scene))
     if device is not None or settings().device != "cpu":
         device_for(device)          # an unusable device is refused before the plan
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int)
@@ -257,6 +256,36 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
             f"scene {scene.name!r}", "change n / md in [discretization] or the stiffest layer"):
         return _solve(scene, like, threads, verbose, projection, device,
                       progress or _no_progress)
+
+
+def _solve_to_tolerance(scene: Scene, tol: float, solve_one, log=None) -> BSDF:
+    """Climb the ladder of discretisations of :class:`layersim.accuracy.Ladder`, solving each
+    rung with ``solve_one(scene) -> BSDF``, until a rung meets ``tol``."""
+    ladder = accuracy.Ladder(scene, tol, log)
+    for rung in ladder.rungs():
+        t0 = time.perf_counter()
+        try:
+            bsdf = solve_one(rung)
+        except InfeasibleError as exc:
+            ladder.refused(rung, exc)
+            continue
+        if ladder.solved(bsdf, time.perf_counter() - t0):
+            return bsdf
+    return ladder.not_met()
+
+
+def _with_estimate(scene: Scene, solve_one, bsdf: BSDF) -> BSDF:
+    """``bsdf`` (solved from ``scene``) with its error estimate from the companion solves
+    of :func:`layersim.accuracy.companion_scenes`, each solved by ``solve_one(scene)``."""
+    t0 = time.perf_counter()
+    companions = []
+    for coarser in accuracy.companion_scenes(scene, bsdf.info):
+        try:
+            companions.append(solve_one(coarser))
+        except InfeasibleError as exc:
+            accuracy.companion_refused(coarser, exc, companions)
+            break
+    return accuracy.with_estimate(bsdf, companions, t0)
 
 
 def _no_progress(phase: str, done: int, total: int, what: str) -> None:
