@@ -225,11 +225,17 @@ class WalkProgram:
 
 @lru_cache(maxsize=None)
 def program(features: Features, max_registers: int | None = None) -> WalkProgram:
-    """The walk with only the paths of ``features`` compiled in (``wp.static`` branches of a
-    closure; Warp builds each feature set once and caches it on disk). ``max_registers`` caps
+    """The walk with only the paths of ``features`` compiled in (``wp.static`` branches of
+    closures; Warp builds each feature set once and caches it on disk). ``max_registers`` caps
     the registers per thread of the CUDA kernel (more threads resident per multiprocessor, at
     the risk of spills)."""
-    f = features
+    scatter = _boundary_scatter(features)
+    thread = _walk_thread(_walk_particle(features, scatter))
+    return WalkProgram(features, thread, _walk_kernel(thread, max_registers))
+
+
+def _boundary_scatter(f: Features):
+    """The boundary interaction of a walk built for ``f``."""
     # with one analytic distribution its code is a constant, and the other's branches in
     # sampling.sample_vndf and physics.smith_g1 fold away
     one_dist = (physics.BECKMANN if not f.ggx else physics.GGX) \
@@ -288,6 +294,12 @@ def program(features: Features, max_registers: int | None = None) -> WalkProgram
             wo, weight = sampling.sample_microfacet(wl, eta, k, au, av, dist, v0, u1, u2, u3)
             return sampling.from_tangent_frame(wo, cr, sr), weight * scale
         return d, wp.float32(0.0)       # a kind these features leave out: absorbed
+
+    return boundary_scatter
+
+
+def _walk_particle(f: Features, boundary_scatter):
+    """The walk of one particle, for ``f``, with ``boundary_scatter`` at its boundaries."""
 
     @wp.func
     def walk_particle(seed_lo: wp.uint32, seed_hi: wp.uint32, p_lo: wp.uint32,
@@ -376,6 +388,12 @@ def program(features: Features, max_registers: int | None = None) -> WalkProgram
                             w = RR_WEIGHT
         return TRUNCATED, d, zero, events
 
+    return walk_particle
+
+
+def _walk_thread(walk_particle):
+    """The work of one thread: its particles, walked with ``walk_particle``, tallied."""
+
     @wp.func
     def walk_thread(tid: int, n_threads: int, per_thread: int, first: wp.int64, count: int,
                     seed_lo: wp.uint32, seed_hi: wp.uint32, wi: wp.vec3,
@@ -405,6 +423,12 @@ def program(features: Features, max_registers: int | None = None) -> WalkProgram
         wp.atomic_add(counters, 2 * copy, events)
         wp.atomic_add(counters, 2 * copy + 1, truncated)
 
+    return walk_thread
+
+
+def _walk_kernel(walk_thread, max_registers: int | None):
+    """The Warp kernel running ``walk_thread``, in a module of its own."""
+
     @wp.kernel(enable_backward=False, module="unique", cuda_max_registers=max_registers)
     def walk_kernel(n_threads: int, per_thread: int, first: wp.int64, count: int,
                     seed_lo: wp.uint32, seed_hi: wp.uint32, wi: wp.vec3,
@@ -417,7 +441,7 @@ def program(features: Features, max_registers: int | None = None) -> WalkProgram
                     bnd_i, bnd_f, slab_f, n_slabs, max_steps, mu_edges, n_mu_edges, phi_edges,
                     n_phi_edges, n_copies, tally, counters)
 
-    return WalkProgram(features, walk_thread, walk_kernel)
+    return walk_kernel
 
 
 #: The walk with every path: runs any stack (tests, and the OpenCL translator's checks).

@@ -22,7 +22,7 @@ itself jumps between neighbouring discretisations: the estimate is within 3 time
 about 60 % of the cases. The estimate per angle (``per_angle``) is less reliable than the
 worst-angle value (about 90 % conservative).
 
-A solve to a tolerance (:func:`solve_to_tolerance`) climbs a ladder of scales of the planner's
+A solve to a tolerance (:class:`Ladder`) climbs a ladder of scales of the planner's
 ``n`` and ``md`` (:data:`LADDER`, a factor ``sqrt 2`` apart, so that the two rungs below are
 each rung's companions) and stops at the first rung from the second on whose estimate is at
 most ``tol`` (on the second, with one companion, :data:`SINGLE` times its distance); a rung the
@@ -163,97 +163,123 @@ def meeting(acc: dict, tol: float) -> str:
     return f"within tol at {', '.join(ok)} deg; {over}" if ok else "over tol at every angle"
 
 
-def with_estimate(scene: Scene, solve, bsdf):
-    """``bsdf`` (solved from ``scene``) with its error estimate in ``bsdf.info["accuracy"]``,
-    from companion solves at the scales of :data:`COMPANIONS` (``solve(scene)`` solves)."""
-    t0 = time.perf_counter()
-    companions = []
-    for ratio, _ in COMPANIONS:
-        coarser = scaled(scene, bsdf.info["n"], bsdf.info["md"], ratio, bsdf.info.get("ms"))
-        try:
-            companions.append(solve(coarser))
-        except InfeasibleError as exc:
-            # too coarse to resolve a lobe: the estimate rests on the finer companion
-            if not companions:
-                raise InfeasibleError(
-                    f"no error estimate: the companion solve at n = "
-                    f"{coarser.discretization.n} is refused ({exc}); estimate a solve with a "
-                    "larger n") from None
-            break
-    bsdf.info["accuracy"] = {**estimate(bsdf, companions), "seconds": time.perf_counter() - t0}
+def companion_scenes(scene: Scene, info: dict) -> list:
+    """The companions of a solve of ``scene`` whose ``BSDF.info`` is ``info``: ``scene`` at
+    the scales of :data:`COMPANIONS` of its ``n``, ``md`` (and ``ms``), to be solved in this
+    order; the first refused ends the list (:func:`companion_refused`)."""
+    return [scaled(scene, info["n"], info["md"], ratio, info.get("ms"))
+            for ratio, _ in COMPANIONS]
+
+
+def companion_refused(coarser: Scene, exc: InfeasibleError, solved: list) -> None:
+    """A companion solve of ``coarser`` was refused with ``exc``: too coarse to resolve a
+    lobe. With companions ``solved`` before it the estimate rests on them (returns);
+    without, there is no estimate (raises :class:`InfeasibleError`)."""
+    if not solved:
+        raise InfeasibleError(
+            f"no error estimate: the companion solve at n = {coarser.discretization.n} is "
+            f"refused ({exc}); estimate a solve with a larger n") from None
+
+
+def with_estimate(bsdf, companions: list, started: float):
+    """``bsdf`` with its error estimate from its solved ``companions`` (in the order of
+    :func:`companion_scenes`) in ``bsdf.info["accuracy"]``, which also records the seconds
+    taken since ``started`` (the :func:`time.perf_counter` at which the companion solves
+    began) up to the estimate made."""
+    bsdf.info["accuracy"] = {**estimate(bsdf, companions),
+                             "seconds": time.perf_counter() - started}
     return bsdf
 
 
-def solve_to_tolerance(scene: Scene, tol: float, solve, log=None):
-    """Solve ``scene`` on the smallest rung of :data:`LADDER` whose error estimate is at most
-    ``tol`` (relative L2 of bin energies, worst incidence).
+class Ladder:
+    """A solve to a tolerance: the rungs of :data:`LADDER` to solve, smallest first, until
+    one's error estimate is at most ``tol`` (relative L2 of bin energies, worst incidence).
+
+    The caller solves each scene that :meth:`rungs` yields and reports the result:
+    :meth:`solved` with the BSDF (True: ``tol`` is met, the BSDF is the answer) or
+    :meth:`refused` with the solver's :class:`InfeasibleError`; after the last rung,
+    :meth:`not_met` raises.
 
     Parameters
     ----------
     scene : Scene
     tol : float
         Requested relative error, in (0, 1).
-    solve : callable
-        ``solve(scene) -> BSDF``: the solver (with the caller's options).
     log : callable, optional
         ``log(str)`` for a line per rung.
 
-    Returns
-    -------
-    BSDF
-        With ``info["accuracy"]`` (:func:`estimate`, plus ``tol``, ``met`` and ``ladder``: the
-        rungs solved with their ``n``, ``md``, seconds and estimates).
-
     Raises
     ------
-    InfeasibleError
-        If the memory or time limits refuse a rung before the tolerance is met; the message
-        gives the best estimate reached and on which discretisation.
+    ValueError
+        For a ``tol`` outside (0, 1).
     """
-    if not (isinstance(tol, (int, float)) and 0.0 < tol < 1.0):
-        raise ValueError(f"tol must be a number in (0, 1), got {tol!r}")
-    plan = make_plan(scene, refuse=False)
-    # the last rungs solved and their bin tables (each rung is the companion of the next two)
-    ladder, solved, tables, best = [], [], [], None
-    for scale in LADDER:
-        rung = scaled(scene, plan.n, plan.md, scale, plan.ms)
-        t0 = time.perf_counter()
-        try:
-            bsdf = solve(rung)
-        except InfeasibleError as exc:
-            if not solved:      # too coarse for a lobe (or over the limits: the last rung says)
-                if scale == LADDER[-1]:
-                    raise
-                continue
-            if best is None:
-                raise
-            raise InfeasibleError(
-                f"tol = {tol:g} not reached: the best estimate is {best[1]['estimate']:.2g} at "
-                f"n = {best[0].info['n']}, md = {best[0].info['md']} "
-                f"({meeting(best[1], tol)}); the next rung (n = "
-                f"{rung.discretization.n}, md = {rung.discretization.md}) is refused: {exc}; "
-                "raise LAYERSIM_MAX_MEMORY / LAYERSIM_MAX_SECONDS or ask for a larger tol"
-            ) from None
-        step = {"n": bsdf.info["n"], "md": bsdf.info["md"],
-                "seconds": time.perf_counter() - t0, "estimate": None}
-        ladder.append(step)
-        solved.append(bsdf)
-        tables.append(bin_table(bsdf))
-        if len(solved) >= 2:
-            acc = estimate(bsdf, solved[-2::-1], tables[::-1])
-            step["estimate"] = acc["estimate"]
-            if log is not None:
-                log(f"n = {step['n']}, md = {step['md']}: estimated error "
-                    f"{acc['estimate']:.2g} ({step['seconds']:.2f} s)")
-            if best is None or acc["estimate"] < best[1]["estimate"]:
-                best = (bsdf, acc)
-            if acc["estimate"] <= tol:
-                bsdf.info["accuracy"] = {**acc, "tol": tol, "met": True, "ladder": ladder}
-                return bsdf
-            del solved[:-2], tables[:-2]
-    bsdf, acc = best
-    raise InfeasibleError(
-        f"tol = {tol:g} not reached within {LADDER[-1]:.2g} times the planned n and md: the "
-        f"best estimate is {acc['estimate']:.2g} at n = {bsdf.info['n']}, md = "
-        f"{bsdf.info['md']} ({meeting(acc, tol)}); ask for a larger tol, or set n and md in "
-        "[discretization]")
+
+    def __init__(self, scene: Scene, tol: float, log=None):
+        if not (isinstance(tol, (int, float)) and 0.0 < tol < 1.0):
+            raise ValueError(f"tol must be a number in (0, 1), got {tol!r}")
+        self.scene, self.tol, self.log = scene, tol, log
+        self.plan = make_plan(scene, refuse=False)
+        #: ``n``, ``md``, seconds and estimate of each rung solved (``info["accuracy"]``)
+        self.steps = []
+        # the last rungs solved and their bin tables (each rung is the companion of the next
+        # two), and the best (bsdf, estimate) so far
+        self._solved, self._tables, self._best = [], [], None
+        self._scale = None
+
+    def rungs(self):
+        """The scenes of the rungs, smallest first (a generator)."""
+        for scale in LADDER:
+            self._scale = scale
+            yield scaled(self.scene, self.plan.n, self.plan.md, scale, self.plan.ms)
+
+    def solved(self, bsdf, seconds: float) -> bool:
+        """Record the solve of the current rung (``seconds`` of wall time); True, with
+        ``bsdf.info["accuracy"]`` (:func:`estimate`, plus ``tol``, ``met`` and ``ladder``:
+        the rungs solved), where its estimate meets ``tol``."""
+        step = {"n": bsdf.info["n"], "md": bsdf.info["md"], "seconds": seconds,
+                "estimate": None}
+        self.steps.append(step)
+        self._solved.append(bsdf)
+        self._tables.append(bin_table(bsdf))
+        if len(self._solved) < 2:
+            return False
+        acc = estimate(bsdf, self._solved[-2::-1], self._tables[::-1])
+        step["estimate"] = acc["estimate"]
+        if self.log is not None:
+            self.log(f"n = {step['n']}, md = {step['md']}: estimated error "
+                     f"{acc['estimate']:.2g} ({step['seconds']:.2f} s)")
+        if self._best is None or acc["estimate"] < self._best[1]["estimate"]:
+            self._best = (bsdf, acc)
+        if acc["estimate"] <= self.tol:
+            bsdf.info["accuracy"] = {**acc, "tol": self.tol, "met": True, "ladder": self.steps}
+            return True
+        del self._solved[:-2], self._tables[:-2]
+        return False
+
+    def refused(self, rung: Scene, exc: InfeasibleError) -> None:
+        """The solve of the current rung ``rung`` was refused with ``exc``: before any rung
+        is solved a rung too coarse for a lobe is skipped (returns); otherwise the ladder
+        ends with ``exc`` or, past the second rung, with the best estimate reached."""
+        if not self._solved:  # too coarse for a lobe (or over the limits: the last rung says)
+            if self._scale == LADDER[-1]:
+                raise exc
+            return
+        if self._best is None:
+            raise exc
+        best, acc = self._best
+        raise InfeasibleError(
+            f"tol = {self.tol:g} not reached: the best estimate is {acc['estimate']:.2g} at "
+            f"n = {best.info['n']}, md = {best.info['md']} ({meeting(acc, self.tol)}); the "
+            f"next rung (n = {rung.discretization.n}, md = {rung.discretization.md}) is "
+            f"refused: {exc}; raise LAYERSIM_MAX_MEMORY / LAYERSIM_MAX_SECONDS or ask for a "
+            "larger tol") from None
+
+    def not_met(self):
+        """Raise :class:`InfeasibleError` after the last rung: ``tol`` is not reached, with
+        the best estimate and its discretisation."""
+        bsdf, acc = self._best
+        raise InfeasibleError(
+            f"tol = {self.tol:g} not reached within {LADDER[-1]:.2g} times the planned n and "
+            f"md: the best estimate is {acc['estimate']:.2g} at n = {bsdf.info['n']}, md = "
+            f"{bsdf.info['md']} ({meeting(acc, self.tol)}); ask for a larger tol, or set n "
+            "and md in [discretization]")

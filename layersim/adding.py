@@ -66,21 +66,9 @@ ORDER_BATCH_ELEMENTS = 1 << 18
 BLAS_SINGLE_BELOW = 512
 
 
-def refuse_boundary(what: str, *ops) -> None:
-    """Refuse stack algebra on operators with smooth dielectric boundaries: their blocks hold
-    the radiance inside the boundary, which :mod:`layersim.boundary` applies only at
-    evaluation."""
-    if any(op.boundary for op in ops):
-        raise OperatorError(
-            f"cannot {what} an operator with a smooth dielectric boundary (roughness 0 at the "
-            "top or bottom of its stack): its blocks describe the light inside that boundary; "
-            "solve the whole stack as one scene instead")
-
-
 def check_pair(top, bottom) -> None:
     """Refuse to stack ``top`` on ``bottom`` unless they share a grid, ``top`` is transmissive
     and the index of the medium between them agrees (either representation)."""
-    refuse_boundary("add", top, bottom)
     if top.grid != bottom.grid:
         raise OperatorError(f"cannot add operators on different grids ({top.grid.rule} n="
                             f"{top.grid.n} over {bottom.grid.rule} n={bottom.grid.n}); "

@@ -3,7 +3,7 @@
 A stack whose top (or bottom) interface is smooth is solved on the Snell-matched grid
 (:func:`layersim.quadrature.snell_matched`) in the directions just inside that boundary, with
 the boundary's internal reflection in the blocks (:func:`layersim.ingredients.smooth.
-boundary_reflector`); ``op.boundary[side]`` records the index outside. Refraction maps an
+boundary_reflector`); the BSDF's ``boundary[side]`` records the index outside. Refraction maps an
 outside cosine ``x`` to ``mu = sqrt(1 - (1 - x^2) / eta^2)`` (``eta`` = inside / outside) and
 keeps the azimuth; the grid's nodes in the escape cone are exactly the images of a quadrature in
 ``x``, so that every sum over what leaves is that quadrature's sum. In the radiance convention
@@ -15,7 +15,7 @@ keeps the azimuth; the grid's nodes in the escape cone are exactly the images of
 boundary, where the factor ``(1 - F)`` is 1 too), plus the boundary's own mirror reflection
 ``F(x_i)``, a delta. Energies use ``1 - F`` without the ``eta^2`` (radiance is compressed into
 the smaller solid angle). :class:`BoundaryEvaluator` wraps the evaluator of the inside
-operator with these factors. A near-specular rough boundary (``op.lobes``,
+operator with these factors. A near-specular rough boundary (the BSDF's ``lobes``,
 :mod:`layersim.lobe`) replaces ``1 - F`` by its rough transmittance and the mirror reflection
 by its microfacet reflection lobe. A lobe on a side without a boundary (a bare near-specular
 conductor) replaces the operator's own delta reflection on that side.
@@ -89,17 +89,28 @@ class Exit:
 
 
 class BoundaryEvaluator:
-    """Evaluation of an operator with smooth boundaries (``op.boundary``), wrapping the
-    evaluator ``inner`` of its inside blocks; same interface as
-    :class:`layersim.isobsdf.IsoEvaluator`."""
+    """Evaluation of an operator with smooth boundaries, wrapping the evaluator ``inner`` of
+    its inside blocks; same interface as :class:`layersim.isobsdf.IsoEvaluator`.
 
-    def __init__(self, op, inner):
+    Parameters
+    ----------
+    op : layersim.operator.Operator
+        The stack's operator, its blocks inside the boundaries.
+    inner : evaluator
+        The evaluator of ``op`` (:data:`layersim.bsdf.EVALUATORS`).
+    boundary : dict
+        ``{"top" | "bottom": index of the medium outside}`` (:attr:`layersim.bsdf.BSDF.boundary`).
+    lobes : dict
+        ``{"top": parameters of a NearSpecularLobe}`` or empty (:attr:`layersim.bsdf.BSDF.lobes`).
+    """
+
+    def __init__(self, op, inner, boundary: dict, lobes: dict):
         self.op = op
         self.inner = inner
         eta_in = {"top": op.eta_top, "bottom": op.eta_bottom}
-        self.lobes = {side: NearSpecularLobe(**p) for side, p in op.lobes.items()}
+        self.lobes = {side: NearSpecularLobe(**p) for side, p in lobes.items()}
         self.exits = {side: Exit(eta_in[side] / outside, op.grid.mu, self.lobes.get(side))
-                      for side, outside in op.boundary.items()}
+                      for side, outside in boundary.items()}
 
     @property
     def table(self):

@@ -64,6 +64,17 @@ def channel_pairs(a: "BSDF", b: "BSDF", mismatch: str) -> list:
     return [(pick(a, c), pick(b, c)) for c in range(max(a.channels, b.channels))]
 
 
+def refuse_boundary(what: str, *bsdfs: "BSDF") -> None:
+    """Refuse stack algebra (``what``: "add", "subtract") on BSDFs with smooth dielectric
+    boundaries: their operators' blocks hold the radiance inside the boundary, which
+    :mod:`layersim.boundary` applies only at evaluation."""
+    if any(b.boundary for b in bsdfs):
+        raise OperatorError(
+            f"cannot {what} a BSDF with a smooth dielectric boundary (roughness 0 at the "
+            "top or bottom of its stack): its blocks describe the light inside that boundary; "
+            "solve the whole stack as one scene instead")
+
+
 def foreign_file(head: bytes, path) -> str:
     """What a file that does not start with :data:`ZIP_MAGIC` is, as far as its first bytes
     (``head``) and name tell, for the message that refuses it as a saved BSDF."""
@@ -77,6 +88,38 @@ def foreign_file(head: bytes, path) -> str:
         return ("a scene file, not a saved layersim BSDF (.lsim); solve it first "
                 "('layersim solve' writes the .lsim file)")
     return "not a saved layersim BSDF (.lsim files are written by BSDF.save and 'layersim solve')"
+
+
+#: Order of the saved parameters of a near-specular interface (:attr:`BSDF.lobes`); files
+#: without the last ones (``k``) load with their defaults.
+_LOBE_KEYS = ("eta", "alpha_u", "alpha_v", "distribution", "rotation", "k")
+
+#: Sides of a stack, in the names of saved boundaries and lobes.
+_SIDES = ("top", "bottom")
+
+
+def _surroundings_arrays(boundary: dict, lobes: dict, prefix: str) -> dict:
+    """A channel's smooth boundaries and near-specular lobes (:attr:`BSDF.boundary`,
+    :attr:`BSDF.lobes`) as named arrays beside its operator's (``{prefix}boundary_{side}``:
+    the index outside; ``{prefix}lobe_{side}``: the lobe's parameters in :data:`_LOBE_KEYS`
+    order, as text)."""
+    d = {f"{prefix}boundary_{side}": np.array(eta) for side, eta in boundary.items()}
+    for side, lobe in lobes.items():
+        d[f"{prefix}lobe_{side}"] = np.array([str(lobe.get(k, 0.0)) for k in _LOBE_KEYS])
+    return d
+
+
+def _read_boundary(d, prefix: str) -> dict:
+    """The smooth boundaries saved by :func:`_surroundings_arrays` (empty if none)."""
+    return {side: float(d[f"{prefix}boundary_{side}"]) for side in _SIDES
+            if f"{prefix}boundary_{side}" in d}
+
+
+def _read_lobes(d, prefix: str) -> dict:
+    """The near-specular lobes saved by :func:`_surroundings_arrays` (empty if none)."""
+    return {side: {k: (str(v) if k == "distribution" else float(v))
+                   for k, v in zip(_LOBE_KEYS, d[f"{prefix}lobe_{side}"])}
+            for side in _SIDES if f"{prefix}lobe_{side}" in d}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -95,14 +138,34 @@ class BSDF:
     plan : layersim.plan.Plan or None
     info : dict
         Scene name, timings and other metadata (saved with the BSDF).
+    boundary : dict
+        Smooth dielectric boundaries kept out of the operators' blocks, ``{"top" | "bottom":
+        index of the medium outside}``, the same for all channels: the blocks then hold the
+        radiance just inside that boundary, on the Snell-matched grid of
+        :func:`layersim.quadrature.snell_matched`, and evaluation applies the boundary's
+        Fresnel transmission and refraction (:mod:`layersim.boundary`). Empty for ordinary
+        stacks.
+    lobes : list of dict
+        Per channel, the near-specular rough boundaries among them, ``{"top": parameters}``
+        of :class:`layersim.lobe.NearSpecularLobe`: their direct reflection is that lobe and
+        their transmittance the rough one (:mod:`layersim.lobe`). On a side without a
+        boundary (a bare near-specular conductor) the lobe replaces the operator's own delta
+        reflection on that side, which stands for it in the adding equations. Empty dicts
+        otherwise.
     """
 
-    def __init__(self, operators: list, plan=None, info: dict | None = None):
+    def __init__(self, operators: list, plan=None, info: dict | None = None,
+                 boundary: dict | None = None, lobes: list | None = None):
         if not operators:
             raise ValueError("a BSDF needs at least one operator")
         self.operators = list(operators)
         self.plan = plan
         self.info = dict(info or {})
+        self.boundary = dict(boundary or {})
+        self.lobes = [{} for _ in self.operators] if lobes is None else [dict(x) for x in lobes]
+        if len(self.lobes) != len(self.operators):
+            raise ValueError(f"lobes holds {len(self.lobes)} entries for "
+                             f"{len(self.operators)} channel(s): give one dict per channel")
         self._evaluators: dict = {}
 
     # ---- basic properties --------------------------------------------------------------
@@ -139,7 +202,9 @@ class BSDF:
         if c not in self._evaluators:
             op = self.operators[c]
             ev = EVALUATORS[op.representation](op)
-            self._evaluators[c] = BoundaryEvaluator(op, ev) if op.boundary or op.lobes else ev
+            if self.boundary or self.lobes[c]:
+                ev = BoundaryEvaluator(op, ev, self.boundary, self.lobes[c])
+            self._evaluators[c] = ev
         return self._evaluators[c]
 
     def series_table(self, c: int):
@@ -154,7 +219,7 @@ class BSDF:
         ops = [op.rotational_average() for op in self.operators]
         if all(a is b for a, b in zip(ops, self.operators)):
             return self
-        return BSDF(ops, info=self.info)
+        return BSDF(ops, info=self.info, boundary=self.boundary, lobes=self.lobes)
 
     def _per_channel(self, fn):
         out = [fn(c) for c in range(self.channels)]
@@ -312,6 +377,7 @@ class BSDF:
                   "info": np.array(json.dumps(self.info, default=str))}
         for c, op in enumerate(self.operators):
             arrays.update(op.to_arrays(prefix=f"c{c}_"))
+            arrays.update(_surroundings_arrays(self.boundary, self.lobes[c], prefix=f"c{c}_"))
         with open(path, "wb") as fh:
             np.savez_compressed(fh, **arrays)
         return path
@@ -358,8 +424,10 @@ class BSDF:
                     raise FileFormatError(f"{path}: format version {version} is newer than "
                                           f"this layersim ({FORMAT_VERSION_ANISO}); upgrade "
                                           "layersim")
-                ops = [from_arrays(d, prefix=f"c{c}_")
-                       for c in range(int(d["channels"]))]
+                channels = range(int(d["channels"]))
+                ops = [from_arrays(d, prefix=f"c{c}_") for c in channels]
+                boundary = _read_boundary(d, prefix="c0_")
+                lobes = [_read_lobes(d, prefix=f"c{c}_") for c in channels]
                 info = json.loads(str(d["info"]))
         except FileFormatError:
             raise
@@ -368,7 +436,7 @@ class BSDF:
             raise FileFormatError(f"{path}: a damaged or truncated layersim BSDF file "
                                   f"({type(exc).__name__}: {exc}); save or solve it again"
                                   ) from None
-        return cls(ops, None, info)
+        return cls(ops, None, info, boundary=boundary, lobes=lobes)
 
     def __repr__(self) -> str:
         op = self.operators[0]

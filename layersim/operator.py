@@ -129,23 +129,13 @@ class Operator(ABC):
     delta : dict
         The delta (specular or straight-through) part of each block per node, ``{block: (h,)}``
         (:mod:`layersim.deltas`): the unscattered transmission of media, smooth interfaces.
-    boundary : dict
-        Smooth dielectric boundaries kept out of the blocks, ``{"top" | "bottom": index of the
-        medium outside}``: the blocks then hold the radiance just inside that boundary, on the
-        Snell-matched grid of :func:`layersim.quadrature.snell_matched`, and the BSDF applies
-        the boundary's Fresnel transmission and refraction when it evaluates
-        (:mod:`layersim.boundary`). Empty for ordinary operators.
-    lobes : dict
-        Near-specular rough boundaries among them, ``{"top": parameters}`` of
-        :class:`layersim.lobe.NearSpecularLobe`: their direct reflection is that lobe and their
-        transmittance the rough one (:mod:`layersim.lobe`). On a side without a boundary (a
-        bare near-specular conductor) the lobe replaces the operator's own delta reflection on
-        that side, which stands for it in the adding equations. Empty otherwise.
+
+    Smooth dielectric boundaries and near-specular lobes applied where a stack is evaluated
+    are the BSDF's (:attr:`layersim.bsdf.BSDF.boundary`, :attr:`~layersim.bsdf.BSDF.lobes`),
+    not the operator's: the same blocks serve inside and outside them.
     """
 
     representation: str = ""
-    boundary: dict = {}
-    lobes: dict = {}
     #: True once an adding step that consumes its operands took this operator's blocks
     #: (:meth:`layersim.aniso.operator.AnisoOperator.consume`).
     consumed: bool = False
@@ -269,18 +259,7 @@ def from_arrays(d, prefix: str = "") -> Operator:
     """An operator of the representation recorded in the saved arrays ``d`` (no
     ``representation`` entry: isotropic)."""
     representation = str(d.get(f"{prefix}representation", "isotropic"))
-    op = representation_class(representation).from_arrays(d, prefix=prefix)
-    op.boundary = {side: float(d[f"{prefix}boundary_{side}"]) for side in ("top", "bottom")
-                   if f"{prefix}boundary_{side}" in d}
-    op.lobes = {side: {k: (str(v) if k == "distribution" else float(v)) for k, v in
-                       zip(_LOBE_KEYS, d[f"{prefix}lobe_{side}"])}
-                for side in ("top", "bottom") if f"{prefix}lobe_{side}" in d}
-    return op
-
-
-#: Order of the saved parameters of a near-specular interface (:attr:`Operator.lobes`); files
-#: without the last ones (``k``) load with their defaults.
-_LOBE_KEYS = ("eta", "alpha_u", "alpha_v", "distribution", "rotation", "k")
+    return representation_class(representation).from_arrays(d, prefix=prefix)
 
 
 @register
@@ -598,10 +577,6 @@ def header_arrays(op, prefix: str) -> dict:
          f"{prefix}eta_bottom": np.array(np.nan if op.eta_bottom is None else op.eta_bottom)}
     for name, vec in op.delta.items():
         d[f"{prefix}delta_{name}"] = vec
-    for side, eta in op.boundary.items():
-        d[f"{prefix}boundary_{side}"] = np.array(eta)
-    for side, lobe in op.lobes.items():
-        d[f"{prefix}lobe_{side}"] = np.array([str(lobe.get(k, 0.0)) for k in _LOBE_KEYS])
     return d
 
 

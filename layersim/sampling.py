@@ -67,7 +67,6 @@ the boundary and refracted out (:class:`BoundarySampler`).
 
 from __future__ import annotations
 
-import copy
 import math
 import weakref
 from typing import NamedTuple
@@ -112,10 +111,10 @@ _SAMPLERS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 def sampler_for(bsdf) -> "FourierSampler":
     """The (cached) sampler of a BSDF (anisotropic ones: see the module docstring)."""
     s = _SAMPLERS.get(bsdf)
-    if s is None and any(op.lobes for op in bsdf.operators):
+    if s is None and any(bsdf.lobes):
         s = LobeSampler(bsdf)
         _SAMPLERS[bsdf] = s
-    if s is None and any(op.boundary for op in bsdf.operators):
+    if s is None and bsdf.boundary:
         s = BoundarySampler(bsdf)
         _SAMPLERS[bsdf] = s
     if s is None:
@@ -136,12 +135,7 @@ class BoundarySampler:
     def __init__(self, bsdf):
         self.target = bsdf
         self.exits = bsdf.evaluator(0).exits
-        inside = []
-        for op in bsdf.operators:
-            op = copy.copy(op)
-            op.boundary = {}
-            inside.append(op)
-        self.inner = sampler_for(type(bsdf)(inside, info=bsdf.info))
+        self.inner = sampler_for(type(bsdf)(bsdf.operators, info=bsdf.info, lobes=bsdf.lobes))
 
     def _side(self, w):
         return np.where(w[..., 2] > 0, "top", "bottom")
@@ -200,12 +194,7 @@ class LobeSampler:
     def __init__(self, bsdf):
         self.target = bsdf
         self.lobes = [bsdf.evaluator(c).lobes["top"] for c in range(bsdf.channels)]
-        rest = []
-        for op in bsdf.operators:
-            op = copy.copy(op)
-            op.lobes = {}
-            rest.append(op)
-        self.rest_bsdf = type(bsdf)(rest, info=bsdf.info)
+        self.rest_bsdf = type(bsdf)(bsdf.operators, info=bsdf.info, boundary=bsdf.boundary)
         self._rest = None
 
     @property

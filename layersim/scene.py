@@ -257,54 +257,61 @@ def _parse_int(ctx: _Ctx, fld: str, value: Any, lo: int, hi: int) -> int:
 
 
 def _parse_scene(data: Mapping[str, Any], source: str | None, default_name: str) -> Scene:
-    ctx = _Ctx(source)
     if not isinstance(data, Mapping):
         raise SceneError(f"a scene must be a table/dict, got {type(data).__name__}", source=source)
     unknown = set(data) - _TOP_FIELDS
     if unknown:
         raise SceneError(f"unknown top-level entry '{sorted(unknown)[0]}' (allowed: "
                          "[[layer]], [stack], [discretization])", source=source)
+    top_ior, name, defaults = _parse_stack(data.get("stack", {}), source, default_name)
+    stacks = _parse_layers(data.get("layer"), source, defaults)
+    disc = _parse_discretization(data.get("discretization", {}), source)
+    return Scene(stacks=stacks, top_ior=top_ior, discretization=disc, name=name, source=source)
 
-    stack = data.get("stack", {})
+
+def _parse_stack(stack: Any, source: str | None, default_name: str) -> tuple:
+    """``(top_ior, name, defaults)`` of the ``[stack]`` table; ``defaults`` holds the values
+    layers inherit."""
     if not isinstance(stack, Mapping):
         raise SceneError("[stack] must be a table", source=source)
     unknown = set(stack) - _STACK_FIELDS
     if unknown:
         raise SceneError(f"unknown field '{sorted(unknown)[0]}' in [stack] (allowed: top_ior, "
                          "name, energy_compensation)", source=source)
-    top_ior = _real(ctx, "stack.top_ior", stack.get("top_ior", 1.0), lo=0.0, hi=_MAX_IOR,
-                    lo_open=True)
+    top_ior = _real(_Ctx(source), "stack.top_ior", stack.get("top_ior", 1.0), lo=0.0,
+                    hi=_MAX_IOR, lo_open=True)
     name = stack.get("name", default_name)
     if not isinstance(name, str) or not name:
         raise SceneError("[stack] name must be a non-empty string", source=source)
-
-    raw_layers = data.get("layer")
-    if raw_layers is None:
-        raise SceneError("no layers: add at least one [[layer]] table", source=source)
-    if not isinstance(raw_layers, (list, tuple)) or not raw_layers:
-        raise SceneError("'layer' must be a non-empty list of [[layer]] tables", source=source)
-
     compensation = stack.get("energy_compensation", "none")
     if compensation not in COMPENSATIONS:
         raise SceneError(f"[stack] energy_compensation: unknown compensation {compensation!r}; "
                          "expected one of " + ", ".join(COMPENSATIONS), source=source)
-    defaults = {"energy_compensation": compensation}
-    per_layer = []
-    for i, raw in enumerate(raw_layers):
-        per_layer.append(_parse_layer(_Ctx(source, layer=i), raw, defaults))
+    return top_ior, name, {"energy_compensation": compensation}
 
+
+def _parse_layers(raw_layers: Any, source: str | None, defaults: Mapping[str, Any]) -> tuple:
+    """The per-channel stacks of the ``[[layer]]`` tables (an opaque layer only at the
+    bottom)."""
+    if raw_layers is None:
+        raise SceneError("no layers: add at least one [[layer]] table", source=source)
+    if not isinstance(raw_layers, (list, tuple)) or not raw_layers:
+        raise SceneError("'layer' must be a non-empty list of [[layer]] tables", source=source)
+    per_layer = [_parse_layer(_Ctx(source, layer=i), raw, defaults)
+                 for i, raw in enumerate(raw_layers)]
     for i, versions in enumerate(per_layer):
         if versions[0].opaque and i != len(per_layer) - 1:
             raise SceneError(f"an opaque {versions[0].kind} layer must be the bottom layer; "
                              f"{len(per_layer) - 1 - i} layer(s) below it would never receive "
                              "light", layer=i, kind=versions[0].kind, field="kind",
                              source=source)
-
     channels = max(len(v) for v in per_layer)
-    stacks = tuple(tuple(v[c] if len(v) == 3 else v[0] for v in per_layer)
-                   for c in range(channels))
+    return tuple(tuple(v[c] if len(v) == 3 else v[0] for v in per_layer)
+                 for c in range(channels))
 
-    disc_raw = data.get("discretization", {})
+
+def _parse_discretization(disc_raw: Any, source: str | None) -> Discretization:
+    """The ``[discretization]`` overrides."""
     if not isinstance(disc_raw, Mapping):
         raise SceneError("[discretization] must be a table", source=source)
     unknown = set(disc_raw) - _DISC_FIELDS
@@ -344,7 +351,4 @@ def _parse_scene(data: Mapping[str, Any], source: str | None, default_name: str)
     if theta_full is not None:
         theta_full = _real(dctx, "discretization.theta_full", theta_full, 0.0, 90.0,
                            lo_open=True, hi_open=True)
-    return Scene(stacks=stacks, top_ior=top_ior,
-                 discretization=Discretization(n=n, md=md, ms=ms, quadrature=quad, tol=tol,
-                                               theta_full=theta_full),
-                 name=name, source=source)
+    return Discretization(n=n, md=md, ms=ms, quadrature=quad, tol=tol, theta_full=theta_full)

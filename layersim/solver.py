@@ -14,7 +14,7 @@ from threadpoolctl import threadpool_limits
 from . import accuracy, adding
 from .aniso import adding as aniso_adding
 from .aniso.plan import STACK_RELERR, STACK_RELERR_INTERMEDIATE
-from .bsdf import BSDF, channel_pairs
+from .bsdf import BSDF, channel_pairs, refuse_boundary
 from .config import settings
 from .errors import InfeasibleError
 from .ingredients.aniso_microfacet import AnisoProjectionStats
@@ -43,6 +43,16 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
     job = OperatorJob(plan, grid, scene, i, stats, projection, device, workspace,
                       [] if notes is None else notes)
     return kind_of(scene.layers[i]).operator(job)
+
+
+def _lobes(plan: Plan, mono: Scene) -> dict:
+    """The near-specular lobes that the BSDF of the one-channel scene ``mono`` evaluates
+    (:attr:`BSDF.lobes`): under a smooth boundary the plan's (a near-specular coat); else those
+    the top layer's kind evaluates in place of its operator (a near-specular conductor alone:
+    :meth:`layersim.layers.LayerKind.evaluated_lobes`)."""
+    if plan.boundary:
+        return dict(plan.lobes)
+    return kind_of(mono.layers[0]).evaluated_lobes(plan, mono, 0)
 
 
 @contextlib.contextmanager
@@ -130,9 +140,8 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
         plain = functools.partial(solve, threads=threads, projection=projection,
                                   device=device, progress=progress)
         if tol is not None:
-            return accuracy.solve_to_tolerance(scene, tol, plain,
-                                               log=print if verbose else None)
-        return accuracy.with_estimate(scene, plain, plain(scene))
+            return _solve_to_tolerance(scene, tol, plain, log=print if verbose else None)
+        return _with_estimate(scene, plain, plain(scene))
     if device is not None or settings().device != "cpu":
         device_for(device)          # an unusable device is refused before the plan
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int)
@@ -150,6 +159,36 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
                       progress or _no_progress)
 
 
+def _solve_to_tolerance(scene: Scene, tol: float, solve_one, log=None) -> BSDF:
+    """Climb the ladder of discretisations of :class:`layersim.accuracy.Ladder`, solving each
+    rung with ``solve_one(scene) -> BSDF``, until a rung meets ``tol``."""
+    ladder = accuracy.Ladder(scene, tol, log)
+    for rung in ladder.rungs():
+        t0 = time.perf_counter()
+        try:
+            bsdf = solve_one(rung)
+        except InfeasibleError as exc:
+            ladder.refused(rung, exc)
+            continue
+        if ladder.solved(bsdf, time.perf_counter() - t0):
+            return bsdf
+    return ladder.not_met()
+
+
+def _with_estimate(scene: Scene, solve_one, bsdf: BSDF) -> BSDF:
+    """``bsdf`` (solved from ``scene``) with its error estimate from the companion solves
+    of :func:`layersim.accuracy.companion_scenes`, each solved by ``solve_one(scene)``."""
+    t0 = time.perf_counter()
+    companions = []
+    for coarser in accuracy.companion_scenes(scene, bsdf.info):
+        try:
+            companions.append(solve_one(coarser))
+        except InfeasibleError as exc:
+            accuracy.companion_refused(coarser, exc, companions)
+            break
+    return accuracy.with_estimate(bsdf, companions, t0)
+
+
 def _no_progress(phase: str, done: int, total: int, what: str) -> None:
     """The default ``progress`` of :func:`solve`: reports nothing."""
 
@@ -164,87 +203,173 @@ def _like_argument(like) -> BSDF | None:
                     f"of a saved one, whose discretisation to reuse, got {type(like).__name__}")
 
 
+def _discretisation_of(like: BSDF, scene: Scene) -> Scene:
+    """``scene`` on the discretisation (rule, n, md, ms) of the solved BSDF ``like``."""
+    op = like.operators[0]
+    return replace(scene, discretization=replace(
+        scene.discretization, n=op.grid.n, md=op.m, quadrature=op.grid.rule,
+        ms=like.info.get("ms", getattr(op, "ms", None)) or scene.discretization.ms))
+
+
+class _Phases:
+    """Progress reports and timings of the phases of a solve (``"projection"``: a step per
+    layer operator built, ``"adding"``: a step per channel; see ``progress`` of
+    :func:`solve`). ``seconds[phase]`` sums the time spent in its steps."""
+
+    def __init__(self, progress, totals: dict):
+        self.progress = progress
+        self.totals = totals
+        self.done = dict.fromkeys(totals, 0)
+        self.seconds = dict.fromkeys(totals, 0.0)
+
+    def start(self, phase: str) -> None:
+        """Report that ``phase`` starts, before its first step."""
+        self.progress(phase, 0, self.totals[phase], "")
+
+    @contextlib.contextmanager
+    def step(self, phase: str, what: str):
+        """Time the block as a step of ``phase`` named ``what``, reported as it starts and
+        after it ends (not when it raises)."""
+        t0 = time.perf_counter()
+        self.progress(phase, self.done[phase], self.totals[phase], what)
+        yield
+        self.seconds[phase] += time.perf_counter() - t0
+        self.done[phase] += 1
+        self.progress(phase, self.done[phase], self.totals[phase], what)
+
+
+class _OperatorCache:
+    """The layer operators of one solve, shared by the channels: keyed by ``(layer,
+    eta_above)``, each is built once, for the first channel that uses it, and dropped when
+    the last channel that uses it takes it (:meth:`take`), so that its adding can release its
+    blocks as it goes.
+
+    Parameters
+    ----------
+    keys : list of list
+        Per channel, the keys of its layer operators, top to bottom.
+    """
+
+    def __init__(self, keys: list):
+        self.keys = keys
+        self.size = len({k for ks in keys for k in ks})
+        self._ops: dict = {}
+
+    def __contains__(self, key) -> bool:
+        return key in self._ops
+
+    def __setitem__(self, key, op) -> None:
+        self._ops[key] = op
+
+    def _later(self, c: int) -> set:
+        return {k for ks in self.keys[c + 1:] for k in ks}
+
+    def owned(self, c: int) -> list[bool]:
+        """Per layer of channel ``c``: True if its operator is used by no later channel and
+        nowhere else in this one, so that channel ``c``'s adding may consume it
+        (``aniso_adding.add(consume=...)``)."""
+        later = self._later(c)
+        return [key not in later and self.keys[c].count(key) == 1 for key in self.keys[c]]
+
+    def take(self, c: int) -> list:
+        """The operators of channel ``c``, top to bottom; those that no later channel uses
+        leave the cache."""
+        ops = [self._ops[key] for key in self.keys[c]]
+        for key in set(self.keys[c]) - self._later(c):
+            del self._ops[key]
+        return ops
+
+
 def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
     t_start = time.perf_counter()
     if like is not None:
-        op = like.operators[0]
-        scene = replace(scene, discretization=replace(
-            scene.discretization, n=op.grid.n, md=op.m, quadrature=op.grid.rule,
-            ms=like.info.get("ms", getattr(op, "ms", None)) or scene.discretization.ms))
+        scene = _discretisation_of(like, scene)
     plan = make_plan(scene)
     if verbose:
         print(plan.report())
-    grid = plan.grid
     t_plan = time.perf_counter() - t_start
-    if plan.representation == "anisotropic":
-        stats = AnisoProjectionStats()
-    else:
-        stats = ProjectionStats()
-    t_layers = t_adding = 0.0
-    cache: dict = {}
-    stacks = []
-    notes: list[str] = []           # diagnostics of the solve, for info["notes"]
-    # every channel's layer keys, to know when an operator is used for the last time: the
-    # coupled adding then releases its blocks as it goes (aniso_adding.add(consume=...))
+    stats = AnisoProjectionStats() if plan.representation == "anisotropic" \
+        else ProjectionStats()
     used = [lp for lp in plan.layers if lp.action != "left out"]
     monos = [scene.channel(c) for c in range(scene.channels)]
-    keys = [[(mono.layers[lp.index], mono.ior_above(lp.index)) for lp in used]
-            for mono in monos]
+    cache = _OperatorCache([[(mono.layers[lp.index], mono.ior_above(lp.index)) for lp in used]
+                            for mono in monos])
     memory.release()                # the plan's temporaries
-    n_ops, built = len({k for ks in keys for k in ks}), 0
-    progress("projection", 0, n_ops, "")
+    phases = _Phases(progress, {"projection": cache.size, "adding": len(monos)})
+    phases.start("projection")
+    notes: list[str] = []           # diagnostics of the solve, for info["notes"]
+    stacks = []
     for c, mono in enumerate(monos):
-        later = {k for ks in keys[c + 1:] for k in ks}
-        owned = [key not in later and keys[c].count(key) == 1 for key in keys[c]]
+        owned = cache.owned(c)
         # anisotropic operators that a coupled adding step will consume wait in the workspace
         # as their blocks are built (aniso_interface_operator(workspace=...))
         workspace = Workspace.for_bytes(plan.memory_bytes) \
-            if plan.representation == "anisotropic" and len(keys[c]) > 1 else Workspace()
-        # projected bottom up: the base of a coated stack is the smaller operator (one block
-        # below an opaque interface), so the coating's projection, the larger transient, runs
-        # beside it rather than the base's projection beside the larger coating
-        for lp, key, own in reversed(list(zip(used, keys[c], owned))):
-            if key not in cache:
-                t0 = time.perf_counter()
-                progress("projection", built, n_ops, f"layer {lp.index} ({lp.kind})")
-                with _singular_as_infeasible(f"layer {lp.index} ({lp.kind})",
-                                             "change its parameters or n / md in "
-                                             "[discretization]"):
-                    cache[key] = _layer_operator(plan, grid, mono, lp.index, stats, projection,
-                                                 device, workspace if own else None, notes)
-                memory.release()
-                built += 1
-                progress("projection", built, n_ops, f"layer {lp.index} ({lp.kind})")
-                t_layers += time.perf_counter() - t0
-        ops = [cache[key] for key in keys[c]]
-        for key in set(keys[c]) - later:
-            del cache[key]
-        t0 = time.perf_counter()
-        progress("adding", c, len(monos), f"channel {c}" if len(monos) > 1 else "")
-        if not ops:
-            stack = IsoOperator.identity(grid, plan.md, scene.top_ior)
-        elif plan.representation == "anisotropic":
-            with _singular_as_infeasible("adding the layers (coupled modes)", _ADDING_ADVICE):
-                stack = _add_mixed(ops, owned, threads, workspace)
-        else:
-            stack = ops[-1]
-            for lp, op in reversed(list(zip(used[:-1], ops[:-1]))):
-                with _singular_as_infeasible(f"adding layer {lp.index} ({lp.kind}) onto the "
-                                             "layers below it", _ADDING_ADVICE):
-                    stack = adding.add(op, stack, threads)
-        del ops
-        if plan.boundary:
-            # the blocks hold the radiance inside the smooth boundaries (layersim.boundary)
-            stack.boundary = dict(plan.boundary)
-            stack.lobes = dict(plan.lobes)
-        t_adding += time.perf_counter() - t0
-        progress("adding", c + 1, len(monos), f"channel {c}" if len(monos) > 1 else "")
-        stacks.append(stack)
-    info = {
+            if plan.representation == "anisotropic" and len(used) > 1 else Workspace()
+        project = functools.partial(_layer_operator, plan, plan.grid, mono, stats=stats,
+                                    projection=projection, device=device, notes=notes)
+        _project_channel(c, used, cache, owned, project, workspace, phases)
+        with phases.step("adding", f"channel {c}" if len(monos) > 1 else ""):
+            stacks.append(_add_channel(plan, used, cache.take(c), owned, threads, workspace,
+                                       scene.top_ior))
+    info = _info(scene, plan, projection, stats, stacks, notes,
+                 {"plan": t_plan, "layers": phases.seconds["projection"],
+                  "projection": stats.seconds, "adding": phases.seconds["adding"],
+                  "total": time.perf_counter() - t_start})
+    if verbose:
+        s = info["seconds"]
+        print(f"solved in {s['total']:.2f} s (plan {s['plan']:.2f} s, layers {s['layers']:.2f} s, "
+              f"adding {s['adding']:.2f} s)")
+    # the operators hold the radiance inside the smooth boundaries (layersim.boundary)
+    return BSDF(stacks, plan, info, boundary=plan.boundary,
+                lobes=[_lobes(plan, mono) for mono in monos])
+
+
+def _project_channel(c: int, used: list, cache: _OperatorCache, owned: list, project,
+                     workspace: Workspace, phases: _Phases) -> None:
+    """Build the operators of channel ``c``'s layers (``used``, their :class:`LayerPlan`)
+    that are not in ``cache`` yet, with ``project(i, workspace=...)`` for layer ``i``; an
+    operator its channel's adding consumes (``owned``) waits in ``workspace``."""
+    # projected bottom up: the base of a coated stack is the smaller operator (one block
+    # below an opaque interface), so the coating's projection, the larger transient, runs
+    # beside it rather than the base's projection beside the larger coating
+    for lp, key, own in reversed(list(zip(used, cache.keys[c], owned))):
+        if key in cache:
+            continue
+        with phases.step("projection", f"layer {lp.index} ({lp.kind})"):
+            with _singular_as_infeasible(f"layer {lp.index} ({lp.kind})",
+                                         "change its parameters or n / md in "
+                                         "[discretization]"):
+                cache[key] = project(lp.index, workspace=workspace if own else None)
+            memory.release()
+
+
+def _add_channel(plan: Plan, used: list, ops: list, owned: list, threads, workspace,
+                 top_ior: float):
+    """The operator of one channel's stack: its layer operators ``ops`` (top to bottom, of the
+    layers ``used``) added with the adding equations, the isotropic ones or the coupled-mode
+    ones (:func:`_add_mixed`, which consumes the ``owned`` operators and empties ``ops``); no
+    layers: the identity."""
+    if not ops:
+        return IsoOperator.identity(plan.grid, plan.md, top_ior)
+    if plan.representation == "anisotropic":
+        with _singular_as_infeasible("adding the layers (coupled modes)", _ADDING_ADVICE):
+            return _add_mixed(ops, owned, threads, workspace)
+    stack = ops[-1]
+    for lp, op in reversed(list(zip(used[:-1], ops[:-1]))):
+        with _singular_as_infeasible(f"adding layer {lp.index} ({lp.kind}) onto the "
+                                     "layers below it", _ADDING_ADVICE):
+            stack = adding.add(op, stack, threads)
+    return stack
+
+
+def _info(scene: Scene, plan: Plan, projection: str, stats, stacks: list, notes: list,
+          seconds: dict) -> dict:
+    """``BSDF.info`` of a solve: the scene, its discretisation, ``seconds`` per phase, the
+    projection's statistics, size of the solved operators and the diagnostics ``notes``."""
+    return {
         "scene": scene.name, "source": scene.source, "channels": scene.channels,
         "n": plan.n, "md": plan.md, "ms": plan.ms, "rule": plan.rule,
-        "seconds": {"plan": t_plan, "layers": t_layers, "projection": stats.seconds,
-                    "adding": t_adding, "total": time.perf_counter() - t_start},
+        "seconds": seconds,
         "projection": {"method": projection, "pairs": stats.pairs,
                        "projected": stats.projected, "refit": stats.refit,
                        "truncated": stats.truncated, "tapered": stats.tapered,
@@ -259,11 +384,6 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
             for i, layer in enumerate(scene.channel(0).layers)
             if getattr(layer, "energy_compensation", "none") != "none" and not layer.smooth],
     }
-    if verbose:
-        s = info["seconds"]
-        print(f"solved in {s['total']:.2f} s (plan {s['plan']:.2f} s, layers {s['layers']:.2f} s, "
-              f"adding {s['adding']:.2f} s)")
-    return BSDF(stacks, plan, info)
 
 
 def _add_mixed(ops, owned, threads, workspace=None):
@@ -332,6 +452,7 @@ def add(top, bottom, threads: int | None = None):
         return _ADDERS[common_representation(top, bottom)](top, bottom, threads)
     if not (isinstance(top, BSDF) and isinstance(bottom, BSDF)):
         raise TypeError("add() takes two BSDF objects (from layersim.solve) or two operators")
+    refuse_boundary("add", top, bottom)
     pairs = channel_pairs(top, bottom, "cannot add a {a}-channel BSDF to a {b}-channel one")
     channels = len(pairs)
     ops = [add(a, b, threads) for a, b in pairs]

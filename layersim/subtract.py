@@ -86,13 +86,12 @@ from threadpoolctl import threadpool_limits
 
 from .adding import BLAS_SINGLE_BELOW
 from .adding import add as iso_add
-from .adding import refuse_boundary
 from . import determined
 from .aniso import basis
 from .aniso.adding import add as coupled_add
 from .aniso.banded import banded_solve
 from .aniso.operator import AnisoOperator, prune
-from .bsdf import BSDF, channel_pairs
+from .bsdf import BSDF, channel_pairs, refuse_boundary
 from .errors import InfeasibleError, OperatorError
 from .operator import BLOCKS, DROP_TOLERANCE, IsoOperator, common_representation, order_weight
 
@@ -175,6 +174,7 @@ def subtract(stack, known, side: str = "top", eps: float | None = None,
     if isinstance(stack, BSDF) or isinstance(known, BSDF):
         if not (isinstance(stack, BSDF) and isinstance(known, BSDF)):
             raise TypeError("subtract() takes two BSDF objects or two operators")
+        refuse_boundary("subtract", stack, known)
         pairs = channel_pairs(stack, known,
                               "cannot subtract a {b}-channel BSDF from a {a}-channel one")
         ops, infos = [], []
@@ -200,7 +200,6 @@ def subtract(stack, known, side: str = "top", eps: float | None = None,
 # ---------------------------------------------------------------------------------------------
 
 def _subtract_op(stack, known, side, eps, noise):
-    refuse_boundary("subtract", stack, known)
     if any(name in op.delta for op in (stack, known) for name in ("Rt", "Rb")):
         # the recovered layer's mirror delta would need the delta algebra inverted
         # (layersim.deltas); without it the delta would be smeared into the smooth part

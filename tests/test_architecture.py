@@ -4,8 +4,11 @@ interface (docs/method.md, "Layout").
 The import graph is read from the source with :mod:`ast`, counting imports inside functions too:
 a cycle hidden in a function is still a cycle for whoever reads or moves the code."""
 import ast
+import io
 import pathlib
 import re
+import textwrap
+import tokenize
 
 import pytest
 
@@ -201,3 +204,108 @@ def test_only_the_layer_kinds_branch_on_the_kind():
                     for c in [node.left, *node.comparators]) and "kind" in ast.unparse(node):
                 found.append(f"{module}:{node.lineno}: {ast.unparse(node)}")
     assert found == []
+
+
+#: Longest function allowed, in lines of code: lines with code on them, not counting blank
+#: lines, comment lines and docstrings (a nested function counts within its parent too).
+MAX_FUNCTION_LINES = 80
+
+#: Functions allowed to be longer, ``"path: qualified name"`` (or a whole module's path), with
+#: what makes them long.
+LONG_FUNCTIONS = {
+    "layersim/cli.py: build_parser": "the argument parser",
+    "kernels/opencl_codegen.py": "the translator's dispatch",
+}
+
+_NOT_CODE = {tokenize.COMMENT, tokenize.NL, tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT,
+             tokenize.ENCODING, tokenize.ENDMARKER}
+
+
+def _code_lines(text: str, tree: ast.Module) -> set:
+    """Numbers of the lines of ``text`` that hold code: a token other than a comment, outside
+    docstrings (of the module, classes and functions)."""
+    lines = set()
+    for tok in tokenize.generate_tokens(io.StringIO(text).readline):
+        if tok.type not in _NOT_CODE:
+            lines.update(range(tok.start[0], tok.end[0] + 1))
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            first = node.body[0] if node.body else None
+            if (isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant)
+                    and isinstance(first.value.value, str)):
+                lines.difference_update(range(first.lineno, first.end_lineno + 1))
+    return lines
+
+
+def function_lengths(text: str) -> dict:
+    """``{qualified name: lines of code}`` of every function and method in the source
+    ``text`` (nested ones as ``outer.inner``)."""
+    tree = ast.parse(text)
+    code = _code_lines(text, tree)
+    out = {}
+
+    def visit(node, prefix):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                name = prefix + child.name
+                if not isinstance(child, ast.ClassDef):
+                    out[name] = sum(1 for n in code if child.lineno <= n <= child.end_lineno)
+                visit(child, name + ".")
+            else:
+                visit(child, prefix)
+
+    visit(tree, "")
+    return out
+
+
+def _long_functions() -> dict:
+    """``{"path: name": lines of code}`` of the functions of all packages over
+    :data:`MAX_FUNCTION_LINES`."""
+    found = {}
+    for path in MODULES.values():
+        rel = path.relative_to(ROOT).as_posix()
+        for name, n in function_lengths(path.read_text()).items():
+            if n > MAX_FUNCTION_LINES:
+                found[f"{rel}: {name}"] = n
+    return found
+
+
+def test_functions_fit_on_a_screen():
+    """A function over :data:`MAX_FUNCTION_LINES` lines of code mixes concerns; split it by
+    concept. Each function named in :data:`LONG_FUNCTIONS` is still over the limit: an entry
+    that no longer allows anything would let the function grow back unnoticed."""
+    found = _long_functions()
+    allowed = lambda name: name in LONG_FUNCTIONS or name.split(":")[0] in LONG_FUNCTIONS
+    assert {name: n for name, n in found.items() if not allowed(name)} == {}
+    for key in LONG_FUNCTIONS:
+        assert (ROOT / key.split(":")[0]).is_file(), key
+        assert ": " not in key or key in found, f"{key} is within the limit: drop its entry"
+
+
+def test_function_lengths_count_code_only():
+    """Blank lines, comments and docstrings do not count; lines of a multi-line string do (a
+    ``#`` in it is no comment); a nested function counts within its parent."""
+    text = textwrap.dedent('''\
+        def f(x):
+            """Doc
+
+            more doc."""
+            # a comment
+
+            y = (x +
+                 1)
+            s = """a
+        # not a comment
+        """
+
+            def g():
+                return y
+            return g, s
+
+
+        class A:
+            def m(self):
+                """Doc."""
+                pass
+        ''')
+    assert function_lengths(text) == {"f": 9, "f.g": 2, "A.m": 2}

@@ -156,7 +156,7 @@ def test_boundary_survives_save_and_load_and_refuses_stack_algebra(tmp_path):
     back = layersim.BSDF.load(path)
     wi = _dirs([10.0, 70.0])
     assert np.allclose(back.albedo(wi)[0], bsdf.albedo(wi)[0], atol=1e-15)
-    assert back.operators[0].boundary == {"top": 1.0}
+    assert back.boundary == bsdf.boundary == {"top": 1.0}
     glass = layersim.solve(layersim.Scene.from_dict({"layer": [
         {"kind": "dielectric", "ior": 1.5, "roughness": 0.3}]}), like=bsdf)
     with pytest.raises(OperatorError, match="smooth dielectric boundary"):
@@ -259,3 +259,21 @@ def test_bad_smooth_boundaries_are_refused_with_the_layer_and_field():
     with pytest.raises(InfeasibleError, match="layer 0 .*same index in every channel"):
         layersim.make_plan(layersim.Scene.from_dict({
             "layer": [{"kind": "dielectric", "ior": [1.5, 1.52, 1.55]}, lam]}))
+
+
+def test_rotational_average_keeps_the_smooth_boundary():
+    """The rotational average of a coupled stack under a smooth coating is evaluated outside
+    the boundary too: its albedo is the incident-azimuth average of the stack's (the average
+    keeps the order-0 coupling exactly and the boundary's transmittance does not depend on
+    the azimuth; 64 azimuths integrate the stack's modes exactly)."""
+    bsdf = layersim.solve(layersim.Scene.from_dict({
+        "discretization": {"n": 24, "md": 9},
+        "layer": [{"kind": "dielectric", "ior": 1.5, "roughness": 0},
+                  {"kind": "conductor", "ior": GOLD, "roughness": [0.2, 0.4]}]}))
+    avg = bsdf.rotational_average()
+    assert bsdf.anisotropic and not avg.anisotropic and avg.boundary == bsdf.boundary
+    for theta in (0.0, 40.0, 70.0):
+        wi = _dirs(np.full(64, theta), phi=np.linspace(0.0, 2 * np.pi, 64, endpoint=False))
+        R, T = bsdf.albedo(wi)
+        R_avg, T_avg = avg.albedo(_dirs(theta))
+        assert abs(R_avg - R.mean()) < 1e-12 and T_avg == 0.0 == T.max(), theta

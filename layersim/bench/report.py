@@ -255,93 +255,126 @@ def _fmt(x, spec=".3g"):
 
 
 def _markdown(results: dict, images: dict, throughput) -> str:
-    m = results["machine"]
-    lines = ["# layersim benchmark report", "",
-             f"- machine: {m.get('cpu')} ({m.get('cores')} cores), {m.get('platform')}",
-             f"- GPU: {', '.join(m['gpu']) if m.get('gpu') else 'none'}",
-             f"- OpenCL: {'; '.join(m.get('opencl') or []) or 'none'}",
-             f"- versions: python {m.get('python')}, numpy {m.get('numpy')}, scipy "
-             f"{m.get('scipy')}, warp {m.get('warp')}, layersim commit "
-             f"{m.get('layersim_commit')}",
-             f"- command: `{m.get('command')}`", f"- date: {m.get('date')}", "",
-             "Errors are relative L2 errors of the bin energies (both sides, all incidence "
-             "angles) against the reference; `albedo err` is max |R - R_ref| + |T - T_ref|.",
-             ""]
+    lines = _header_markdown(results["machine"])
     for s in results["scenes"]:
-        ref = s.get("reference", {})
-        lines += [f"## {s['name']}", ""]
-        if ref.get("kind") == "solver":
-            rungs = [r["n"] for r in s.get("solver", []) if "n" in r]
-            desc = f"solver at n = {ref['n']}, md = {ref['md']}"
-            if rungs:
-                desc += (f" ({ref['n'] / max(rungs):.2g}x the n of the finest solver rung below; "
-                         "each rung's error includes the reference's own, so a rung close to "
-                         "it can show the reference's error rather than its own)")
-            chk = ref.get("montecarlo_check")
-            if chk:
-                desc += (f"; checked against {chk['particles']:.0e} Monte Carlo paths "
-                         f"({chk['backend']}): {100 * chk['within_3sigma']:.1f}% of bins within "
-                         f"3 sigma, albedos within {chk['albedo_sigma']:.1f} sigma")
-        elif ref.get("kind") == "montecarlo":
-            desc = (f"Monte Carlo, {ref.get('particles', 0):.0e} paths (the solver refused: "
-                    f"{ref.get('solver_refused')})")
-        else:
-            desc = ref.get("note", "none")
-        lines += [f"Reference: {desc}.", ""]
-        if s.get("solver"):
-            lines += ["| solver n | md | ms | seconds | error | albedo err |",
-                      "|---:|---:|---:|---:|---:|---:|"]
-            for r in s["solver"]:
-                if "refused" in r:
-                    lines.append(f"| refused at scale {r['scale']} | | | | | {r['refused']} |")
-                    continue
-                lines.append(f"| {r['n']} | {r['md']} | {r.get('ms', 0)} | "
-                             f"{r['seconds']:.2f} | {_fmt(r['error'])} | "
-                             f"{_fmt(r['albedo_error'])} |")
-            lines.append("")
-        if s.get("tolerance"):
-            lines += ["| tol | n | md | seconds | estimate | error |",
-                      "|---:|---:|---:|---:|---:|---:|"]
-            for r in s["tolerance"]:
-                if "refused" in r:
-                    lines.append(f"| {r['tol']:g} | refused | | | | {r['refused']} |")
-                    continue
-                lines.append(f"| {r['tol']:g} | {r['n']} | {r['md']} | {r['seconds']:.2f} | "
-                             f"{_fmt(r['estimate'])} | {_fmt(r['error'])} |")
-            lines.append("")
-        if s.get("montecarlo"):
-            lines += ["| MC backend | paths | seconds | paths/s | error | stderr | in 3 sigma |",
-                      "|---|---:|---:|---:|---:|---:|---:|"]
-            for r in s["montecarlo"]:
-                if "refused" in r:
-                    lines.append(f"| {r['backend']} | {r['particles']:.0e} | refused: "
-                                 f"{r['refused']} | | | | |")
-                    continue
-                lines.append(f"| {r['backend']} | {r['particles']:.0e} | {r['seconds']:.2f} | "
-                             f"{r['paths_per_second']:.3g} | {_fmt(r['error'])} | "
-                             f"{_fmt(r['stderr'])} | {100 * r['within_3sigma']:.1f}% |")
-            lines.append("")
+        lines += [f"## {s['name']}", "", f"Reference: {_reference_markdown(s)}.", ""]
+        lines += _solver_markdown(s) + _tolerance_markdown(s) + _montecarlo_markdown(s)
         if s.get("statistical"):
             lines += statistical_markdown(s["statistical"], _fmt)
         for img in images.get(s["name"], []):
             lines += [f"![{img}]({img})", ""]
     if throughput:
-        lines += ["## Throughput", "", "| scene | backend | paths/s |", "|---|---|---:|"]
-        for (scene, backend), pps in throughput["rows"].items():
-            lines.append(f"| {scene} | {backend} | {pps:.3g} |")
-        lines += ["", f"![throughput]({throughput['file']})", ""]
+        lines += _throughput_markdown(throughput)
     if results["stability"]:
-        counts = {k: sum(1 for c in results["stability"] if c["outcome"] == k)
-                  for k in ("pass", "refused", "fail")}
-        lines += ["## Stability suite", "",
-                  f"{counts['pass']} pass, {counts['refused']} refused, {counts['fail']} fail. "
-                  "Checks: finite; R, T >= 0; R + T <= 1 + 1e-6 (= 1 within 1e-6 when "
-                  "nothing absorbs); reciprocity within 1e-6 of the largest value; albedos "
-                  "within 4 standard errors of Monte Carlo where it runs.", "",
-                  "| case | what | outcome | seconds | detail |", "|---|---|---|---:|---|"]
-        for c in results["stability"]:
-            detail = c["detail"].replace("|", "/")
-            lines.append(f"| {c['name']} | {c.get('what', '')} | **{c['outcome']}** | "
-                         f"{c.get('seconds', 0):.1f} | {detail} |")
-        lines.append("")
+        lines += _stability_markdown(results["stability"])
     return "\n".join(lines)
+
+
+def _header_markdown(m: dict) -> list[str]:
+    """Title, the machine ``m`` (results.json ``machine``) and how errors are measured."""
+    return ["# layersim benchmark report", "",
+            f"- machine: {m.get('cpu')} ({m.get('cores')} cores), {m.get('platform')}",
+            f"- GPU: {', '.join(m['gpu']) if m.get('gpu') else 'none'}",
+            f"- OpenCL: {'; '.join(m.get('opencl') or []) or 'none'}",
+            f"- versions: python {m.get('python')}, numpy {m.get('numpy')}, scipy "
+            f"{m.get('scipy')}, warp {m.get('warp')}, layersim commit "
+            f"{m.get('layersim_commit')}",
+            f"- command: `{m.get('command')}`", f"- date: {m.get('date')}", "",
+            "Errors are relative L2 errors of the bin energies (both sides, all incidence "
+            "angles) against the reference; `albedo err` is max |R - R_ref| + |T - T_ref|.",
+            ""]
+
+
+def _reference_markdown(s: dict) -> str:
+    """What the errors of scene entry ``s`` are measured against, with the Monte Carlo check
+    of a solver reference."""
+    ref = s.get("reference", {})
+    if ref.get("kind") == "solver":
+        rungs = [r["n"] for r in s.get("solver", []) if "n" in r]
+        desc = f"solver at n = {ref['n']}, md = {ref['md']}"
+        if rungs:
+            desc += (f" ({ref['n'] / max(rungs):.2g}x the n of the finest solver rung below; "
+                     "each rung's error includes the reference's own, so a rung close to "
+                     "it can show the reference's error rather than its own)")
+        chk = ref.get("montecarlo_check")
+        if chk:
+            desc += (f"; checked against {chk['particles']:.0e} Monte Carlo paths "
+                     f"({chk['backend']}): {100 * chk['within_3sigma']:.1f}% of bins within "
+                     f"3 sigma, albedos within {chk['albedo_sigma']:.1f} sigma")
+        return desc
+    if ref.get("kind") == "montecarlo":
+        return (f"Monte Carlo, {ref.get('particles', 0):.0e} paths (the solver refused: "
+                f"{ref.get('solver_refused')})")
+    return ref.get("note", "none")
+
+
+def _solver_markdown(s: dict) -> list[str]:
+    """The table of the solver's rungs of scene entry ``s`` (none: no lines)."""
+    if not s.get("solver"):
+        return []
+    lines = ["| solver n | md | ms | seconds | error | albedo err |",
+             "|---:|---:|---:|---:|---:|---:|"]
+    for r in s["solver"]:
+        if "refused" in r:
+            lines.append(f"| refused at scale {r['scale']} | | | | | {r['refused']} |")
+            continue
+        lines.append(f"| {r['n']} | {r['md']} | {r.get('ms', 0)} | "
+                     f"{r['seconds']:.2f} | {_fmt(r['error'])} | "
+                     f"{_fmt(r['albedo_error'])} |")
+    return lines + [""]
+
+
+def _tolerance_markdown(s: dict) -> list[str]:
+    """The table of the solves to a tolerance of scene entry ``s`` (none: no lines)."""
+    if not s.get("tolerance"):
+        return []
+    lines = ["| tol | n | md | seconds | estimate | error |",
+             "|---:|---:|---:|---:|---:|---:|"]
+    for r in s["tolerance"]:
+        if "refused" in r:
+            lines.append(f"| {r['tol']:g} | refused | | | | {r['refused']} |")
+            continue
+        lines.append(f"| {r['tol']:g} | {r['n']} | {r['md']} | {r['seconds']:.2f} | "
+                     f"{_fmt(r['estimate'])} | {_fmt(r['error'])} |")
+    return lines + [""]
+
+
+def _montecarlo_markdown(s: dict) -> list[str]:
+    """The table of the Monte Carlo runs of scene entry ``s`` (none: no lines)."""
+    if not s.get("montecarlo"):
+        return []
+    lines = ["| MC backend | paths | seconds | paths/s | error | stderr | in 3 sigma |",
+             "|---|---:|---:|---:|---:|---:|---:|"]
+    for r in s["montecarlo"]:
+        if "refused" in r:
+            lines.append(f"| {r['backend']} | {r['particles']:.0e} | refused: "
+                         f"{r['refused']} | | | | |")
+            continue
+        lines.append(f"| {r['backend']} | {r['particles']:.0e} | {r['seconds']:.2f} | "
+                     f"{r['paths_per_second']:.3g} | {_fmt(r['error'])} | "
+                     f"{_fmt(r['stderr'])} | {100 * r['within_3sigma']:.1f}% |")
+    return lines + [""]
+
+
+def _throughput_markdown(throughput: dict) -> list[str]:
+    """The best Monte Carlo throughput per scene and backend (:func:`_throughput_plot`)."""
+    lines = ["## Throughput", "", "| scene | backend | paths/s |", "|---|---|---:|"]
+    for (scene, backend), pps in throughput["rows"].items():
+        lines.append(f"| {scene} | {backend} | {pps:.3g} |")
+    return lines + ["", f"![throughput]({throughput['file']})", ""]
+
+
+def _stability_markdown(cases: list) -> list[str]:
+    """The outcomes of the stability suite (:mod:`layersim.bench.stability`)."""
+    counts = {k: sum(1 for c in cases if c["outcome"] == k) for k in ("pass", "refused", "fail")}
+    lines = ["## Stability suite", "",
+             f"{counts['pass']} pass, {counts['refused']} refused, {counts['fail']} fail. "
+             "Checks: finite; R, T >= 0; R + T <= 1 + 1e-6 (= 1 within 1e-6 when "
+             "nothing absorbs); reciprocity within 1e-6 of the largest value; albedos "
+             "within 4 standard errors of Monte Carlo where it runs.", "",
+             "| case | what | outcome | seconds | detail |", "|---|---|---|---:|---|"]
+    for c in cases:
+        detail = c["detail"].replace("|", "/")
+        lines.append(f"| {c['name']} | {c.get('what', '')} | **{c['outcome']}** | "
+                     f"{c.get('seconds', 0):.1f} | {detail} |")
+    return lines + [""]

@@ -170,88 +170,112 @@ def run_scene(path: Path, s: Settings, log=print) -> dict:
            "montecarlo": []}
     mc = montecarlo_module()
     log(f"[{scene.name}]")
-    # ---- reference -----------------------------------------------------------------
-    ref_bins = ref_alb = None
-    try:
-        plan = make_plan(scene)
-        n0, md0 = plan.n, plan.md
-        t0 = time.perf_counter()
-        # the coupled modes' ms grows too: its truncation is the larger error of anisotropic
-        # stacks (layersim.accuracy.scaled)
-        ref = solve(accuracy.scaled(scene, n0, md0, s.reference_scale, plan.ms))
-        ref_bins, ref_alb = _solver_bins(ref, s)
-        out["reference"] = {"kind": "solver", "n": ref.info["n"], "md": ref.info["md"],
-                            "seconds": time.perf_counter() - t0}
-        log(f"  reference: solver n={ref.info['n']} md={ref.info['md']}")
-    except LayersimError as exc:
-        out["reference"] = {"kind": "montecarlo", "solver_refused": str(exc)}
-        n0 = md0 = None
-        log(f"  solver refused: {exc}")
+    plan, ref_bins, ref_alb = _solver_reference(scene, s, out, log)
     if mc is not None:
-        try:
-            b, e, a, ae, sec, used = _mc_bins(mc, scene, s, s.check_particles, s.backends[0])
-        except LayersimError as exc:
-            out["reference"]["montecarlo_refused"] = str(exc)
-            b = None
-        if b is not None:
-            check = {"particles": s.check_particles, "backend": used, "seconds": sec}
-            if ref_bins is None:
-                ref_bins, ref_alb = b, a
-                out["reference"].update(check)
-            else:
-                check["within_3sigma"] = _within(b, ref_bins, e, s.check_particles)
-                check["albedo_sigma"] = float(np.max(np.abs(ref_alb - a) / np.maximum(ae, 1e-15)))
-                out["reference"]["montecarlo_check"] = check
-                log(f"  reference vs {s.check_particles:.0e} paths: "
-                    f"{100 * check['within_3sigma']:.1f}% of bins within 3 sigma, albedo "
-                    f"within {check['albedo_sigma']:.1f} sigma")
+        ref_bins, ref_alb = _montecarlo_check(mc, scene, s, out, ref_bins, ref_alb, log)
     elif ref_bins is None:
         out["reference"]["note"] = "no Monte Carlo backend installed: no reference"
         return out
     out["_ref"] = (ref_bins, ref_alb)
-    # ---- solver ladder --------------------------------------------------------------
-    if n0 is not None:
-        for scale in s.scales:
-            sc = accuracy.scaled(scene, n0, md0, scale, plan.ms)
-            try:
-                t0 = time.perf_counter()
-                b = solve(sc)
-                sec = time.perf_counter() - t0
-            except LayersimError as exc:
-                out["solver"].append({"scale": scale, "refused": str(exc)})
-                continue
-            bins, alb = _solver_bins(b, s)
-            row = {"scale": scale, "n": b.info["n"], "md": b.info["md"], "ms": b.info.get("ms", 0),
-                   "seconds": sec, "error": _error(bins, ref_bins),
-                   "albedo_error": _albedo_error(alb, ref_alb)}
-            out["solver"].append(row)
-            out.setdefault("_solver_bins", {})[scale] = bins
-            log(f"  solver n={row['n']:4d} md={row['md']:5d}: {sec:7.2f} s  error {row['error']:.2e}")
+    if plan is not None:
+        _solver_ladder(scene, plan, s, out, ref_bins, ref_alb, log)
         out["tolerance"] = [_tolerance_row(scene, tol, s, ref_bins, ref_alb, log)
                             for tol in s.tols]
-    # ---- Monte Carlo ladder -----------------------------------------------------------
     if mc is not None:
-        for backend in s.backends:
-            for particles in s.particles:
-                try:
-                    b, e, a, ae, sec, used = _mc_bins(mc, scene, s, particles, backend)
-                except LayersimError as exc:
-                    out["montecarlo"].append({"backend": backend, "particles": particles,
-                                              "refused": str(exc)})
-                    break
-                row = {"backend": used, "particles": particles, "seconds": sec,
-                       "paths_per_second": particles * len(s.angles) / max(sec, 1e-9),
-                       "error": _error(b, ref_bins), "albedo_error": _albedo_error(a, ref_alb),
-                       "stderr": float(np.sqrt(np.sum(e ** 2) / np.sum(ref_bins ** 2))),
-                       "within_3sigma": _within(b, ref_bins, e, particles)}
-                out["montecarlo"].append(row)
-                out["_mc_bins"] = b
-                log(f"  MC {used} {particles:.0e}: {sec:7.2f} s  error {row['error']:.2e} "
-                    f"(stderr {row['stderr']:.1e}, {100 * row['within_3sigma']:.0f}% in 3 sigma)")
-    # ---- statistical model (third method, where it represents the scene) --------------
+        _montecarlo_ladder(mc, scene, s, out, ref_bins, ref_alb, log)
+    # the statistical model: a third method, where it represents the scene
     out["statistical"] = statistical_row(scene, s, ref_bins, ref_alb, _solver_bins, _error,
                                          _albedo_error)
     if "error" in out["statistical"]:
         log(f"  statistical model: {out['statistical']['seconds']:.3f} s  error "
             f"{out['statistical']['error']:.2e}")
     return out
+
+
+def _solver_reference(scene: Scene, s: Settings, out: dict, log):
+    """The reference solve, ``s.reference_scale`` times the planner's discretisation:
+    ``(plan, bins, albedos)`` (:func:`_solver_bins`), recorded in ``out["reference"]``; where
+    the solver refuses the scene, ``(None, None, None)`` and the refusal recorded."""
+    try:
+        plan = make_plan(scene)
+        t0 = time.perf_counter()
+        # the coupled modes' ms grows too: its truncation is the larger error of anisotropic
+        # stacks (layersim.accuracy.scaled)
+        ref = solve(accuracy.scaled(scene, plan.n, plan.md, s.reference_scale, plan.ms))
+        ref_bins, ref_alb = _solver_bins(ref, s)
+        out["reference"] = {"kind": "solver", "n": ref.info["n"], "md": ref.info["md"],
+                            "seconds": time.perf_counter() - t0}
+        log(f"  reference: solver n={ref.info['n']} md={ref.info['md']}")
+    except LayersimError as exc:
+        out["reference"] = {"kind": "montecarlo", "solver_refused": str(exc)}
+        log(f"  solver refused: {exc}")
+        return None, None, None
+    return plan, ref_bins, ref_alb
+
+
+def _montecarlo_check(mc, scene: Scene, s: Settings, out: dict, ref_bins, ref_alb, log):
+    """A long Monte Carlo run (``s.check_particles``): the check of a solver reference
+    (``out["reference"]["montecarlo_check"]``), or the reference itself where the solver
+    refused (``ref_bins`` None). Returns the reference's bins and albedos."""
+    try:
+        b, e, a, ae, sec, used = _mc_bins(mc, scene, s, s.check_particles, s.backends[0])
+    except LayersimError as exc:
+        out["reference"]["montecarlo_refused"] = str(exc)
+        return ref_bins, ref_alb
+    check = {"particles": s.check_particles, "backend": used, "seconds": sec}
+    if ref_bins is None:
+        out["reference"].update(check)
+        return b, a
+    check["within_3sigma"] = _within(b, ref_bins, e, s.check_particles)
+    check["albedo_sigma"] = float(np.max(np.abs(ref_alb - a) / np.maximum(ae, 1e-15)))
+    out["reference"]["montecarlo_check"] = check
+    log(f"  reference vs {s.check_particles:.0e} paths: "
+        f"{100 * check['within_3sigma']:.1f}% of bins within 3 sigma, albedo "
+        f"within {check['albedo_sigma']:.1f} sigma")
+    return ref_bins, ref_alb
+
+
+def _solver_ladder(scene: Scene, plan, s: Settings, out: dict, ref_bins, ref_alb,
+                   log) -> None:
+    """Solves at ``s.scales`` times the planner's discretisation, timed and compared with the
+    reference: rows of ``out["solver"]``, bins in ``out["_solver_bins"]``."""
+    for scale in s.scales:
+        sc = accuracy.scaled(scene, plan.n, plan.md, scale, plan.ms)
+        try:
+            t0 = time.perf_counter()
+            b = solve(sc)
+            sec = time.perf_counter() - t0
+        except LayersimError as exc:
+            out["solver"].append({"scale": scale, "refused": str(exc)})
+            continue
+        bins, alb = _solver_bins(b, s)
+        row = {"scale": scale, "n": b.info["n"], "md": b.info["md"], "ms": b.info.get("ms", 0),
+               "seconds": sec, "error": _error(bins, ref_bins),
+               "albedo_error": _albedo_error(alb, ref_alb)}
+        out["solver"].append(row)
+        out.setdefault("_solver_bins", {})[scale] = bins
+        log(f"  solver n={row['n']:4d} md={row['md']:5d}: {sec:7.2f} s  error {row['error']:.2e}")
+
+
+def _montecarlo_ladder(mc, scene: Scene, s: Settings, out: dict, ref_bins, ref_alb,
+                       log) -> None:
+    """Monte Carlo runs at ``s.particles`` per backend, timed and compared with the
+    reference: rows of ``out["montecarlo"]`` (a backend's first refusal ends its ladder),
+    the last run's bins in ``out["_mc_bins"]``."""
+    for backend in s.backends:
+        for particles in s.particles:
+            try:
+                b, e, a, ae, sec, used = _mc_bins(mc, scene, s, particles, backend)
+            except LayersimError as exc:
+                out["montecarlo"].append({"backend": backend, "particles": particles,
+                                          "refused": str(exc)})
+                break
+            row = {"backend": used, "particles": particles, "seconds": sec,
+                   "paths_per_second": particles * len(s.angles) / max(sec, 1e-9),
+                   "error": _error(b, ref_bins), "albedo_error": _albedo_error(a, ref_alb),
+                   "stderr": float(np.sqrt(np.sum(e ** 2) / np.sum(ref_bins ** 2))),
+                   "within_3sigma": _within(b, ref_bins, e, particles)}
+            out["montecarlo"].append(row)
+            out["_mc_bins"] = b
+            log(f"  MC {used} {particles:.0e}: {sec:7.2f} s  error {row['error']:.2e} "
+                f"(stderr {row['stderr']:.1e}, {100 * row['within_3sigma']:.0f}% in 3 sigma)")

@@ -500,14 +500,14 @@ def export(bsdf: BSDF, path, version: int | None = None, alpha=(0.0, 0.0),
         # the format tabulates cosine series per ordinate pair: a mirror reflection is not a
         # function of the pair, and outside a smooth boundary the ordinates are not the
         # format's (the inside nodes are matched by Snell's law)
-        if op.lobes:
+        if bsdf.lobes[c]:
             raise InfeasibleError(
                 f"channel {c}: this BSDF has a near-specular interface (layersim.lobe), "
                 "solved as smooth transport plus its exact lobe at evaluation; a .bsdf "
                 "file would need about 1 / alpha ordinates to tabulate that lobe; keep the "
                 "solved BSDF (BSDF.save), or export a rougher interface")
-        if op.boundary or any(name in op.delta for name in ("Rt", "Rb")):
-            what = ("a smooth dielectric boundary" if op.boundary
+        if bsdf.boundary or any(name in op.delta for name in ("Rt", "Rb")):
+            what = ("a smooth dielectric boundary" if bsdf.boundary
                     else "a specular (mirror) reflection")
             raise InfeasibleError(
                 f"channel {c}: this BSDF has {what} (a smooth interface, roughness 0), a delta "

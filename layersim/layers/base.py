@@ -237,6 +237,12 @@ class LayerKind:
         raise SceneError(f"the solver has no operator for a {self.name} layer",
                          layer=job.index, kind=self.name)
 
+    def evaluated_lobes(self, plan, scene, i: int) -> dict:
+        """Lobes the BSDF evaluates exactly in place of layer ``i``'s operator
+        (:attr:`layersim.BSDF.lobes`, ``{"top": NearSpecularLobe parameters}``); none by
+        default."""
+        return {}
+
     # ---- walk ------------------------------------------------------------------------------
 
     def walk_boundary(self, scene, i: int) -> WalkBoundary:

@@ -54,6 +54,14 @@ class ConductorKind(InterfaceKind):
     def lobe(self, layer, eta_rel):
         return layer.lobe_width(), "reflection lobe"
 
+    def evaluated_lobes(self, plan, scene, i: int) -> dict:
+        """Alone (on top, nothing below it is seen), a near-specular conductor is its exact
+        microfacet lobe, which its operator's mirror stands for."""
+        if i == 0 and i in plan.near_specular:
+            return {"top": near_specular.conductor_lobe(scene.layers[i],
+                                                        scene.relative_ior(i)).params()}
+        return {}
+
     def special_operator(self, job):
         if job.layer.smooth:
             return smooth.conductor_operator(job)

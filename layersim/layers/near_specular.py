@@ -123,15 +123,16 @@ def coat_operator(job):
     return smooth.dielectric_operator(job, R)
 
 
+def conductor_lobe(layer, eta: complex) -> NearSpecularLobe:
+    """The microfacet reflection lobe of the conductor ``layer`` at relative index ``eta``."""
+    return NearSpecularLobe(eta.real, layer.alpha_u, layer.alpha_v, layer.distribution,
+                            layer.rotation, k=eta.imag)
+
+
 def conductor_operator(job):
     """A mirror whose reflectance is the rough reflected energy; alone, its exact lobe replaces
-    that mirror when the BSDF is evaluated (:attr:`Operator.lobes`)."""
-    layer = job.layer
+    that mirror when the BSDF is evaluated (:meth:`ConductorKind.evaluated_lobes`)."""
     eta = job.scene.relative_ior(job.index)
-    lobe = NearSpecularLobe(eta.real, layer.alpha_u, layer.alpha_v, layer.distribution,
-                            layer.rotation, k=eta.imag)
-    op = smooth_conductor_operator(job.grid, job.plan.md, eta, job.eta_above,
-                                   lobe.reflectance(job.grid.mu))
-    if job.index == 0:
-        op.lobes = {"top": lobe.params()}
-    return op
+    lobe = conductor_lobe(job.layer, eta)
+    return smooth_conductor_operator(job.grid, job.plan.md, eta, job.eta_above,
+                                     lobe.reflectance(job.grid.mu))
