@@ -12,11 +12,11 @@ directions on either side, split into the reflected and the transmitted energy::
 The integral is taken over the microfacet normal ``m`` (the directions are a function of it:
 reflection, Walter et al. 2007 eq. 13-14; refraction, eq. 15-17), against the slope density
 ``D(m) m.z dm`` written in polar slope coordinates: the radial coordinate is its cumulative
-distribution ``u`` (Beckmann: ``r = alpha sqrt(-log(1 - u))``; GGX: ``r = alpha sqrt(u / (1 -
-u))``), so that ``D(m) m.z dm = du dphi / (2 pi)``. Gauss-Legendre nodes in ``u`` and the
-trapezoidal rule in the azimuth of the slope (the integrand is even in it: incidence lies in the
-``xz`` plane) are exact for the smooth parts; the integrand is continuous with kinks where
-``wo`` reaches the horizon or total internal reflection sets in.
+distribution ``u`` (:func:`layersim.kernels.physics.slope_radius`), so that ``D(m) m.z dm =
+du dphi / (2 pi)``. Gauss-Legendre nodes in ``u`` and the trapezoidal rule in the azimuth of
+the slope (the integrand is even in it: incidence lies in the ``xz`` plane) are exact for the
+smooth parts; the integrand is continuous with kinks where ``wo`` reaches the horizon or total
+internal reflection sets in.
 
 With ``unit_fresnel`` the Fresnel factor of a conductor is divided out: the table of Kulla &
 Conty 2017 ("Revisiting physically based shading at Imageworks", sec. "Energy compensation")
@@ -51,15 +51,6 @@ TABLE_NODES = wp.constant(181)
 #: Floats per side of incidence in a boundary's table record: a_R, a_T, g_R, g_T.
 SIDE_FLOATS = wp.constant(4 * 181)
 HALF_PI32 = wp.constant(wp.float32(1.5707963267948966))
-
-
-@wp.func
-def slope_radius(u: wp.float64, alpha: wp.float64, dist: int):
-    """Slope radius whose cumulative slope probability is ``u`` (isotropic roughness)."""
-    one = wp.float64(1.0)
-    if dist == physics.GGX:
-        return alpha * wp.sqrt(u / (one - u))
-    return alpha * wp.sqrt(-wp.log(one - u))
 
 
 @wp.func
@@ -125,7 +116,7 @@ def albedo_kernel(mu: wp.array(dtype=wp.float64), side: wp.float64,
     one = wp.float64(1.0)
     c = mu[j]
     wi = wp.vec3d(wp.sqrt(wp.max(one - c * c, zero)), zero, side * c)
-    rad = slope_radius(u_nodes[a], alpha, dist)
+    rad = physics.slope_radius(u_nodes[a], alpha, dist)
     dphi = wp.float64(3.141592653589793) / wp.float64(n_phi - 1)
     sr = zero
     st = zero

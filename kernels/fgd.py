@@ -32,7 +32,8 @@ PHI_NODES = 32
 def _half_vector_node(wi: wp.vec3d, alpha: wp.float64, u: wp.float64, phi: wp.float64):
     """Half vector at quadrature node ``(u, phi)`` and the mirrored direction ``wo``."""
     one = wp.float64(1.0)
-    t2 = alpha * alpha * u / (one - u)
+    r = physics.slope_radius(u, alpha, physics.GGX)
+    t2 = r * r
     cos_h = one / wp.sqrt(one + t2)
     sin_h = wp.sqrt(wp.max(one - cos_h * cos_h, wp.float64(0.0)))
     h = wp.vec3d(sin_h * wp.cos(phi), sin_h * wp.sin(phi), cos_h)
@@ -55,7 +56,7 @@ def _integrand(wi: wp.vec3d, a: wp.float64, u: wp.float64, phi: wp.float64, eta:
     if fresnel == 0:
         g = physics.smith_g1(wi, h, a, a, physics.GGX) * physics.smith_g1(
             wo, h, a, a, physics.GGX)
-        return g * d / (wp.float64(4.0) * wi[2] * wo[2]) * wo[2] * jac
+        return g * d * physics.microfacet_reflection_factor(wp.float64(1.0), wi, wo) * wo[2] * jac
     return physics.microfacet_eval(wi, wo, eta, k, a, a, physics.GGX) * wo[2] * jac
 
 
@@ -230,7 +231,8 @@ def _lobe_kernel(wi: wp.array(dtype=wp.vec3d), wo: wp.array(dtype=wp.vec3d),
     h = wp.normalize(a + b)
     g = physics.smith_g1(a, h, alpha, alpha, physics.GGX) * physics.smith_g1(
         b, h, alpha, alpha, physics.GGX)
-    out[q] = physics.ndf(h, alpha, alpha, physics.GGX) * g / (wp.float64(4.0) * a[2] * b[2])
+    out[q] = physics.ndf(h, alpha, alpha, physics.GGX) * g * physics.microfacet_reflection_factor(
+        wp.float64(1.0), a, b)
 
 
 @wp.kernel

@@ -123,6 +123,18 @@ def ndf(m: Any, au: Any, av: Any, dist: int):
 
 
 @wp.func
+def slope_radius(u: Any, alpha: Any, dist: int):
+    """Slope radius ``tan(theta_m)`` whose cumulative probability under the isotropic slope
+    distribution of roughness ``alpha`` is ``u`` in [0, 1): ``alpha sqrt(u / (1 - u))`` (GGX)
+    or ``alpha sqrt(-log(1 - u))`` (Beckmann) (Walter et al. 2007, eq. 28 and 35). A
+    quadrature in ``u`` (and the slope azimuth) integrates against ``D(m) m.z dm``."""
+    one = type(u)(1.0)
+    if dist == GGX:
+        return alpha * wp.sqrt(u / (one - u))
+    return alpha * wp.sqrt(-wp.log(one - u))
+
+
+@wp.func
 def smith_lambda(w: Any, au: Any, av: Any, dist: int):
     """Smith's Lambda for direction ``w`` (any hemisphere; uses |w.z|), anisotropic roughness."""
     zero = au * type(au)(0.0)
@@ -211,6 +223,15 @@ def microfacet_smooth_q(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, di
 
 
 @wp.func
+def microfacet_reflection_factor(f: Any, wi: Any, wo: Any):
+    """The microfacet BRDF without ``D(m) G`` for a given Fresnel factor ``f``:
+    ``f / (4 |wi.z wo.z|)`` (Walter et al. 2007, eq. 20; Wang et al. 2008, eq. 2). The reflection
+    branch of :func:`microfacet_factor`; single-view NDF fitting (:mod:`layersim.ndf`) calls it
+    with ``f = 1`` as the paper's fit assumes."""
+    return f / (type(f)(4.0) * wp.abs(wi[2] * wo[2]))
+
+
+@wp.func
 def microfacet_factor(wi: Any, wo: Any, m: Any, eta_i: Any, eta_o: Any, eta: Any, k: Any):
     """The microfacet BSDF without ``D(m) G``: ``F / (4 |wi.z wo.z|)`` in reflection and
     ``|wi.m wo.m| eta_o^2 (1 - F) / (|wi.z wo.z| (eta_i wi.m + eta_o wo.m)^2)`` in refraction
@@ -223,8 +244,8 @@ def microfacet_factor(wi: Any, wo: Any, m: Any, eta_i: Any, eta_o: Any, eta: Any
     cos_io = wp.abs(wi[2] * wo[2])
     if wi[2] * wo[2] > type(eta)(0.0):
         if k > type(eta)(0.0):
-            return fresnel_conductor(wp.abs(ci), eta, k) / (type(eta)(4.0) * cos_io)
-        return fresnel_dielectric(ci, eta) / (type(eta)(4.0) * cos_io)
+            return microfacet_reflection_factor(fresnel_conductor(wp.abs(ci), eta, k), wi, wo)
+        return microfacet_reflection_factor(fresnel_dielectric(ci, eta), wi, wo)
     ft = one - fresnel_dielectric(ci, eta)
     denom = eta_i * ci + eta_o * co
     return wp.abs(ci * co) * eta_o * eta_o * ft / (cos_io * denom * denom)

@@ -1,9 +1,11 @@
 """Cosine-series tools for the semi-analytic projection of microfacet BSDFs.
 
 All series here are *cosine* series ``f(phi) = sum_k c_k cos(k phi)`` on [0, pi] (even,
-2 pi-periodic), batched over rows (one row per ordinate pair). Physics never appears here: the
-peak factors are functions of the slope-space form ``q(phi) = c - d cos(phi)`` whose endpoints
-``q0 = q(0)`` and ``qpi = q(pi)`` the kernels report.
+2 pi-periodic), batched over rows (one row per ordinate pair). No pointwise physics is written
+here: the peak factors are functions of the slope-space form ``q(phi) = c - d cos(phi)`` whose
+endpoints ``q0 = q(0)`` and ``qpi = q(pi)`` the kernels report, their values come from
+``physics.ndf_peak`` (:func:`peak_values`), and what this module derives is their closed-form
+cosine series below, which has no pointwise counterpart in the kernels.
 
 Peak factors (see :mod:`layersim.kernels.physics`)
 --------------------------------------------------
@@ -36,6 +38,8 @@ import math
 import numpy as np
 import scipy.special
 
+from .kernels import pointwise
+
 #: Largest FFT used for a Beckmann peak series; longer series use scipy.special.ive.
 FFT_MAX = 1 << 15
 
@@ -47,11 +51,10 @@ def _qcd(q0, qpi):
 
 
 def peak_values(q: np.ndarray, dist: str) -> np.ndarray:
-    """Peak factor of the NDF at slope-space form ``q`` (mirrors ``physics.ndf_peak``; used only
-    for weights, never as a BSDF value)."""
-    if dist == "ggx":
-        return 1.0 / (1.0 + q) ** 2
-    return np.exp(-q)
+    """Peak factor of the NDF at slope-space form ``q``, shape of ``q``: ``physics.ndf_peak``
+    evaluated by :func:`layersim.kernels.pointwise.ndf_peak` (used for weights and bounds, never
+    as a BSDF value)."""
+    return pointwise.ndf_peak(q, dist)
 
 
 def peak_support(q0, qpi, dist: str, tol: float) -> np.ndarray:

@@ -21,10 +21,11 @@ The error of this split against the Monte Carlo walk (exact for any roughness) i
 
 Both energies are integrals over microfacet normals in slope space (Heitz 2014, sec. 5): the
 slope distribution ``P22`` is mapped to the unit square by its radial inverse CDF
-(``t^2 = -log(1 - u)`` Beckmann, ``u / (1 - u)`` GGX, scaled by ``alpha_u``, ``alpha_v``), with
-Gauss-Legendre nodes in ``u`` and uniform ones in the azimuth; the integrand is the
-visible-normal factor times the event's weight (:func:`layersim.kernels.lobe.facet_events`),
-so that the energies are exactly those the walk samples, up to the quadrature.
+(:func:`layersim.kernels.physics.slope_radius` at unit roughness, scaled by ``alpha_u``,
+``alpha_v``), with Gauss-Legendre nodes in ``u`` and uniform ones in the azimuth; the integrand
+is the visible-normal factor times the event's weight
+(:func:`layersim.kernels.lobe.facet_events`), so that the energies are exactly those the walk
+samples, up to the quadrature.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ import numpy as np
 
 from .kernels.fresnel import fresnel
 from .kernels.lobe import facet_events, microfacet_reflection, reflection_pdf, sample_reflection
+from .kernels.pointwise import slope_radius
 
 #: A dielectric top interface whose narrower roughness ``min(alpha_u, alpha_v)`` is at most
 #: this is solved as a near-specular boundary: its exact projection over rough gold costs
@@ -133,7 +135,7 @@ class NearSpecularLobe:
         nu, nphi = nodes
         u, wu = np.polynomial.legendre.leggauss(nu)
         u, wu = 0.5 * (u + 1.0), 0.5 * wu
-        t = np.sqrt(-np.log1p(-u)) if distribution == "beckmann" else np.sqrt(u / (1.0 - u))
+        t = slope_radius(u, 1.0, distribution)
         phi = (np.arange(nphi) + 0.5) * 2.0 * np.pi / nphi
         sx = -self.au * np.outer(t, np.cos(phi)).ravel()
         sy = -self.av * np.outer(t, np.sin(phi)).ravel()

@@ -309,3 +309,140 @@ def test_function_lengths_count_code_only():
                 pass
         ''')
     assert function_lengths(text) == {"f": 9, "f.g": 2, "A.m": 2}
+
+
+# ---- physics written once (docs/method.md, "Physics, written once") -------------------------
+
+#: Names of functions that compute a physics term: Fresnel and Schlick, the NDFs and their
+#: peak factors, Smith's masking and shadowing, Henyey-Greenstein, refraction, Airy's
+#: thin-film reflectance, Lambert. Outside the kernels a function so named may only delegate
+#: (no arithmetic of its own), unless listed in :data:`PHYSICS_EXCEPTIONS`.
+PHYSICS_NAME = re.compile(r"^_*(fresnel|schlick|beckmann|ggx|smith|masking|shadowing|hg_|henyey|"
+                          r"refract|snell|airy|lambert|ndf$|ndf_(peak|eval|value))",
+                          re.IGNORECASE)
+
+#: Functions named like physics that do arithmetic outside the kernels, and why that is not a
+#: second copy of a formula of ``kernels/physics.py``.
+PHYSICS_EXCEPTIONS = {
+    "layersim.compensation.tables:fresnel_average":
+        "Gauss-Legendre average of physics.fresnel_conductor, whose values a kernel computes",
+    "layersim.ingredients.medium:hg_scaling":
+        "delta-M scaling of HG's Legendre moments g^k (Wiscombe 1977): a series representation "
+        "for the discrete ordinates, tested against physics.hg_eval (tests/test_physics.py)",
+    "layersim.ingredients.medium:hg_orders":
+        "length of HG's Legendre series (the number of Fourier orders it needs)",
+    "layersim.ingredients.medium:hg_components":
+        "Fourier components of HG's Legendre series by the addition theorem, tested against "
+        "physics.hg_eval (tests/test_physics.py)",
+    "layersim.ndf.microfacet:shadowing_table":
+        "Wang et al. 2008 eq. (5) as a quadrature over a table of D (no pointwise formula); "
+        "the check of shadowing_rings",
+    "layersim.ndf.microfacet:shadowing_rings":
+        "the same quadrature on rings of directions by FFT along phi",
+    "layersim.ndf.table:NDFTable.shadowing":
+        "bilinear lookup of the tabulated S(k) that kernels/tabulated.py reads too",
+    "layersim.quadrature:snell_split":
+        "how many ordinates of a Snell-matched grid lie in the escape cone (grid geometry)",
+    "layersim.quadrature:snell_matched":
+        "nodes and weights of the Snell-matched grid: Snell's cosine map of quadrature nodes, "
+        "computed once per grid",
+}
+
+
+def _functions(tree: ast.AST, prefix: str = ""):
+    """``(qualified name, node)`` of every function and method in ``tree``, nested ones too."""
+    for node in ast.iter_child_nodes(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            yield prefix + node.name, node
+            yield from _functions(node, prefix + node.name + ".")
+        elif isinstance(node, ast.ClassDef):
+            yield from _functions(node, prefix + node.name + ".")
+        else:
+            yield from _functions(node, prefix)
+
+
+def _computes(fn: ast.AST) -> bool:
+    """Whether a function does arithmetic of its own (a delegate that only calls, converts
+    and returns does none)."""
+    return any(isinstance(n, ast.BinOp) or (isinstance(n, ast.UnaryOp)
+                                            and not isinstance(n.op, ast.Not))
+               for n in ast.walk(fn))
+
+
+#: Names the package gives a roughness (``self.au`` counts as ``au``).
+ROUGHNESS = {"alpha", "alpha_u", "alpha_v", "au", "av", "a_u", "a_v"}
+
+
+def _roughness(node: ast.AST) -> str | None:
+    if isinstance(node, ast.Name) and node.id in ROUGHNESS:
+        return node.id
+    if isinstance(node, ast.Attribute) and node.attr in ROUGHNESS:
+        return node.attr
+    return None
+
+
+def _squared_roughness(node: ast.AST) -> bool:
+    """``alpha ** 2`` or ``alpha * alpha`` (a product of squared roughnesses counts too)."""
+    if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow):
+        return (_roughness(node.left) is not None and isinstance(node.right, ast.Constant)
+                and node.right.value == 2)
+    if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Mult):
+        name = _roughness(node.left)
+        if name is not None and name == _roughness(node.right):
+            return True
+        return _squared_roughness(node.left) or _squared_roughness(node.right)
+    return False
+
+
+def _physics_outside_kernels(sources: dict) -> list:
+    """Offences against "physics once" in ``{module: source}`` (modules outside the kernels):
+    physics-named functions that compute, a Warp function or kernel defined there, the error
+    function (it enters the package only through Beckmann's Smith Lambda) and a division by a
+    squared roughness (the slope-space form of an NDF, ``tan^2 / alpha^2``)."""
+    found = []
+    for module, text in sources.items():
+        tree = ast.parse(text)
+        for name, fn in _functions(tree):
+            if (PHYSICS_NAME.match(name.split(".")[-1]) and _computes(fn)
+                    and f"{module}:{name}" not in PHYSICS_EXCEPTIONS):
+                found.append(f"{module}:{name} computes a physics term")
+            for dec in getattr(fn, "decorator_list", []):
+                target = dec.func if isinstance(dec, ast.Call) else dec
+                if ast.unparse(target) in ("wp.func", "wp.kernel", "warp.func", "warp.kernel"):
+                    found.append(f"{module}:{name} is a Warp {ast.unparse(target)[3:]}")
+        for node in ast.walk(tree):
+            if ((isinstance(node, ast.Name) and node.id == "erf")
+                    or (isinstance(node, ast.Attribute) and node.attr == "erf")
+                    or (isinstance(node, ast.alias) and node.name.split(".")[-1] == "erf")):
+                found.append(f"{module}:{getattr(node, 'lineno', '?')} uses erf")
+            if (isinstance(node, ast.BinOp) and isinstance(node.op, ast.Div)
+                    and _squared_roughness(node.right)):
+                found.append(f"{module}:{node.lineno} divides by a squared roughness")
+    return sorted(set(found))
+
+
+def test_physics_is_written_once_in_the_kernels():
+    """No module outside ``kernels/`` re-implements a physics term of ``kernels/physics.py``:
+    the host gets values from the Warp functions (``kernels/pointwise.py`` and the other host
+    wrappers), so the solver, the fit and the walk cannot disagree on a formula."""
+    sources = {m: p.read_text() for m, p in MODULES.items()
+               if not m.startswith("layersim.kernels")}
+    assert _physics_outside_kernels(sources) == []
+    listed = {key.split(":")[0] for key in PHYSICS_EXCEPTIONS}
+    assert listed <= set(sources), "an exception names a module that does not exist"
+    defined = {f"{m}:{name}" for m in listed for name, _ in _functions(ast.parse(sources[m]))}
+    assert set(PHYSICS_EXCEPTIONS) <= defined, "an exception names a function that is gone"
+
+
+def test_physics_check_finds_a_formula_and_lets_a_delegate_pass():
+    snippet = ("import numpy as np\nfrom scipy.special import erf\n"
+               "def beckmann_d(t2, a):\n    return np.exp(-t2 / (a * a)) / (np.pi * a * a)\n"
+               "def fresnel(c, eta):\n    return kernel_fresnel(c, eta)\n"
+               "class Lobe:\n    def _smith_g1(self, w):\n        return 1.0 / (1.0 + w)\n"
+               "import warp as wp\n@wp.func\ndef helper(x: float):\n    return x\n"
+               "def weight(h, alpha_u, alpha_v):\n"
+               "    return np.exp(-h[0] ** 2 / alpha_u ** 2 - h[1] ** 2 / (alpha_v * alpha_v))\n")
+    assert _physics_outside_kernels({"m": snippet}) == [
+        "m:15 divides by a squared roughness", "m:2 uses erf",
+        "m:Lobe._smith_g1 computes a physics term", "m:beckmann_d computes a physics term",
+        "m:helper is a Warp func"]

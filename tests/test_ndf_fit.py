@@ -6,6 +6,8 @@ import pytest
 
 from layersim.cli import main
 from layersim.errors import FileFormatError, InfeasibleError
+from layersim.kernels import pointwise as pw
+from layersim.kernels.fresnel import fresnel
 from layersim.ndf import complete as cp
 from layersim.ndf import microfacet as mf
 from layersim.ndf import synthetic as sy
@@ -29,12 +31,11 @@ def _truth(grid, rot, alpha=ALPHA):
 @pytest.mark.parametrize("dist", ["ggx", "beckmann"])
 def test_shadowing_from_the_tabulated_ndf_is_the_smith_term(dist):
     g = HalfGrid(91, 180)
-    fn = mf.ggx_ndf if dist == "ggx" else mf.beckmann_ndf
-    d = fn(g.directions(), 0.2, 0.45)
+    d = pw.ndf(g.directions(), 0.2, 0.45, dist)
     assert g.projected_area(d) == pytest.approx(1.0, abs=1e-3)
     t, p = np.meshgrid(np.radians([5, 30, 60, 75, 85]), np.radians([0, 35, 90, 160, 250]))
     k = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1).reshape(-1, 3)
-    exact = mf.smith_g1(k, 0.2, 0.45, dist)
+    exact = pw.smith_g1(k, 0.2, 0.45, dist)
     assert np.abs(mf.shadowing_table(g, d, k) - exact).max() < 1e-3
     assert np.abs(mf.shadowing_table(g, 7.0 * d, k) - exact).max() < 1e-3    # scale-free
     assert exact.min() < 0.8                                   # the test reaches real shadowing
@@ -42,7 +43,7 @@ def test_shadowing_from_the_tabulated_ndf_is_the_smith_term(dist):
 
 def test_shadowing_on_rings_equals_the_direct_integral():
     g = HalfGrid(31, 60)
-    d = np.roll(mf.ggx_ndf(g.directions(), 0.3, 0.1), 5, axis=1)
+    d = np.roll(pw.ndf(g.directions(), 0.3, 0.1, "ggx"), 5, axis=1)
     tk = np.radians([0.0, 20.0, 70.0, 88.0])
     t, p = np.meshgrid(tk, g.phi, indexing="ij")
     k = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1).reshape(-1, 3)
@@ -52,8 +53,8 @@ def test_shadowing_on_rings_equals_the_direct_integral():
 
 def test_fresnel_of_eq3_limits():
     eta = 1.5
-    assert mf.fresnel_unpolarized(1.0, eta) == pytest.approx(((eta - 1) / (eta + 1)) ** 2)
-    assert mf.fresnel_unpolarized(1e-9, eta) == pytest.approx(1.0, abs=1e-6)
+    assert fresnel(1.0, eta) == pytest.approx(((eta - 1) / (eta + 1)) ** 2)
+    assert fresnel(1e-9, eta) == pytest.approx(1.0, abs=1e-6)
 
 
 def test_measurement_files_round_trip_and_reject_bad_fields(tmp_path):

@@ -189,3 +189,25 @@ def test_henyey_greenstein_is_normalised_with_mean_cosine_g():
         p = _run(_hg, x.size, [wp.array(x, dtype=wp.float64), wp.float64(g)], 1)[0]
         assert 2 * np.pi * np.sum(w * p) == pytest.approx(1.0, abs=1e-10)
         assert 2 * np.pi * np.sum(w * p * x) == pytest.approx(g, abs=1e-9)
+
+
+@pytest.mark.parametrize("g", [0.3, -0.5, 0.8])
+def test_the_solvers_henyey_greenstein_series_sums_to_hg_eval(g):
+    """The discrete ordinates use HG through its Legendre series (moments g^k and the addition
+    theorem, :func:`layersim.ingredients.medium.hg_components`), not through ``hg_eval``: the
+    Fourier sum of its components between directions in the same and in opposite hemispheres
+    is the Warp function, to the series' truncation tolerance (relative to the peak)."""
+    from layersim.ingredients import medium
+    mu = np.cos(np.linspace(0.05, 1.5, 9))
+    s = np.sqrt(1.0 - mu * mu)
+    dphi = np.linspace(0.0, np.pi, 7)
+    same, opp = medium.hg_components(mu, g, medium.legendre_terms(g))
+    peak = (1 + abs(g)) / ((1 - abs(g)) ** 2 * 4 * np.pi)
+    for comp, sign in ((same, 1.0), (opp, -1.0)):
+        series = np.einsum("lab,lp->abp", comp,
+                           np.cos(np.outer(np.arange(comp.shape[0]), dphi)))
+        c = (sign * mu[:, None, None] * mu[None, :, None]
+             + s[:, None, None] * s[None, :, None] * np.cos(dphi))
+        ref = _run(_hg, c.size, [wp.array(c.ravel(), dtype=wp.float64), wp.float64(g)],
+                   1)[0].reshape(c.shape)
+        assert np.abs(series - ref).max() < medium.PHASE_TOLERANCE * peak

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import CloughTocher2DInterpolator
 
+from ..kernels.fresnel import fresnel
 from . import microfacet as mf
 from .halfgrid import HalfGrid
 from .measurements import Measurements
@@ -93,7 +94,7 @@ def _data_on_grid(meas: Measurements, grid: HalfGrid, max_light_theta: float, et
                          "normal; fitting needs at least 16 (raise --max-light-theta?)")
     li, yi = lights[keep], y[keep]
     hq = mf.half_vector(li, o)
-    fres = 1.0 if eta is None else mf.fresnel_unpolarized(np.sum(li * hq, -1), eta)
+    fres = 1.0 if eta is None else fresnel(np.sum(li * hq, -1), eta)
     tq = 4.0 * yi * li[:, 2] * o[2] / fres
     interp = CloughTocher2DInterpolator(li[:, :2], tq, fill_value=np.nan)
     hg = grid.directions()

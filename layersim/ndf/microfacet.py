@@ -1,7 +1,11 @@
-"""Microfacet BRDF with a tabulated or analytic NDF, in float64 numpy (Wang et al. 2008, sec. 3).
+"""Microfacet BRDF with a tabulated or analytic NDF, in float64 (Wang et al. 2008, sec. 3).
 
 The forward model of single-view NDF fitting: it makes synthetic measurements and derives the
-shadowing term S(k) from an NDF given on a :class:`~layersim.ndf.halfgrid.HalfGrid`.
+shadowing term S(k) from an NDF given on a :class:`~layersim.ndf.halfgrid.HalfGrid`. The pointwise
+physics (analytic D, Smith's S, the Fresnel term and the BRDF's product of eq. 2) is that of
+:mod:`layersim.kernels.physics`, evaluated on arrays by :mod:`layersim.kernels.pointwise`; this
+module holds the geometry (half vectors, mirror directions) and the quadratures of eq. (5) over a
+table of D, for which the kernels have no pointwise counterpart.
 
 Conventions (``docs/conventions.md``): unit vectors of shape ``(..., 3)`` in the local frame, z the
 macro-surface normal, ``wi`` toward the light and ``wo`` toward the viewer, both pointing away from
@@ -18,8 +22,8 @@ G = S(i) S(o), eq. (5) S derived from D (after Ashikmin et al. 2000).
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import erf
 
+from ..kernels import pointwise
 from .halfgrid import HalfGrid
 
 
@@ -35,79 +39,11 @@ def reflect(o: np.ndarray, h: np.ndarray) -> np.ndarray:
     return 2.0 * np.sum(h * o, axis=-1, keepdims=True) * h - o
 
 
-def _slope_form(h, alpha_u, alpha_v):
-    h = np.asarray(h, float)
-    return h[..., 0] ** 2 / alpha_u ** 2 + h[..., 1] ** 2 / alpha_v ** 2, h[..., 2]
-
-
-def ggx_ndf(h: np.ndarray, alpha_u: float, alpha_v: float) -> np.ndarray:
-    """Anisotropic GGX (Trowbridge-Reitz) NDF D(h) in 1/sr, shape ``h.shape[:-1]``; 0 for h.z <= 0.
-
-    D(h) = 1 / (pi a_u a_v (h_x^2/a_u^2 + h_y^2/a_v^2 + h_z^2)^2).
-    """
-    s, z = _slope_form(h, alpha_u, alpha_v)
-    d = 1.0 / (np.pi * alpha_u * alpha_v * (s + z * z) ** 2)
-    return np.where(z > 0, d, 0.0)
-
-
-def beckmann_ndf(h: np.ndarray, alpha_u: float, alpha_v: float) -> np.ndarray:
-    """Anisotropic Beckmann NDF D(h) in 1/sr, shape ``h.shape[:-1]``; 0 for h.z <= 0.
-
-    D(h) = exp(-(h_x^2/a_u^2 + h_y^2/a_v^2) / h_z^2) / (pi a_u a_v h_z^4).
-    """
-    s, z = _slope_form(h, alpha_u, alpha_v)
-    zs = np.where(z > 0, z, 1.0)
-    d = np.exp(-s / zs ** 2) / (np.pi * alpha_u * alpha_v * zs ** 4)
-    return np.where(z > 0, d, 0.0)
-
-
-def _projected_alpha_tan(k, alpha_u, alpha_v):
-    """alpha(phi_k) tan(theta_k): the roughness projected on the plane of k times its tangent."""
-    k = np.asarray(k, float)
-    t2 = alpha_u ** 2 * k[..., 0] ** 2 + alpha_v ** 2 * k[..., 1] ** 2
-    return np.sqrt(t2) / np.maximum(k[..., 2], 1e-300)
-
-
-def smith_g1(k: np.ndarray, alpha_u: float, alpha_v: float, distribution: str) -> np.ndarray:
-    """Closed-form Smith shadowing 1 / (1 + Lambda(k)) of the GGX or Beckmann NDF.
-
-    It is the same function as eq. (5) of Wang et al. 2008 evaluated on that NDF (Ashikmin's
-    derivation and Smith's agree for any NDF: both divide the projected area cos(theta_k) by the
-    area of the microfacets facing k), so it checks :func:`shadowing_table`.
-
-    Parameters
-    ----------
-    k : array (..., 3), unit vectors with k.z > 0
-    distribution : "ggx" or "beckmann"
-    """
-    at = _projected_alpha_tan(k, alpha_u, alpha_v)
-    if distribution == "ggx":
-        lam = 0.5 * (np.sqrt(1.0 + at * at) - 1.0)
-    elif distribution == "beckmann":
-        a = 1.0 / np.maximum(at, 1e-300)
-        lam = 0.5 * (erf(a) - 1.0) + np.exp(-a * a) / (2.0 * a * np.sqrt(np.pi))
-    else:
-        raise ValueError(f"distribution must be 'ggx' or 'beckmann', not {distribution!r}")
-    return 1.0 / (1.0 + lam)
-
-
-def fresnel_unpolarized(c: np.ndarray, eta: float) -> np.ndarray:
-    """Unpolarised dielectric Fresnel reflectance, Wang et al. 2008 eq. (3) (Cook & Torrance 1981).
-
-    Parameters
-    ----------
-    c : array, |i . h| (cosine of the angle of incidence on the microfacet)
-    eta : float > 1, relative index of refraction
-    """
-    c = np.abs(np.asarray(c, float))
-    g = np.sqrt(eta * eta + c * c - 1.0)
-    a = (g - c) ** 2 / (2.0 * (g + c) ** 2)
-    b = (c * (g + c) - 1.0) ** 2 / (c * (g - c) + 1.0) ** 2
-    return a * (1.0 + b)
-
-
 def specular_brdf(wi, wo, ndf, shadow, eta: float | None = None) -> np.ndarray:
     """Microfacet BRDF f = D(h) S(i) S(o) F / (4 cos_i cos_o) in 1/sr, Wang et al. 2008 eq. (2, 4).
+
+    ``D`` and ``S`` are evaluated here (they may be tables); the product with the Fresnel and
+    Jacobian factor is :func:`layersim.kernels.pointwise.microfacet_brdf`.
 
     Parameters
     ----------
@@ -120,13 +56,10 @@ def specular_brdf(wi, wo, ndf, shadow, eta: float | None = None) -> np.ndarray:
     -------
     f : array (...), 0 where either direction is below the horizon
     """
-    wi, wo = np.asarray(wi, float), np.asarray(wo, float)
+    wi, wo = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wo, float))
     h = half_vector(wi, wo)
-    ci, co = wi[..., 2], wo[..., 2]
-    f = np.ones(h.shape[:-1]) if eta is None else fresnel_unpolarized(np.sum(wi * h, -1), eta)
-    ok = (ci > 0) & (co > 0)
-    val = ndf(h) * shadow(wi) * shadow(wo) * f / (4.0 * np.where(ok, ci * co, 1.0))
-    return np.where(ok, val, 0.0)
+    f = pointwise.microfacet_brdf(wi, wo, ndf(h), shadow(wi), shadow(wo), eta)
+    return f.reshape(h.shape[:-1])
 
 
 def shadowing_table(grid: HalfGrid, d: np.ndarray, k: np.ndarray, chunk: int = 128) -> np.ndarray:

@@ -1,14 +1,15 @@
 """Synthetic single-view measurements of an analytic microfacet surface, for tests and benchmarks.
 
 The data a gonioreflectometer with one camera and a moving light would record from a surface of
-known GGX or Beckmann NDF (Wang et al. 2008 eq. 2-4, with the exact Smith shadowing of that NDF),
-with optional multiplicative Gaussian noise.
+known GGX or Beckmann NDF (Wang et al. 2008 eq. 2-4, with the exact Smith shadowing of that NDF;
+both from :mod:`layersim.kernels.physics`), with optional multiplicative Gaussian noise.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..kernels import pointwise
 from . import microfacet as mf
 from .measurements import Measurements
 
@@ -32,7 +33,8 @@ def fibonacci_lights(n: int, max_theta_deg: float = 85.0) -> np.ndarray:
 def analytic_ndf(distribution: str, alpha_u: float, alpha_v: float, rotation_deg: float = 0.0):
     """(ndf, shadow) callables of unit vectors (..., 3) for a GGX or Beckmann surface whose
     alpha_u axis lies at azimuth rotation_deg."""
-    fn = {"ggx": mf.ggx_ndf, "beckmann": mf.beckmann_ndf}[distribution]
+    if distribution not in ("ggx", "beckmann"):
+        raise ValueError(f"distribution must be 'ggx' or 'beckmann', not {distribution!r}")
     c, s = np.cos(np.radians(rotation_deg)), np.sin(np.radians(rotation_deg))
 
     def to_local(v):
@@ -40,8 +42,8 @@ def analytic_ndf(distribution: str, alpha_u: float, alpha_v: float, rotation_deg
         return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1],
                          v[..., 2]], axis=-1)
 
-    return (lambda h: fn(to_local(h), alpha_u, alpha_v),
-            lambda k: mf.smith_g1(to_local(k), alpha_u, alpha_v, distribution))
+    return (lambda h: pointwise.ndf(to_local(h), alpha_u, alpha_v, distribution),
+            lambda k: pointwise.smith_g1(to_local(k), alpha_u, alpha_v, distribution))
 
 
 def measure(view, lights, distribution="ggx", alpha_u=0.3, alpha_v=0.6, rotation_deg=0.0,
