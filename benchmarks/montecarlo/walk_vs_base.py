@@ -37,6 +37,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+sys.path.insert(0, str(HERE.parent))
+from checkout import stage, worker_env  # noqa: E402
 GOLD = [0.143552, 3.98397]
 #: Roughly aluminium at red, green and blue (eta + i k near 650 / 550 / 450 nm); the throughput
 #: does not depend on the exact values.
@@ -90,24 +92,10 @@ def worker() -> None:
 
 # ---- driver ------------------------------------------------------------------------------------
 
-def stage(checkout: Path, where: Path) -> Path:
-    """A folder whose ``layersim`` package holds links to the checkout's ``layersim/*`` and to its
-    ``kernels`` and ``montecarlo`` folders, as the installed package lays them out."""
-    pkg = where / "layersim"
-    pkg.mkdir(parents=True)
-    for entry in (checkout / "layersim").iterdir():
-        (pkg / entry.name).symlink_to(entry)
-    for sub in ("kernels", "montecarlo"):
-        (pkg / sub).symlink_to(checkout / sub)
-    return where
-
-
 class Worker:
     def __init__(self, checkout: Path, staging: Path):
         self.site = stage(checkout.resolve(), staging)
-        # the staging folder first; the rest of PYTHONPATH stays (where warp may be installed)
-        path = os.pathsep.join(filter(None, [str(self.site), os.environ.get("PYTHONPATH")]))
-        env = dict(os.environ, PYTHONPATH=path)
+        env = worker_env(self.site)
         self.proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--worker"],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                                      env=env, cwd="/")

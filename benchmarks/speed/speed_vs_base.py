@@ -29,11 +29,14 @@ import os
 import platform
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
+sys.path.insert(0, str(HERE.parent))
+from checkout import stage, worker_env  # noqa: E402
 GOLD = [0.143552, 3.98397]
 COATED = [(0.1, 0.05), (0.1, 0.1), (0.1, 0.3), (0.05, 0.05), (0.3, 0.3)]
 SCENES = ["coated_hg_diffuse.toml", "dusty_gold.toml", "ggx_coated_gold.toml"]
@@ -67,7 +70,10 @@ def worker() -> None:
         th = np.radians(np.atleast_1d(np.asarray(deg, float)))
         return np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], axis=-1)
 
-    print(json.dumps({"layersim": layersim.__file__}), flush=True)
+    import layersim.kernels
+    import layersim.montecarlo
+    print(json.dumps({"layersim": layersim.__file__, "kernels": layersim.kernels.__file__,
+                      "montecarlo": layersim.montecarlo.__file__}), flush=True)
     for line in sys.stdin:
         spec = json.loads(line)
         scene = (Scene.from_toml(spec) if isinstance(spec, str) else Scene.from_dict(spec))
@@ -84,14 +90,19 @@ def worker() -> None:
 # ---- driver ------------------------------------------------------------------------------------
 
 class Worker:
-    def __init__(self, checkout: Path):
-        env = dict(os.environ, PYTHONPATH=str(checkout))
+    def __init__(self, checkout: Path, staging: Path):
+        site = stage(checkout, staging)
         self.proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "--worker"],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                                     env=env, cwd="/")
-        self.module = json.loads(self.proc.stdout.readline())["layersim"]
-        if not self.module.startswith(str(checkout)):
-            raise SystemExit(f"{checkout}: imported layersim from {self.module}")
+                                     env=worker_env(site), cwd="/")
+        line = self.proc.stdout.readline()
+        if not line:
+            raise SystemExit(f"{checkout}: the worker did not start (see its error above)")
+        modules = json.loads(line)
+        for name, path in modules.items():
+            if not path.startswith(str(site)):
+                raise SystemExit(f"{checkout}: imported {name} from {path}")
+        self.module = f"{checkout} ({modules['layersim']})"
 
     def solve(self, spec) -> dict:
         self.proc.stdin.write(json.dumps(spec) + "\n")
@@ -123,7 +134,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--only", help="rows whose label contains this text")
     args = ap.parse_args()
-    base, new = Worker(Path(args.base).resolve()), Worker(ROOT)
+    staging = Path(tempfile.mkdtemp(prefix="speed_vs_base_"))
+    base, new = Worker(Path(args.base), staging / "base"), Worker(ROOT, staging / "new")
     print("# speed_vs_base.py: layersim.solve in this checkout (new) against a base checkout")
     print(f"# command: python benchmarks/speed/speed_vs_base.py --base {args.base} "
           f"--repeat {args.repeat}" + (f" --only '{args.only}'" if args.only else ""))
