@@ -15,9 +15,10 @@ top reflection ``Rt`` (wi.z > 0, wo.z > 0), bottom reflection ``Rb``, top-to-bot
 splines in both elevations, constant beyond the outermost ordinates, sums the cosine
 series in ``dphi`` (a Warp kernel) and returns the positive part of that interpolant. The
 series at the ordinates are non-negative (lobes cut in azimuth are tapered with a non-negative
-kernel, :func:`layersim.fourier.taper_factors`), but cubic weights are partly negative, so on
-the steep flank of a narrow lobe the interpolant between ordinates can undershoot zero by a few
-millionths of the BSDF's peak (docs/method.md, "Non-negative evaluation", measured by
+kernel, :func:`layersim.fourier.taper_factors`), but cubic weights are partly negative, so
+between ordinates the interpolant can undershoot zero: by a few millionths of the BSDF's peak on
+the steep flank of a narrow lobe, by ~1e-3 next to the critical angle of total internal
+reflection (docs/method.md, "Non-negative evaluation", measured by
 ``benchmarks/eval_positivity.py``); those values are returned as 0. ``albedo`` and
 ``bin_energies`` interpolate the incident elevation
 linearly instead: a convex combination of the energies at the ordinates, so that they are never
