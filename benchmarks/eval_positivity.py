@@ -34,11 +34,11 @@ linear interpolation (section ``sources``) by substituting
 
 Usage: python benchmarks/eval_positivity.py [--pairs N] [--grazing N] [--sections S,...]
 [--source-scenes A,B,...] [SCENE[:KEY=VALUE,...] ...] (section ``sources``: coated_gold and
-car_paint by default, N grazing and N uniform pairs; the others: the SCENEs). SCENE is a name in benchmarks/scenes or examples, ``rough_glass``
-(a single rough dielectric interface, alpha 0.3) or a .toml path; KEY=VALUE set
-``[discretization]`` fields over the planner's (default: every scene of benchmarks/scenes,
-examples/car_paint, examples/lacquered_wood and rough_glass). Output:
-benchmarks/eval_positivity.txt.
+car_paint by default, N grazing and N uniform pairs; the others: the SCENEs). SCENE is a name
+in benchmarks/scenes or examples, in :data:`INLINE` (``rough_glass``, ``rotated_conductor``)
+or a .toml path; KEY=VALUE set ``[discretization]`` fields over the planner's (default: every
+scene of benchmarks/scenes, examples/car_paint, examples/lacquered_wood and rough_glass).
+Output: benchmarks/eval_positivity.txt.
 """
 import argparse
 import contextlib
@@ -62,9 +62,13 @@ ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "benchmarks" / "scenes"
 EXAMPLES = ROOT / "examples"
 #: Scenes given inline: a single rough dielectric interface (all four blocks), whose interpolant
-#: undershoots next to the critical angle.
+#: undershoots next to the critical angle, and a rotated anisotropic conductor, whose coupled
+#: modes (|s| <= ms) are cut without taper.
 INLINE = {"rough_glass": {"stack": {"name": "rough_glass"},
-                          "layer": [{"kind": "dielectric", "ior": 1.5, "roughness": 0.3}]}}
+                          "layer": [{"kind": "dielectric", "ior": 1.5, "roughness": 0.3}]},
+          "rotated_conductor": {"stack": {"name": "rotated_conductor"},
+                                "layer": [{"kind": "conductor", "ior": [0.2, 3.0],
+                                           "roughness": [0.15, 0.45], "rotation": 20.0}]}}
 DEFAULT_SCENES = (sorted(p.stem for p in SCENES.glob("*.toml"))
                   + ["car_paint", "lacquered_wood", "rough_glass"])
 SOURCE_SCENES = ("coated_gold", "car_paint")
