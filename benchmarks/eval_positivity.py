@@ -1,10 +1,10 @@
 """Negative values of ``BSDF.eval``: where they come from, and what keeping them away changes.
 
-Three sections (all float64, fixed seeds):
+Four sections (all float64, fixed seeds):
 
 ``sources``
     Which candidate makes the spline interpolant negative, for a few scenes: the same solve with
-    the Lanczos sigma factors ``sinc(l / m)`` on lobes cut in azimuth (the previous taper), with
+    the Lanczos sigma factors ``sinc(l / m)`` on lobes cut in azimuth ('before'), with
     no taper (plain truncation), with the sigma factors and twice the orders, and with the
     Jackson kernel factors (:func:`layersim.fourier.taper_factors`, the library's); each
     evaluated with the cubic interpolation in the elevations and with linear interpolation
@@ -30,7 +30,7 @@ Three sections (all float64, fixed seeds):
     degrees of the specular azimuth, and the relative L2 error near the peak (pairs with the
     model above 5 % of its maximum), for both tapers.
 
-The previous reconstruction is reproduced by substituting the sigma factors for
+The 'before' reconstruction is made by substituting the sigma factors for
 ``layersim.fourier.taper_factors`` during its solve, the only difference between the two solves;
 linear interpolation (section ``sources``) by substituting
 :func:`layersim.interpolation.hat_weights` for the spline weights of ``eval``.

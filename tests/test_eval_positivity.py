@@ -4,9 +4,9 @@ Lobes cut in azimuth are tapered with the Jackson kernel (:func:`layersim.fourie
 a non-negative kernel, so that the series at the ordinates stay non-negative; ``eval`` returns the
 positive part of the cubic spline interpolant between them, which may undershoot only slightly on
 the steep flank of a narrow lobe. The tests check the kernel, the series at the ordinates of every
-projection path (with the previous taper, Lanczos sigma factors, as the counter-example that gives
-them their power), and scan random direction pairs of the bench scenes and the example car paint
-and lacquered wood. ``benchmarks/eval_positivity.py`` measures the same before and after, and
+projection path (with Lanczos sigma factors as the taper, the counter-example that gives them
+their power), and scan random direction pairs of the bench scenes and the example car paint
+and lacquered wood. ``benchmarks/eval_positivity.py`` measures the same with either taper, and
 covers the anisotropic bench scenes, whose solves and evaluations at the default plans take
 minutes on two cores.
 """
@@ -32,7 +32,7 @@ UNDERSHOOT = 1e-5
 
 
 def sigma_factors(m):
-    """The previous taper (Lanczos sigma factors), whose kernel has negative side lobes."""
+    """Lanczos sigma factors, a taper whose kernel has negative side lobes."""
     return np.sinc(np.arange(m) / m)
 
 
