@@ -283,11 +283,13 @@ def _ragged_dct_kernel(f: wp.array(dtype=wp.float64), half: wp.array(dtype=wp.in
 
 @wp.kernel
 def _truncate_kernel(c: wp.array2d(dtype=wp.float64), m: int, relerr: wp.float64,
-                     taper: wp.array(dtype=wp.int32), cut: wp.array(dtype=wp.int32)):
+                     taper: wp.array(dtype=wp.int32), factors: wp.array(dtype=wp.float64),
+                     cut: wp.array(dtype=wp.int32)):
     """Per pair: series computed to ``c.shape[1] >= m`` orders are cut to ``m``. A coefficient at
     or past ``m`` above ``relerr |c_0|`` marks the pair truncated (``cut``); otherwise orders past
-    the last one above ``relerr |c_0|`` are zeroed. Rows with ``taper`` get Lanczos sigma
-    factors ``sinc(l / m)``. Same rule as ``layersim.ingredients.numeric`` on the host."""
+    the last one above ``relerr |c_0|`` are zeroed. Rows with ``taper`` are multiplied by
+    ``factors`` (m,) (the host passes the Jackson kernel's). Same rule as
+    ``layersim.ingredients.numeric`` on the host."""
     p = wp.tid()
     extra = c.shape[1]
     thr = relerr * wp.max(wp.abs(c[p, 0]), wp.float64(1e-300))
@@ -305,18 +307,18 @@ def _truncate_kernel(c: wp.array2d(dtype=wp.float64), m: int, relerr: wp.float64
     for l in range(m):
         if l >= length:
             c[p, l] = wp.float64(0.0)
-        elif taper[p] != 0 and l > 0:
-            x = wp.float64(wp.pi) * wp.float64(l) / wp.float64(m)
-            c[p, l] = c[p, l] * wp.sin(x) / x
+        elif taper[p] != 0:
+            c[p, l] = c[p, l] * factors[l]
 
 
 def ragged_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, half: np.ndarray,
                          orders: int, m: int, relerr: float, taper: np.ndarray,
-                         device=None):
+                         factors: np.ndarray, device=None):
     """Trapezoidal cosine series of each pair with its own ``2 half[p]`` samples per period
     (``half`` powers of two), ``orders`` coefficients, then cut to ``m`` orders as described in
-    :func:`_truncate_kernel`. Pairs should be sorted by ``half`` (one launch per distinct
-    value; unsorted input works but launches more often).
+    :func:`_truncate_kernel` (rows with ``taper`` multiplied by ``factors``, shape (m,)). Pairs
+    should be sorted by ``half`` (one launch per distinct value; unsorted input works but
+    launches more often).
 
     Returns
     -------
@@ -355,7 +357,9 @@ def ragged_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, half: 
                   outputs=[coef])
         wp.launch(_truncate_kernel, dim=P, device=dev,
                   inputs=[coef, int(m), wp.float64(relerr),
-                          host_array(taper, wp.int32, dev)], outputs=[cut])
+                          host_array(taper, wp.int32, dev),
+                          host_array(np.asarray(factors, float)[:m], wp.float64, dev)],
+                  outputs=[cut])
     return coef, cut
 
 

@@ -12,10 +12,15 @@ top reflection ``Rt`` (wi.z > 0, wo.z > 0), bottom reflection ``Rb``, top-to-bot
 ``Ttb`` (wi.z > 0, wo.z < 0) and ``Tbt``.
 
 ``eval`` interpolates the Fourier coefficients between ordinates with cubic (Catmull-Rom type)
-splines in both elevations, constant beyond the outermost ordinates, and sums the cosine
-series in ``dphi`` (a Warp kernel). Cubic weights are partly negative, so next to a sharp edge of
-a lobe (the critical angle of total internal reflection) ``eval`` can undershoot slightly below
-zero; it is not clamped. ``albedo`` and ``bin_energies`` interpolate the incident elevation
+splines in both elevations, constant beyond the outermost ordinates, sums the cosine
+series in ``dphi`` (a Warp kernel) and returns the positive part of that interpolant. The
+series at the ordinates are non-negative (lobes cut in azimuth are tapered with a non-negative
+kernel, :func:`layersim.fourier.taper_factors`), but cubic weights are partly negative, so
+between ordinates the interpolant can undershoot zero: by a few millionths of the BSDF's peak on
+the steep flank of a narrow lobe, by ~1e-3 next to the critical angle of total internal
+reflection (docs/method.md, "Non-negative evaluation", measured by
+``benchmarks/eval_positivity.py``); those values are returned as 0. ``albedo`` and
+``bin_energies`` interpolate the incident elevation
 linearly instead: a convex combination of the energies at the ordinates, so that they are never
 negative and never exceed 1 where the ordinates do not. Delta parts (the unscattered
 transmission through media, the mirror reflection of smooth interfaces; :mod:`layersim.deltas`)
@@ -244,11 +249,18 @@ class BSDF:
         Returns
         -------
         ndarray, shape (...) (or (..., 3) for RGB)
+            Never negative: the positive part of the spline interpolant (module docstring).
             Zero for configurations whose block is left out (opaque stack lit from below) and on
             the horizon (z = 0). Delta parts (unscattered transmission of media, mirror
             reflection and refraction of smooth interfaces) are not included: see
             :meth:`specular`.
         """
+        return np.maximum(self.interpolant(wi, wo), 0.0)
+
+    def interpolant(self, wi, wo) -> np.ndarray:
+        """The spline interpolant of the solved series that :meth:`eval` takes the positive
+        part of (1/sr; same arguments and shape). Between ordinates it can undershoot zero
+        slightly (module docstring); ``benchmarks/eval_positivity.py`` measures by how much."""
         wi, wo, shape = direction_pairs(wi, wo)
         return self._per_channel(lambda c: self.evaluator(c).eval(wi, wo).reshape(shape))
 

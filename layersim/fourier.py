@@ -146,6 +146,34 @@ def cos_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+def taper_factors(m: int) -> np.ndarray:
+    """Jackson kernel factors ``g_0 .. g_{m-1}`` (``g_0 = 1``) that a cosine series cut at
+    ``m`` orders is multiplied with, so that it blurs instead of ringing.
+
+    ``sum_l g_l c_l cos(l phi)`` is the series of ``f`` convolved with the Jackson kernel
+    ``K_m(phi) = (1 / 2 pi) (1 + 2 sum_{0 < l < m} g_l cos(l phi))``, which is non-negative
+    (the squared modulus of a trigonometric polynomial of degree ``m - 1``, by construction;
+    Weisse, Wellein, Alvermann & Fehske 2006, Rev. Mod. Phys. 78, 275, sec. II.C.3, eq. (71)
+    with ``N = m``): the tapered series of a non-negative ``f`` is non-negative at every
+    azimuth, whatever ``m``. Lanczos sigma factors ``sinc(l / m)``, whose kernel has side
+    lobes down to -4.8 % of its peak, are not. Order 0, hence energy, is unchanged; order
+    ``l`` changes by ``1 - g_l ~ (pi l / m)^2 / 2``, and the kernel's half-maximum width
+    is ~``2.4 pi / m`` (1.36 times that of the sigma factors).
+
+    Parameters
+    ----------
+    m : int
+        Orders kept (>= 1).
+
+    Returns
+    -------
+    ndarray, shape (m,)
+    """
+    n = np.arange(m)
+    a = math.pi / (m + 1)
+    return ((m - n + 1) * np.cos(a * n) + np.sin(a * n) / math.tan(a)) / (m + 1)
+
+
 @functools.lru_cache(maxsize=16)
 def _gl(n):
     """Gauss-Legendre nodes and weights on [0, 1] (cached: computing them is an eigenproblem)."""

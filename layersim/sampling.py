@@ -23,19 +23,22 @@ then has the constant weight ``E(wi)`` (perfect importance sampling of the inter
 
 Negative values
 ---------------
-Cubic interpolation undershoots slightly below zero next to sharp edges of a lobe (``eval`` is not
-clamped; see :mod:`layersim.bsdf`), and truncated series ring. The *sampling* density is kept
+The series at the ordinates are non-negative up to small projection errors next to the critical
+angle (lobes cut in azimuth are tapered with a non-negative kernel), but cubic interpolation
+between ordinates undershoots slightly below zero next to sharp edges of a lobe (``eval`` returns
+the positive part of the interpolant; see :mod:`layersim.bsdf`). The *sampling* density is kept
 non-negative, and ``pdf`` reports exactly the density that is sampled:
 
 * elevation: in an interval between ordinates where the interpolated ``f_0`` is negative at one
   of the four nodes involved or the cubic dips below zero, the sampler (and ``pdf``) use the
   linear interpolant of its two end values clamped to ``>= 0`` instead, and sample the azimuth
   uniformly there;
-* azimuth elsewhere: the density is ``max(g, 0) / (2 pi g_0)``. Where ``g`` is negative somewhere,
-  inverting its integral follows ``g`` only up to the negative mass, so ``pdf`` integrates to
-  ``1 + `` that mass (2e-6 for coated gold at 85 degrees, 5e-6 for rough glass at 30
-  degrees, exactly 1 where nothing rings: see ``tests/test_sampling.py``);
-* weights are ``max(f, 0) |wo.z| / pdf`` per channel (never negative).
+* azimuth elsewhere: the density is ``max(g, 0) / (2 pi g_0)``, the shape of ``eval`` (the
+  positive part of the same interpolant) for a one-channel BSDF. Where ``g`` is negative
+  somewhere, inverting its integral follows ``g`` only up to the negative mass, so ``pdf``
+  integrates to ``1 + `` that mass (4.6e-5 for rough glass lit from inside at 140 degrees, 1
+  where the interpolant is non-negative: see ``tests/test_bsdf_sampling.py``);
+* weights are ``eval(wi, wo) |wo.z| / pdf`` per channel (never negative).
 
 RGB
 ---
@@ -410,8 +413,8 @@ class FourierSampler:
 
 def _sample_result(target, wi: np.ndarray, wo: np.ndarray, pdf: np.ndarray, shape: tuple):
     """``(wo, weight, pdf)`` of a batch of samples in the caller's ``shape``: ``weight`` is
-    ``f |wo.z| / pdf`` per channel (never negative: the cubic interpolation of ``eval`` may
-    undershoot slightly), and samples with ``pdf = 0`` (none drawn) return ``wo = 0`` and
+    ``f |wo.z| / pdf`` per channel (never negative: ``f`` is ``target.eval``, the positive part
+    of the interpolant), and samples with ``pdf = 0`` (none drawn) return ``wo = 0`` and
     weight 0 (:class:`Sample`). ``wi``, ``wo`` (Q, 3) and ``pdf`` (Q,) are flat; ``wo`` is
     modified."""
     good = pdf > 0
@@ -421,7 +424,7 @@ def _sample_result(target, wi: np.ndarray, wo: np.ndarray, pdf: np.ndarray, shap
     g = np.flatnonzero(good)
     if g.size:
         f = target.eval(wi[g], wo[g]).reshape(g.size, nch)
-        weight[g] = np.maximum(f, 0.0) * (np.abs(wo[g, 2]) / pdf[g])[:, None]
+        weight[g] = f * (np.abs(wo[g, 2]) / pdf[g])[:, None]
     weight = weight[:, 0] if nch == 1 else weight
     return Sample(wo.reshape(shape + (3,)), weight.reshape(shape + weight.shape[1:]),
                   pdf.reshape(shape))

@@ -141,7 +141,7 @@ def test_grazing_peaks_are_kept_when_asked(layer, fresnel):
     """A rough interface (alpha 0.1; gold, and the reflection of glass) lit at 85 and 88
     degrees: BSDF values near the reflection peak (f > 5 % of its maximum) within 1e-2
     relative L2 of an independent float64 evaluation of the same microfacet model, with
-    [discretization] theta_full = 89 and n = 400; the default plan tapers those orders (35-65 %
+    [discretization] theta_full = 89 and n = 400; the default plan tapers those orders (51-77 %
     off)."""
     scene = {"layer": [layer]}
     sharp = layersim.solve({**scene, "discretization": {"theta_full": 89, "n": 400}})

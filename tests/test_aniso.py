@@ -928,8 +928,9 @@ def _rotate_z(v, psi):
 
 @pytest.mark.slow
 def test_rotational_average_is_the_mean_over_frame_rotations_and_sampling_is_unbiased():
-    """The isotropic proposal of anisotropic sampling equals the BSDF averaged over rotations
-    of both directions about the normal, and weights drawn with it average to the albedo."""
+    """The isotropic proposal of anisotropic sampling equals the BSDF's interpolant averaged
+    over rotations of both directions about the normal (an identity of the linear interpolant;
+    eval is its positive part), and weights drawn with it average to the albedo."""
     scene = layersim.Scene.from_dict({"layer": [
         {"kind": "conductor", "ior": [0.2, 3.0], "roughness": [0.15, 0.45], "rotation": 20.0}],
         "discretization": {"n": 48, "md": 64}})
@@ -939,8 +940,8 @@ def test_rotational_average_is_the_mean_over_frame_rotations_and_sampling_is_unb
     wi = unit(rng.uniform(10, 70, 6), rng.uniform(0, 360, 6))
     wo = unit(rng.uniform(10, 70, 6), rng.uniform(0, 360, 6))
     psi = np.linspace(0.0, 2 * np.pi, 256, endpoint=False)
-    mean = np.mean([bsdf.eval(_rotate_z(wi, p), _rotate_z(wo, p)) for p in psi], axis=0)
-    np.testing.assert_allclose(avg.eval(wi, wo), mean, rtol=1e-6, atol=1e-9 * mean.max())
+    mean = np.mean([bsdf.interpolant(_rotate_z(wi, p), _rotate_z(wo, p)) for p in psi], axis=0)
+    np.testing.assert_allclose(avg.interpolant(wi, wo), mean, rtol=1e-6, atol=1e-9 * mean.max())
     # importance sampling: E[weight] = R(wi), and the returned pdf is pdf(wi, wo)
     w1 = unit(40.0, 75.0)
     u = rng.random((200_000, 2))

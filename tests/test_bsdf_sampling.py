@@ -78,7 +78,8 @@ def _sphere_integral(bsdf, wi, k_phi=600):
     """Integral of pdf over the sphere: 3-point Gauss-Legendre between ordinates (exact for the
     piecewise-quartic elevation density) and the periodic trapezoid rule in phi (exact for
     trigonometric polynomials of degree < k_phi). Also returns the negative mass of the cosine-
-    weighted luminance of eval relative to its total, on the same points."""
+    weighted luminance of the interpolant (eval before its positive part) relative to its total,
+    on the same points."""
     mu = bsdf.grid.mu
     nodes = np.concatenate([[0.0], mu, [1.0] if mu[-1] < 1 else []])
     x, w = np.polynomial.legendre.leggauss(3)
@@ -91,7 +92,7 @@ def _sphere_integral(bsdf, wi, k_phi=600):
     Z, P = np.meshgrid(z, phi, indexing="ij")
     wo = _directions(Z, P)
     total = float(np.sum(wz[:, None] * bsdf.pdf(wi, wo)) * 2 * np.pi / k_phi)
-    f = bsdf.eval(wi, wo)
+    f = bsdf.interpolant(wi, wo)
     f = f @ LUMINANCE if f.ndim == 3 else f
     fc = wz[:, None] * f * np.abs(Z)
     return total, float(np.sum(np.maximum(-fc, 0)) / np.sum(fc))
@@ -100,10 +101,11 @@ def _sphere_integral(bsdf, wi, k_phi=600):
 @pytest.mark.parametrize("name,theta", [("coated_gold", 45.0), ("coated_gold", 85.0),
                                         ("rough_glass", 30.0), ("rough_glass", 140.0)])
 def test_pdf_integrates_to_one(request, name, theta):
-    """To rounding, plus at most the negative mass of the interpolated eval: where an azimuthal
+    """To rounding, plus at most the negative mass of the interpolant: where an azimuthal
     series dips below zero, the density max(g, 0) / (2 pi g_0) integrates to 1 + that part of the
-    mass (measured: 1 + 5e-6 for grazing coated gold, 1 + 3.5e-5 for rough glass lit from inside
-    at 140 degrees, whose eval has a negative mass of 3.5e-4)."""
+    mass (measured: 1 to rounding for coated gold, whose interpolant is non-negative, also at
+    85 degrees; 1 + 4.6e-5 for rough glass lit from inside at 140 degrees, whose interpolant
+    has a negative mass of 3.6e-4 next to the critical angle)."""
     bsdf = request.getfixturevalue(name)
     total, negative = _sphere_integral(bsdf, unit(theta, 25.0))
     assert negative < 1e-3
@@ -215,11 +217,20 @@ def step_bsdf():
     return layersim.BSDF([op])
 
 
+def test_eval_is_the_positive_part_of_the_undershooting_interpolant(step_bsdf):
+    wi = unit(35.0, 15.0)
+    z = np.linspace(1e-4, 1.0, 4001)
+    wo = _directions(z, np.full_like(z, 15.0 + 180.0) * np.pi / 180)
+    f = step_bsdf.interpolant(wi, wo)
+    assert f.min() < -1e-3 * f.max()                 # precondition: the interpolant undershoots
+    np.testing.assert_array_equal(step_bsdf.eval(wi, wo), np.maximum(f, 0.0))
+
+
 def test_sampling_density_is_clamped_next_to_undershoot(step_bsdf):
     wi = unit(35.0, 15.0)
     z = np.linspace(1e-4, 1.0, 4001)
-    f = step_bsdf.eval(wi, _directions(z, np.full_like(z, 15.0 + 180.0) * np.pi / 180))
-    assert f.min() < -1e-3 * f.max()                 # precondition: eval undershoots
+    f = step_bsdf.interpolant(wi, _directions(z, np.full_like(z, 15.0 + 180.0) * np.pi / 180))
+    assert f.min() < -1e-3 * f.max()                 # precondition: the interpolant undershoots
     phi = np.linspace(-np.pi, np.pi, 91)
     Z, P = np.meshgrid(z, phi, indexing="ij")
     pdf = step_bsdf.pdf(wi, _directions(Z, P))

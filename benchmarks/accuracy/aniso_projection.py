@@ -106,7 +106,7 @@ def main() -> int:
             peak = max(np.abs(table[p]).max() for p in ok)
             ok = [p for p in ok if np.abs(table[p]).max() > 1e-3 * peak]
             # leave out pairs whose peak series is longer than md: the projection tapers them
-            # on purpose (Lanczos sigma factors), the reference does not
+            # on purpose (Jackson kernel factors), the reference does not
             sign_i = 1.0 if name in ("Rt", "Ttb") else -1.0
             sign_o = 1.0 if name in ("Rb", "Ttb") else -1.0
             po, pi_ = np.array([p[0] for p in ok]), np.array([p[1] for p in ok])

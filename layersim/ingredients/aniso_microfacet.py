@@ -28,7 +28,7 @@ frame). The BSDF is split by the kernels into ``f = smooth * peak(q)``
 5. ``|s| <= ms`` is kept (the L2 fraction dropped is recorded, see
    ``benchmarks/accuracy/ms_study.py``); ``d`` is truncated at the series length (``relerr``, see
    :data:`layersim.aniso.plan.COUPLED_RELERR`) and at
-   ``md`` (Lanczos sigma factors, as for isotropic interfaces).
+   ``md`` (Jackson kernel factors, as for isotropic interfaces).
 
 Reflection blocks are projected on one triangle of pairs and mirrored with reciprocity
 (``f_{d,s}(o <- i) = f_{-d,s}(i <- o)``); ``Tbt`` follows from ``Ttb`` by generalized
@@ -383,9 +383,11 @@ def _truncate(F, md, stats, peak_len, relerr):
     """Zero coefficients below ``relerr`` times the pair's largest (this also ends each pair's
     series in d); taper series whose *peak* is cut at ``md`` (``peak_len``: the rule of
     :func:`layersim.ingredients.microfacet.needs_taper`, shared by all projection paths) with
-    Lanczos sigma factors in d, so that they blur instead of ringing. A long tail from a kink of
-    the smooth factor (critical angle) is cut at ``md`` without taper: tapering would blur the
-    whole lobe by ~(d / md)^2 to remove a ringing of the tail's size."""
+    the Jackson kernel factors in d (:func:`layersim.fourier.taper_factors`), so that they blur
+    instead of ringing: a convolution in ``phi_d`` with a non-negative kernel at every
+    ``phi_s``. A long tail from a kink of the smooth factor (critical angle) is cut at ``md``
+    without taper: tapering would blur the whole lobe by ~(d / md)^2 to remove a ringing of the
+    tail's size."""
     mag = np.abs(F)
     big = mag.max(axis=(1, 2), keepdims=True)
     small = mag < relerr * np.maximum(big, 1e-300)
@@ -398,7 +400,7 @@ def _truncate(F, md, stats, peak_len, relerr):
     cut = peak_len > md
     F = F[:, :md].copy()
     if cut.any():
-        F[cut] *= np.sinc(np.arange(F.shape[1]) / md)[None, :, None]
+        F[cut] *= fourier.taper_factors(md)[None, :F.shape[1], None]
     return F
 
 

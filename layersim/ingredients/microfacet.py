@@ -37,9 +37,10 @@ from ..threads import parallel_map
 
 #: Relative truncation of each pair's cosine series (|f_l| < RELERR |f_0| are dropped).
 RELERR = 1e-7
-#: A series cut at m orders is tapered (Lanczos sigma factors) only if the lobe still has
-#: coefficients above this fraction of f_0 at order m: smaller tails ring far less than the taper
-#: would blur every order (sigma factors change order l by ~(pi l / m)^2 / 6). The decision uses
+#: A series cut at m orders is tapered (Jackson kernel factors, :func:`fourier.taper_factors`)
+#: only if the lobe still has coefficients above this fraction of f_0 at order m: smaller tails
+#: ring far less than the taper would blur every order (it changes order l by
+#: ~(pi l / m)^2 / 2). The decision uses
 #: the analytically known length of the pair's peak series (:func:`fourier.peak_length`), not
 #: the computed tail, so that numerical noise in the tail cannot trigger it and both projection
 #: paths taper the same pairs.
@@ -304,7 +305,8 @@ def pair_series(mu_i, mu_o, eta: complex, alpha: float, dist: str, m: int, q0=No
     K : int, optional
         Peak-series orders to use (default: enough for every pair, at most ``m + L_HARD``).
     taper : bool
-        Apply Lanczos sigma factors to pairs whose series needs more than ``m`` orders.
+        Apply the Jackson kernel factors (:func:`layersim.fourier.taper_factors`) to pairs
+        whose series needs more than ``m`` orders (:func:`needs_taper`).
 
     Returns
     -------
@@ -365,11 +367,12 @@ def needs_taper(q0, qpi, dist: str, m: int) -> np.ndarray:
 
 
 def apply_taper(series: np.ndarray, rows: np.ndarray, stats: ProjectionStats) -> None:
-    """Lanczos sigma factors (in place) on the selected rows: blur instead of Gibbs ringing.
+    """Jackson kernel factors (:func:`layersim.fourier.taper_factors`, in place) on the
+    selected rows: blur instead of Gibbs ringing, and a lobe that is non-negative stays so.
     Order 0, hence energy, is unchanged."""
     m = series.shape[1]
     if rows.any():
-        series[rows] *= np.sinc(np.arange(m) / m)[None, :]
+        series[rows] *= fourier.taper_factors(m)[None, :]
         stats.tapered += int(np.count_nonzero(rows))
 
 

@@ -10,14 +10,15 @@ two), capped at ``max_samples``; pairs that would need more (counted in ``stats.
 projected by the semi-analytic path instead. On a GPU this path is far cheaper than the
 semi-analytic one (no fits, one launch per group); on a single CPU thread it is usually slower.
 
-Everything else (pairs, energy pruning, reciprocity shortcut, truncation with Lanczos tapering,
-assembly) follows the semi-analytic path. On a CUDA device a whole operator is built without
-leaving it (:func:`device_interface_operator`): per block, one coarse-bound launch, sampling with
-each pair's own power-of-two sample count, one DCT and one truncation launch, then the assembly
-kernels of :mod:`layersim.kernels.sparse` (scatter with reciprocity, per-order drop threshold,
-scan, compaction); only the three coarse numbers per pair, the row pointers and the nonzeros come
-back. The host keeps the decisions that need the analytic series lengths
-(:func:`layersim.fourier.peak_length`) and the few pairs too peaked to sample.
+Everything else (pairs, energy pruning, reciprocity shortcut, truncation with tapering by the
+Jackson kernel factors, assembly) follows the semi-analytic path. On a CUDA device a whole
+operator is built without leaving it (:func:`device_interface_operator`): per block, one
+coarse-bound launch, sampling with each pair's own power-of-two sample count, one DCT and one
+truncation launch, then the assembly kernels of :mod:`layersim.kernels.sparse` (scatter with
+reciprocity, per-order drop threshold, scan, compaction); only the three coarse numbers per
+pair, the row pointers and the nonzeros come back. The host keeps the decisions that need the
+analytic series lengths (:func:`layersim.fourier.peak_length`) and the few pairs too peaked to
+sample.
 """
 
 from __future__ import annotations
@@ -167,7 +168,8 @@ def _device_block(grid: Grid, name: str, triangle: bool, m: int, eta: complex, a
         stats.tapered += int(np.count_nonzero(taper))
         coef, cut = kproj.ragged_cosine_series(mu_i[sel], mu_o[sel], eta, alpha, alpha, dist,
                                                half[rest], m + EXTRA_ORDERS, m,
-                                               microfacet.RELERR, taper, device=device)
+                                               microfacet.RELERR, taper,
+                                               fourier.taper_factors(m), device=device)
         stats.truncated += int(cut.numpy().sum())
         parts.append((o[sel], i[sel], coef))
     stats.series_seconds += time.perf_counter() - t0

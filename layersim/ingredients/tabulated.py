@@ -13,8 +13,9 @@ not be mirror symmetric about the tangent axes, only symmetric under a rotation 
 Sample counts: ``N_d`` is the smallest power of two >= ``4 md`` (at least :data:`ND_MIN`), so
 that orders up to ``md`` are clean of aliasing from series up to ``3 md`` long; ``N_s`` is that
 of the analytic coupled path for the layer's ``ms``. Orders beyond ``md`` that are still
-significant (> ``relerr`` of the pair's largest) are cut with Lanczos sigma factors, as in the
-analytic paths; coefficients below ``relerr`` of their pair's largest are dropped.
+significant (> ``relerr`` of the pair's largest) are cut with the Jackson kernel factors
+(:func:`layersim.fourier.taper_factors`), as in the analytic paths; coefficients below
+``relerr`` of their pair's largest are dropped.
 
 Assembly, reciprocity (reflection blocks from one triangle of pairs, ``Tbt`` from ``Ttb``) and
 rotation are those of :func:`layersim.ingredients.aniso_microfacet.aniso_interface_operator`,
@@ -28,6 +29,7 @@ import time
 
 import numpy as np
 
+from .. import fourier
 from ..aniso import basis
 from ..kernels import projection as kproj
 from ..operator import Grid
@@ -73,7 +75,7 @@ def pair_coefficients(mu_i, mu_o, eta: complex, table: np.ndarray, md: int, ms: 
     beyond = np.abs(np.fft.fftfreq(n_d, 1.0 / n_d)) >= md
     cut = (mag[:, beyond].max(axis=(1, 2), initial=0.0) > relerr * peak)
     if cut.any():
-        C[cut] *= np.sinc(d / md)[None, :, None]
+        C[cut] *= fourier.taper_factors(md)[np.abs(d)][None, :, None]
     C[np.abs(C) < relerr * peak[:, None, None]] = 0.0
     return C, int(np.count_nonzero(cut))
 

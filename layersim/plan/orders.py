@@ -6,7 +6,8 @@ length of every significant ordinate pair's series; the plan keeps every order n
 whose incident and outgoing elevations are both within :data:`THETA_FULL` of the normal. A lobe
 at elevation theta is ~alpha cos(theta) wide in azimuth, so pairs closer to the horizon would
 need ~1/(alpha mu) orders (thousands at the most grazing ordinates); they are truncated and
-tapered (Lanczos sigma factors, so that they blur instead of ringing negative). Truncating
+tapered with the Jackson kernel (:func:`layersim.fourier.taper_factors`: a non-negative
+kernel, so that they blur instead of ringing negative). Truncating
 orders never changes energy (only order 0 carries energy). Media add the reach of their phase
 function.
 """
@@ -69,7 +70,7 @@ def choose_md(disc: Discretization, md_needed: int, notes: list, overridden: dic
         overridden["md"] = md
         if md < md_needed:
             notes.append(f"md = {md} from the scene is below the {md_needed} orders the lobes "
-                         "need: lobes are truncated in azimuth (ringing)")
+                         "need: lobes are truncated in azimuth (blurred)")
     else:
         md = max(1, md_needed)
     if md > MD_MAX:
