@@ -19,7 +19,7 @@ kernel, :func:`layersim.fourier.taper_factors`), but cubic weights are partly ne
 between ordinates the interpolant can undershoot zero: by a few millionths of the BSDF's peak on
 the steep flank of a narrow lobe, by ~1e-3 next to the critical angle of total internal
 reflection (docs/method.md, "Non-negative evaluation", measured by
-``benchmarks/eval_positivity.py``); those values are returned as 0. ``albedo`` and
+``benchmarks/features/eval_positivity.py``); those values are returned as 0. ``albedo`` and
 ``bin_energies`` interpolate the incident elevation
 linearly instead: a convex combination of the energies at the ordinates, so that they are never
 negative and never exceed 1 where the ordinates do not. Delta parts (the unscattered
@@ -260,7 +260,7 @@ class BSDF:
     def interpolant(self, wi, wo) -> np.ndarray:
         """The spline interpolant of the solved series that :meth:`eval` takes the positive
         part of (1/sr; same arguments and shape). Between ordinates it can undershoot zero
-        slightly (module docstring); ``benchmarks/eval_positivity.py`` measures by how much."""
+        slightly (module docstring); ``benchmarks/features/eval_positivity.py`` measures by how much."""
         wi, wo, shape = direction_pairs(wi, wo)
         return self._per_channel(lambda c: self.evaluator(c).eval(wi, wo).reshape(shape))
 

@@ -6,7 +6,7 @@ positive part of the cubic spline interpolant between them, which may undershoot
 the steep flank of a narrow lobe. The tests check the kernel, the series at the ordinates of every
 projection path (with Lanczos sigma factors as the taper, the counter-example that gives them
 their power), and scan random direction pairs of the bench scenes and the example car paint
-and lacquered wood. ``benchmarks/eval_positivity.py`` measures the same with either taper, and
+and lacquered wood. ``benchmarks/features/eval_positivity.py`` measures the same with either taper, and
 covers the anisotropic bench scenes, whose solves and evaluations at the default plans take
 minutes on two cores.
 """
@@ -27,7 +27,7 @@ GOLD = [0.143552, 3.98397]
 #: Depth (of the BSDF's peak, per channel) that the interpolant may undershoot between
 #: ordinates in the scanned scenes; measured at most 4.6e-6 (the blue channel of
 #: examples/car_paint.toml, on the flank of the coat's lobe at 80-84 deg, 2.5 deg off the
-#: specular azimuth; benchmarks/eval_positivity.txt).
+#: specular azimuth; benchmarks/features/eval_positivity.txt).
 UNDERSHOOT = 1e-5
 
 
@@ -171,14 +171,14 @@ def check_pairs(bsdf, n_uniform, n_grazing, seed=0, n_eval=20_000):
 
 def test_coated_gold_is_non_negative_on_random_pairs(coated_gold):
     """The planner's default for lacquer over gold: with the sigma factors its interpolant went
-    down to -3.6e-2 of the peak on 2 % of such pairs (benchmarks/eval_positivity.txt)."""
+    down to -3.6e-2 of the peak on 2 % of such pairs (benchmarks/features/eval_positivity.txt)."""
     check_pairs(coated_gold, 50_000, 50_000)
 
 
 #: Isotropic bench scenes and the examples of the report of negative eval values. The
 #: anisotropic bench scenes (additive_validation, gold_under_hg: 25-60 s to solve and minutes to
 #: evaluate 1e6 pairs on two cores; gold_blue_hg_coated: 29 GiB at its default plan) are
-#: covered by benchmarks/eval_positivity.py instead.
+#: covered by benchmarks/features/eval_positivity.py instead.
 SCAN_SCENES = ["benchmarks/scenes/coated_gold.toml", "benchmarks/scenes/coated_hg_diffuse.toml",
                "benchmarks/scenes/dusty_gold.toml", "benchmarks/scenes/ggx_coated_gold.toml",
                "benchmarks/scenes/vandehulst_slab.toml", "examples/car_paint.toml",

@@ -35,13 +35,13 @@ The 'before' reconstruction is made by substituting the sigma factors for
 linear interpolation (section ``sources``) by substituting
 :func:`layersim.interpolation.hat_weights` for the spline weights of ``eval``.
 
-Usage: python benchmarks/eval_positivity.py [--pairs N] [--grazing N] [--sections S,...]
+Usage: python benchmarks/features/eval_positivity.py [--pairs N] [--grazing N] [--sections S,...]
 [--source-scenes A,B,...] [--walk-scenes A,B,...] [--paths N] [SCENE[:KEY=VALUE,...] ...] (section ``sources``: coated_gold and
 car_paint by default, N grazing and N uniform pairs; the others: the SCENEs). SCENE is a name
 in benchmarks/scenes or examples, in :data:`INLINE` (``rough_glass``, ``rotated_conductor``)
 or a .toml path; KEY=VALUE set ``[discretization]`` fields over the planner's (default: every
 scene of benchmarks/scenes, examples/car_paint, examples/lacquered_wood and rough_glass).
-Output: benchmarks/eval_positivity.txt.
+Output: benchmarks/features/eval_positivity.txt.
 """
 import argparse
 import contextlib
@@ -61,7 +61,7 @@ import layersim.fourier
 import layersim.interpolation
 from layersim.kernels.projection import microfacet_values
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SCENES = ROOT / "benchmarks" / "scenes"
 EXAMPLES = ROOT / "examples"
 #: Scenes given inline: a single rough dielectric interface (all four blocks), whose interpolant
@@ -344,7 +344,7 @@ def header(argv: str) -> None:
                                 capture_output=True, text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         commit = "unknown"
-    print(f"# python benchmarks/eval_positivity.py {argv}")
+    print(f"# python benchmarks/features/eval_positivity.py {argv}")
     print(f"# {platform.node()} ({platform.machine()}, {os.cpu_count()} cores), "
           f"{datetime.date.today().isoformat()}, commit {commit}, "
           f"LAYERSIM_DEVICE={os.environ.get('LAYERSIM_DEVICE', 'cpu')}")
