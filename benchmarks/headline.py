@@ -80,12 +80,17 @@ def machine(gpu: bool) -> str:
     return line
 
 
+#: What the measured code is: a change elsewhere (the outputs this script writes) is no change of it.
+CODE = ["layersim", "kernels", "montecarlo", "pyproject.toml", ":(glob)benchmarks/**/*.py"]
+
+
 def commit() -> str:
-    """The commit of this tree, marked where the tracked files differ from it."""
+    """The commit of this tree, marked where its code differs from it."""
     head = _run(["git", "-C", str(ROOT), "log", "-1", "--format=%h %cs"])
     if not head:
         return "unknown (no git metadata)"
-    dirty = _run(["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no"])
+    dirty = _run(["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no",
+                  "--", *CODE])
     return head + (" + uncommitted changes" if dirty else "")
 
 
