@@ -1,7 +1,8 @@
 """Host access to the Fresnel reflectances of :mod:`layersim.kernels.physics`: the smooth
 (roughness 0) interfaces of the solver are diagonal in the ordinates with these values, so they
 come from the same functions as the Monte Carlo walk's specular events
-(:func:`layersim.kernels.sampling.sample_smooth`)."""
+(:func:`layersim.kernels.sampling.sample_smooth`, ``sample_smooth_film``), bare or with a thin
+film (:func:`layersim.kernels.physics.fresnel_interface`)."""
 
 from __future__ import annotations
 
@@ -14,15 +15,12 @@ from .runtime import device_for
 
 @wp.kernel
 def _fresnel(cos_i: wp.array(dtype=wp.float64), eta: wp.float64, k: wp.float64,
-             out: wp.array(dtype=wp.float64)):
+             eta_film: wp.float64, phase_scale: wp.float64, out: wp.array(dtype=wp.float64)):
     q = wp.tid()
-    if k > wp.float64(0.0):
-        out[q] = physics.fresnel_conductor(wp.abs(cos_i[q]), eta, k)
-    else:
-        out[q] = physics.fresnel_dielectric(cos_i[q], eta)
+    out[q] = physics.fresnel_interface(cos_i[q], eta, k, eta_film, phase_scale)
 
 
-def fresnel(cos_i, eta: float, k: float = 0.0) -> np.ndarray:
+def fresnel(cos_i, eta: float, k: float = 0.0, film: tuple | None = None) -> np.ndarray:
     """Unpolarised Fresnel reflectance for incidence cosines ``cos_i``.
 
     Parameters
@@ -35,6 +33,10 @@ def fresnel(cos_i, eta: float, k: float = 0.0) -> np.ndarray:
     k : float
         Extinction coefficient of a conductor below (0: dielectric; a conductor is lit from
         above only).
+    film : (float, float), optional
+        A thin film on the boundary: its index relative to the medium above and its phase
+        scale ``4 pi n d / lambda`` (:meth:`layersim.layers.Interface.film_params`); its Airy
+        reflectance replaces Fresnel's.
 
     Returns
     -------
@@ -47,5 +49,7 @@ def fresnel(cos_i, eta: float, k: float = 0.0) -> np.ndarray:
     device = device_for("cpu")
     a = wp.array(flat, dtype=wp.float64, device=device)
     out = wp.zeros(flat.size, dtype=wp.float64, device=device)
-    wp.launch(_fresnel, dim=flat.size, inputs=[a, float(eta), float(k), out], device=device)
+    eta_film, phase_scale = film if film is not None else (0.0, 0.0)
+    wp.launch(_fresnel, dim=flat.size, device=device,
+              inputs=[a, float(eta), float(k), float(eta_film), float(phase_scale), out])
     return out.numpy().reshape(cos_i.shape)

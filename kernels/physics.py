@@ -97,6 +97,147 @@ def fresnel_conductor(cos_i: Any, eta: Any, k: Any):
 
 
 # ---------------------------------------------------------------------------------------------
+# Thin films: Airy reflectance
+# ---------------------------------------------------------------------------------------------
+#
+# Complex numbers are written as pairs of reals (``re, im``): the OpenCL translation has no
+# complex type (:mod:`layersim.kernels.opencl_codegen`).
+
+
+@wp.func
+def _cmul(ar: Any, ai: Any, br: Any, bi: Any):
+    return ar * br - ai * bi, ar * bi + ai * br
+
+
+@wp.func
+def _cdiv(ar: Any, ai: Any, br: Any, bi: Any):
+    """``a / b``; 0 where ``b`` is exactly 0 (the Fresnel coefficients of two media of equal
+    index at their common critical angle, whose limit is 0)."""
+    d = br * br + bi * bi
+    if d == br * type(br)(0.0):
+        return d, d
+    return (ar * br + ai * bi) / d, (ai * br - ar * bi) / d
+
+
+@wp.func
+def _csqrt(ar: Any, ai: Any):
+    """Principal square root, with the imaginary part taken >= 0 on the negative real axis
+    (an evanescent wave decays into the medium: ``Im(n cos theta) >= 0`` for the ``exp(-i
+    omega t)`` convention)."""
+    zero = ar * type(ar)(0.0)
+    m = wp.sqrt(ar * ar + ai * ai)
+    t = wp.sqrt(type(ar)(0.5) * (m + wp.abs(ar)))
+    if t == zero:
+        return zero, zero
+    if ar >= zero:
+        return t, ai / (type(ar)(2.0) * t)
+    if ai < zero:
+        return wp.abs(ai) / (type(ar)(2.0) * t), -t
+    return wp.abs(ai) / (type(ar)(2.0) * t), t
+
+
+@wp.func
+def _airy_amplitude(r12r: Any, r12i: Any, r23r: Any, r23i: Any, er: Any, ei: Any):
+    """``|r|^2`` of ``r = (r12 + r23 E) / (1 + r12 r23 E)`` (Airy summation of the film's
+    multiple reflections, ``E = exp(i phi)``; Belcour & Barla 2017, eq. 2)."""
+    one = r12r * type(r12r)(0.0) + type(r12r)(1.0)
+    ar, ai = _cmul(r23r, r23i, er, ei)
+    br, bi = _cmul(r12r, r12i, ar, ai)
+    rr, ri = _cdiv(r12r + ar, r12i + ai, one + br, bi)
+    return rr * rr + ri * ri
+
+
+@wp.func
+def airy_reflectance(cos_1: Any, n1: Any, n2: Any, n3: Any, k3: Any, phase_scale: Any):
+    """Unpolarised reflectance of a film of real index ``n2`` between a medium of real index
+    ``n1`` (the light's side) and a substrate of index ``n3 + i k3``.
+
+    ``cos_1`` in [0, 1] is the cosine of incidence in medium 1; indices are relative to one
+    common reference (any: only ratios and ``phase_scale`` enter). ``phase_scale = 4 pi n d /
+    lambda`` for a film of absolute index ``n`` and thickness ``d`` at vacuum wavelength
+    ``lambda``, so that the round-trip phase is ``phi = phase_scale cos(theta_2)``
+    (Belcour & Barla 2017, eq. 2 and the phase of their sec. 4; Born & Wolf, Principles of
+    Optics, sec. 1.6.4, eq. 58). With the normal components ``q_j = n_j cos(theta_j) =
+    sqrt(n_j^2 - n1^2 sin^2 theta_1)`` (complex: evanescent in the film beyond its critical
+    angle, absorbing in a conductor), the Fresnel amplitudes are ``r_ij = (q_i - q_j) / (q_i +
+    q_j)`` (s) and ``(n_j^2 q_i - n_i^2 q_j) / (n_j^2 q_i + n_i^2 q_j)`` (p), and
+    ``R = (|r_s|^2 + |r_p|^2) / 2`` with ``r`` of :func:`_airy_amplitude` for each. Grazing
+    incidence and total internal reflection into a real substrate (``k3 = 0``) return exactly
+    1, as :func:`fresnel_dielectric`.
+    """
+    zero = cos_1 * type(cos_1)(0.0)
+    one = type(cos_1)(1.0)
+    if cos_1 <= zero:
+        return one
+    s2 = n1 * n1 * (one - cos_1 * cos_1)            # (n sin theta)^2, the same in every medium
+    if k3 == zero and s2 >= n3 * n3:
+        return one
+    q1 = n1 * cos_1
+    q2r, q2i = _csqrt(n2 * n2 - s2, zero)
+    e3r = n3 * n3 - k3 * k3                         # n3^2 (complex)
+    e3i = type(cos_1)(2.0) * n3 * k3
+    q3r, q3i = _csqrt(e3r - s2, e3i)
+    # round trip through the film: E = exp(i phi), phi = phase_scale q2 / n2 (complex where
+    # the film is evanescent: then E decays)
+    phi_r = phase_scale * q2r / n2
+    phi_i = phase_scale * q2i / n2
+    decay = wp.exp(-phi_i)
+    er = decay * wp.cos(phi_r)
+    ei = decay * wp.sin(phi_r)
+    # s polarisation
+    a12r, a12i = _cdiv(q1 - q2r, -q2i, q1 + q2r, q2i)
+    a23r, a23i = _cdiv(q2r - q3r, q2i - q3i, q2r + q3r, q2i + q3i)
+    rs = _airy_amplitude(a12r, a12i, a23r, a23i, er, ei)
+    # p polarisation
+    e1 = n1 * n1
+    e2 = n2 * n2
+    b12r, b12i = _cdiv(e2 * q1 - e1 * q2r, -e1 * q2i, e2 * q1 + e1 * q2r, e1 * q2i)
+    xr, xi = _cmul(e3r, e3i, q2r, q2i)
+    b23r, b23i = _cdiv(xr - e2 * q3r, xi - e2 * q3i, xr + e2 * q3r, xi + e2 * q3i)
+    rp = _airy_amplitude(b12r, b12i, b23r, b23i, er, ei)
+    return type(cos_1)(0.5) * (rs + rp)
+
+
+@wp.func
+def fresnel_film_dielectric(cos_i: Any, eta: Any, eta_film: Any, phase_scale: Any):
+    """Unpolarised reflectance of a dielectric boundary (relative index ``eta``) carrying a
+    film of relative index ``eta_film`` (both relative to the medium on the ``cos_i > 0``
+    side): :func:`airy_reflectance`, with the signed-cosine convention of
+    :func:`fresnel_dielectric` (``cos_i < 0``: the light arrives from the ``eta`` side).
+    Without absorption the transmittance is ``1 - R``, the same from both sides at
+    Snell-related angles (so the BSDF built on it stays reciprocal)."""
+    one = type(cos_i)(1.0)
+    if cos_i < type(cos_i)(0.0):
+        return airy_reflectance(-cos_i, eta, eta_film, one, cos_i * type(cos_i)(0.0),
+                                phase_scale)
+    return airy_reflectance(cos_i, one, eta_film, eta, cos_i * type(cos_i)(0.0), phase_scale)
+
+
+@wp.func
+def fresnel_film_conductor(cos_i: Any, eta: Any, k: Any, eta_film: Any, phase_scale: Any):
+    """Unpolarised reflectance of a conductor ``eta + i k`` carrying a film of relative index
+    ``eta_film`` (``cos_i`` in [0, 1]): :func:`airy_reflectance`, the conductor's phase
+    shifts entering through its complex Fresnel amplitudes."""
+    return airy_reflectance(cos_i, type(cos_i)(1.0), eta_film, eta, k, phase_scale)
+
+
+@wp.func
+def fresnel_interface(cos_i: Any, eta: Any, k: Any, eta_film: Any, phase_scale: Any):
+    """Fresnel reflectance of an interface as the microfacet BSDF uses it: a conductor
+    (``k > 0``, ``|cos_i|``) or a dielectric (signed ``cos_i``), with a film where
+    ``phase_scale > 0`` and the bare formulas (:func:`fresnel_dielectric`,
+    :func:`fresnel_conductor`) otherwise."""
+    zero = cos_i * type(cos_i)(0.0)
+    if phase_scale > zero:
+        if k > zero:
+            return fresnel_film_conductor(wp.abs(cos_i), eta, k, eta_film, phase_scale)
+        return fresnel_film_dielectric(cos_i, eta, eta_film, phase_scale)
+    if k > zero:
+        return fresnel_conductor(wp.abs(cos_i), eta, k)
+    return fresnel_dielectric(cos_i, eta)
+
+
+# ---------------------------------------------------------------------------------------------
 # Microfacet distributions and Smith shadowing-masking
 # ---------------------------------------------------------------------------------------------
 
@@ -198,14 +339,17 @@ def half_vector(wi: Any, wo: Any, eta: Any, k: Any):
 
 
 @wp.func
-def microfacet_smooth_q(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, dist: int):
+def microfacet_smooth_q_film(wi: Any, wo: Any, eta: Any, k: Any, eta_film: Any,
+                             phase_scale: Any, au: Any, av: Any, dist: int):
     """Split microfacet BSDF of an interface: returns ``(smooth, q)`` with
     ``f(wi, wo) = smooth * ndf_peak(q, dist)``.
 
     Dielectric when ``k == 0`` (reflection and transmission from both sides), conductor when
-    ``k > 0`` (reflection from the top only). Radiance convention for transmission.
-    Where the BSDF vanishes, ``smooth`` is 0; ``q`` is still the slope form of the half vector
-    whenever one exists (it is pure geometry, and the projection reads it at phi = 0 and pi).
+    ``k > 0`` (reflection from the top only). Radiance convention for transmission. Where
+    ``phase_scale > 0`` every microfacet carries a thin film of relative index ``eta_film``
+    (:func:`fresnel_interface`; Belcour & Barla 2017, sec. 4). Where the BSDF vanishes,
+    ``smooth`` is 0; ``q`` is still the slope form of the half vector whenever one exists (it
+    is pure geometry, and the projection reads it at phi = 0 and pi).
     """
     zero = au * type(au)(0.0)
     h, eta_i, eta_o = half_vector(wi, wo, eta, k)
@@ -219,46 +363,79 @@ def microfacet_smooth_q(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, di
     if g <= zero:
         return zero, q
     prefactor = hlen2 * hlen2 / (type(au)(wp.pi) * au * av * hz2 * hz2)
-    return microfacet_factor(wi, wo, m, eta_i, eta_o, eta, k) * g * prefactor, q
+    factor = microfacet_factor_film(wi, wo, m, eta_i, eta_o, eta, k, eta_film, phase_scale)
+    return factor * g * prefactor, q
+
+
+@wp.func
+def microfacet_smooth_q(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, dist: int):
+    """:func:`microfacet_smooth_q_film` without a film."""
+    zero = au * type(au)(0.0)
+    s, q = microfacet_smooth_q_film(wi, wo, eta, k, zero, zero, au, av, dist)
+    return s, q
 
 
 @wp.func
 def microfacet_reflection_factor(f: Any, wi: Any, wo: Any):
     """The microfacet BRDF without ``D(m) G`` for a given Fresnel factor ``f``:
     ``f / (4 |wi.z wo.z|)`` (Walter et al. 2007, eq. 20; Wang et al. 2008, eq. 2). The reflection
-    branch of :func:`microfacet_factor`; single-view NDF fitting (:mod:`layersim.ndf`) calls it
+    branch of :func:`facet_factor`; single-view NDF fitting (:mod:`layersim.ndf`) calls it
     with ``f = 1`` as the paper's fit assumes."""
     return f / (type(f)(4.0) * wp.abs(wi[2] * wo[2]))
 
 
 @wp.func
-def microfacet_factor(wi: Any, wo: Any, m: Any, eta_i: Any, eta_o: Any, eta: Any, k: Any):
-    """The microfacet BSDF without ``D(m) G``: ``F / (4 |wi.z wo.z|)`` in reflection and
-    ``|wi.m wo.m| eta_o^2 (1 - F) / (|wi.z wo.z| (eta_i wi.m + eta_o wo.m)^2)`` in refraction
-    (Walter et al. 2007, eq. 20-21; radiance convention), for the unit normal ``m`` of the pair
-    (:func:`half_vector`). Shared by the analytic and the tabulated NDFs
-    (:mod:`layersim.kernels.tabulated`)."""
-    one = type(eta)(1.0)
+def facet_factor(wi: Any, wo: Any, m: Any, eta_i: Any, eta_o: Any, F: Any):
+    """The microfacet BSDF without ``D(m) G``, for the Fresnel reflectance ``F`` of the facet
+    at ``wi.m``: ``F / (4 |wi.z wo.z|)`` in reflection and ``|wi.m wo.m| eta_o^2 (1 - F) /
+    (|wi.z wo.z| (eta_i wi.m + eta_o wo.m)^2)`` in refraction (Walter et al. 2007, eq. 20-21;
+    radiance convention), for the unit normal ``m`` of the pair (:func:`half_vector`)."""
+    one = type(F)(1.0)
     ci = wp.dot(wi, m)
     co = wp.dot(wo, m)
     cos_io = wp.abs(wi[2] * wo[2])
-    if wi[2] * wo[2] > type(eta)(0.0):
-        if k > type(eta)(0.0):
-            return microfacet_reflection_factor(fresnel_conductor(wp.abs(ci), eta, k), wi, wo)
-        return microfacet_reflection_factor(fresnel_dielectric(ci, eta), wi, wo)
-    ft = one - fresnel_dielectric(ci, eta)
+    if wi[2] * wo[2] > type(F)(0.0):
+        return microfacet_reflection_factor(F, wi, wo)
+    ft = one - F
     denom = eta_i * ci + eta_o * co
     return wp.abs(ci * co) * eta_o * eta_o * ft / (cos_io * denom * denom)
 
 
 @wp.func
-def microfacet_eval(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, dist: int):
+def microfacet_factor_film(wi: Any, wo: Any, m: Any, eta_i: Any, eta_o: Any, eta: Any, k: Any,
+                           eta_film: Any, phase_scale: Any):
+    """:func:`facet_factor` with the interface's Fresnel reflectance at ``wi.m``
+    (:func:`fresnel_interface`: filmed where ``phase_scale > 0``). Shared by the analytic and
+    the tabulated NDFs (:mod:`layersim.kernels.tabulated`)."""
+    F = fresnel_interface(wp.dot(wi, m), eta, k, eta_film, phase_scale)
+    return facet_factor(wi, wo, m, eta_i, eta_o, F)
+
+
+@wp.func
+def microfacet_factor(wi: Any, wo: Any, m: Any, eta_i: Any, eta_o: Any, eta: Any, k: Any):
+    """:func:`microfacet_factor_film` without a film."""
+    zero = eta * type(eta)(0.0)
+    return microfacet_factor_film(wi, wo, m, eta_i, eta_o, eta, k, zero, zero)
+
+
+@wp.func
+def microfacet_eval_film(wi: Any, wo: Any, eta: Any, k: Any, eta_film: Any, phase_scale: Any,
+                         au: Any, av: Any, dist: int):
     """Microfacet BSDF f(wi, wo) (1/sr, no cosine) of a rough dielectric (``k == 0``) or
-    conductor (``k > 0``) interface; see :func:`microfacet_smooth_q`."""
-    s, q = microfacet_smooth_q(wi, wo, eta, k, au, av, dist)
+    conductor (``k > 0``) interface, filmed where ``phase_scale > 0``; see
+    :func:`microfacet_smooth_q_film`."""
+    s, q = microfacet_smooth_q_film(wi, wo, eta, k, eta_film, phase_scale, au, av, dist)
     if s == au * type(au)(0.0):
         return s
     return s * ndf_peak(q, dist)
+
+
+@wp.func
+def microfacet_eval(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, dist: int):
+    """Microfacet BSDF f(wi, wo) (1/sr, no cosine) of a rough dielectric (``k == 0``) or
+    conductor (``k > 0``) interface without a film; see :func:`microfacet_smooth_q`."""
+    zero = au * type(au)(0.0)
+    return microfacet_eval_film(wi, wo, eta, k, zero, zero, au, av, dist)
 
 
 # ---------------------------------------------------------------------------------------------

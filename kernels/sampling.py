@@ -286,6 +286,34 @@ def vndf_pdf(wi: Any, m: Any, au: Any, av: Any, dist: int):
 
 
 @wp.func
+def facet_event(wi: Any, m: Any, eta: Any, k: Any, F: Any, au: Any, av: Any, dist: int,
+                u4: Any):
+    """The event on the sampled microfacet ``m`` of :func:`sample_microfacet`, whose Fresnel
+    reflectance at ``wi.m`` is ``F``: reflection weighted by ``F`` (conductor, ``k > 0``), or
+    reflection with probability ``F`` and refraction otherwise (dielectric). Returns
+    ``(wo, weight)``."""
+    weight = type(au)(1.0)
+    wo = reflect(wi, m)
+    if k > au * type(au)(0.0):
+        weight = F
+    else:
+        if u4 >= F:
+            wt, ok = refract(wi, m, eta)
+            if ok:
+                wo = wt
+    return wo, weight * physics.smith_g1(wo, m, au, av, dist)
+
+
+@wp.func
+def visible_normal(wi: Any, au: Any, av: Any, dist: int, u1: Any, u2: Any, u3: Any):
+    """A visible normal seen from ``wi`` (from ``-wi`` below the interface)."""
+    wu = wi
+    if wi[2] < au * type(au)(0.0):
+        wu = -wi
+    return sample_vndf(wu, au, av, dist, u1, u2, u3)
+
+
+@wp.func
 def sample_microfacet(wi: Any, eta: Any, k: Any, au: Any, av: Any, dist: int, u1: Any,
                       u2: Any, u3: Any, u4: Any):
     """Sample ``wo`` for the rough interface of ``physics.microfacet_eval``.
@@ -295,27 +323,34 @@ def sample_microfacet(wi: Any, eta: Any, k: Any, au: Any, av: Any, dist: int, u1
     reflection or refraction. Returns ``(wo, weight)`` with ``weight = f |wo.z| / pdf``
     (0 where the single-scattering model loses the particle).
     """
-    zero = au * type(au)(0.0)
-    one = type(au)(1.0)
-    wu = wi
-    if wi[2] < zero:
-        wu = -wi
-    m = sample_vndf(wu, au, av, dist, u1, u2, u3)
-    weight = one
-    wo = reflect(wi, m)
-    if k > zero:
-        weight = physics.fresnel_conductor(wp.abs(wp.dot(wi, m)), eta, k)
+    m = visible_normal(wi, au, av, dist, u1, u2, u3)
+    c = wp.dot(wi, m)
+    F = au * type(au)(0.0)
+    if k > F:
+        F = physics.fresnel_conductor(wp.abs(c), eta, k)
     else:
-        if u4 >= physics.fresnel_dielectric(wp.dot(wi, m), eta):
-            wt, ok = refract(wi, m, eta)
-            if ok:
-                wo = wt
-    return wo, weight * physics.smith_g1(wo, m, au, av, dist)
+        F = physics.fresnel_dielectric(c, eta)
+    wo, weight = facet_event(wi, m, eta, k, F, au, av, dist, u4)
+    return wo, weight
 
 
 @wp.func
-def microfacet_pdf(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, dist: int):
-    """Density (1/sr) with which :func:`sample_microfacet` returns ``wo`` for ``wi``.
+def sample_microfacet_film(wi: Any, eta: Any, k: Any, eta_film: Any, phase_scale: Any, au: Any,
+                           av: Any, dist: int, u1: Any, u2: Any, u3: Any, u4: Any):
+    """:func:`sample_microfacet` for the filmed interface of ``physics.microfacet_eval_film``:
+    the same visible normal and event, with the film's Airy reflectance
+    (``physics.fresnel_interface``) in place of Fresnel's."""
+    m = visible_normal(wi, au, av, dist, u1, u2, u3)
+    F = physics.fresnel_interface(wp.dot(wi, m), eta, k, eta_film, phase_scale)
+    wo, weight = facet_event(wi, m, eta, k, F, au, av, dist, u4)
+    return wo, weight
+
+
+@wp.func
+def microfacet_pdf_film(wi: Any, wo: Any, eta: Any, k: Any, eta_film: Any, phase_scale: Any,
+                        au: Any, av: Any, dist: int):
+    """Density (1/sr) with which :func:`sample_microfacet_film` (:func:`sample_microfacet`
+    where ``phase_scale`` is 0) returns ``wo`` for ``wi``.
 
     The half vector is that of ``physics.microfacet_smooth_q``; for a conductor the event is not
     chosen (its Fresnel factor sits in the weight), so the density omits F.
@@ -337,11 +372,35 @@ def microfacet_pdf(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, dist: i
     if refl:
         f = one
         if not conductor:
-            f = physics.fresnel_dielectric(ci, eta)
+            f = physics.fresnel_interface(ci, eta, k, eta_film, phase_scale)
         return f * dv / (type(au)(4.0) * wp.abs(co))
     denom = eta_i * ci + eta_o * co
-    return ((one - physics.fresnel_dielectric(ci, eta)) * dv * eta_o * eta_o * wp.abs(co)
-            / (denom * denom))
+    return ((one - physics.fresnel_interface(ci, eta, k, eta_film, phase_scale)) * dv * eta_o
+            * eta_o * wp.abs(co) / (denom * denom))
+
+
+@wp.func
+def microfacet_pdf(wi: Any, wo: Any, eta: Any, k: Any, au: Any, av: Any, dist: int):
+    """Density (1/sr) with which :func:`sample_microfacet` returns ``wo`` for ``wi``
+    (:func:`microfacet_pdf_film` without a film)."""
+    zero = au * type(au)(0.0)
+    return microfacet_pdf_film(wi, wo, eta, k, zero, zero, au, av, dist)
+
+
+@wp.func
+def smooth_event(wi: Any, eta: Any, k: Any, F: Any, u: Any):
+    """The event of :func:`sample_smooth` for the interface's reflectance ``F`` at ``wi.z``."""
+    zero = eta * type(eta)(0.0)
+    one = type(eta)(1.0)
+    wr = wp.vector(-wi[0], -wi[1], wi[2])
+    if k > zero:
+        return wr, F
+    if u < F:
+        return wr, one
+    wt, ok = refract(wi, wp.vector(zero, zero, one), eta)
+    if ok:
+        return wt, one
+    return wr, one
 
 
 @wp.func
@@ -349,14 +408,20 @@ def sample_smooth(wi: Any, eta: Any, k: Any, u: Any):
     """Specular interface (roughness 0): mirror reflection or Snell refraction, chosen with the
     Fresnel probability for a dielectric (weight 1), or reflection weighted by the conductor's
     Fresnel factor. Returns ``(wo, weight)``."""
-    zero = eta * type(eta)(0.0)
-    one = type(eta)(1.0)
-    wr = wp.vector(-wi[0], -wi[1], wi[2])
-    if k > zero:
-        return wr, physics.fresnel_conductor(wp.abs(wi[2]), eta, k)
-    if u < physics.fresnel_dielectric(wi[2], eta):
-        return wr, one
-    wt, ok = refract(wi, wp.vector(zero, zero, one), eta)
-    if ok:
-        return wt, one
-    return wr, one
+    F = eta * type(eta)(0.0)
+    if k > F:
+        F = physics.fresnel_conductor(wp.abs(wi[2]), eta, k)
+    else:
+        F = physics.fresnel_dielectric(wi[2], eta)
+    wo, weight = smooth_event(wi, eta, k, F, u)
+    return wo, weight
+
+
+@wp.func
+def sample_smooth_film(wi: Any, eta: Any, k: Any, eta_film: Any, phase_scale: Any, u: Any):
+    """:func:`sample_smooth` of a filmed interface: the film's Airy reflectance
+    (``physics.fresnel_interface``) in place of Fresnel's; the refracted direction is Snell's
+    between the media on either side (a film with parallel faces does not change it)."""
+    F = physics.fresnel_interface(wi[2], eta, k, eta_film, phase_scale)
+    wo, weight = smooth_event(wi, eta, k, F, u)
+    return wo, weight

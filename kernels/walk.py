@@ -13,10 +13,12 @@ the top of slab ``b``, boundary ``S`` the bottom of the stack. Boundary records 
 ``bnd_f``: :data:`BND_F` floats each) hold the kind (:data:`NULL` index-matched pass-through,
 :data:`DIELECTRIC`, :data:`CONDUCTOR`, :data:`DIFFUSE`, :data:`MEASURED`), the distribution code,
 the relative index ``eta`` and ``k``, ``alpha_u``, ``alpha_v``, ``cos``/``sin`` of the
-tangent-frame rotation and the Lambertian albedo; a tabulated NDF (:mod:`.tabulated`) and a
-measured base (:mod:`.measured`) keep their tables after the records. Slab records (``slab_f``:
-:data:`SLAB_F` floats each) hold the optical thickness
-``tau`` along the normal, the single-scattering albedo and the HG ``g`` (``tau = 0``: clear).
+tangent-frame rotation, the Lambertian albedo, the offset of the energy-compensation tables, and
+the thin film of a filmed interface (its index relative to the medium above and its phase scale
+``4 pi n d / lambda``, :func:`.physics.fresnel_interface`; 0: no film); a tabulated NDF
+(:mod:`.tabulated`) and a measured base (:mod:`.measured`) keep their tables after the records.
+Slab records (``slab_f``: :data:`SLAB_F` floats each) hold the optical thickness ``tau`` along
+the normal, the single-scattering albedo and the HG ``g`` (``tau = 0``: clear).
 
 Walk
 ----
@@ -68,8 +70,12 @@ MEASURED = wp.constant(4)
 #: ints per boundary record: kind, distribution
 BND_I = wp.constant(2)
 #: floats per boundary record: eta, k, alpha_u, alpha_v, cos(rot), sin(rot), albedo, offset of
-#: the boundary's energy-compensation tables in ``bnd_f`` (0: none; :mod:`.compensation`)
-BND_F = wp.constant(8)
+#: the boundary's energy-compensation tables in ``bnd_f`` (0: none; :mod:`.compensation`), the
+#: film's relative index and phase scale (0: no film; :func:`.physics.fresnel_interface`)
+BND_F = wp.constant(10)
+#: Slots of the film in a boundary record.
+FILM_ETA = wp.constant(8)
+FILM_PHASE = wp.constant(9)
 #: floats per slab record: tau, albedo, g
 SLAB_F = wp.constant(3)
 
@@ -113,6 +119,8 @@ class Features:
         A Lambertian or a measured (:mod:`.measured`) base.
     media : bool
         Slabs with ``tau > 0`` (flights and Henyey-Greenstein scattering).
+    film : bool
+        Interfaces carrying a thin film (Airy reflectance in place of Fresnel's).
     """
 
     smooth: bool = True
@@ -123,6 +131,7 @@ class Features:
     diffuse: bool = True
     measured: bool = True
     media: bool = True
+    film: bool = True
 
     @classmethod
     def every(cls) -> "Features":
@@ -165,7 +174,8 @@ def features_of(bnd_i: np.ndarray, bnd_f: np.ndarray, slab_f: np.ndarray,
         compensation=bool((rough & (rec[:, 7] > 0)).any()),
         diffuse=bool((kinds == DIFFUSE).any()),
         measured=bool((kinds == MEASURED).any()),
-        media=bool(n_slabs > 0 and (slabs[:, 0] > 0).any()))
+        media=bool(n_slabs > 0 and (slabs[:, 0] > 0).any()),
+        film=bool((microfacet & (rec[:, FILM_PHASE] > 0)).any()))
 
 @wp.func
 def find_bin(x: wp.float32, edges: wp.array(dtype=wp.float32), n_edges: int):
@@ -270,6 +280,11 @@ def _boundary_scatter(f: Features):
                 return wm, wm_weight
         if wp.static(f.smooth):
             if au == wp.float32(0.0):
+                if wp.static(f.film):       # a film: its relative index and phase scale
+                    if bnd_f[o + FILM_PHASE] > wp.float32(0.0):
+                        wf, ff = sampling.sample_smooth_film(wi, eta, k, bnd_f[o + FILM_ETA],
+                                                             bnd_f[o + FILM_PHASE], u0)
+                        return wf, ff
                 ws, fs = sampling.sample_smooth(wi, eta, k, u0)
                 return ws, fs
         if wp.static(f.rough):
@@ -291,6 +306,12 @@ def _boundary_scatter(f: Features):
                     wt, wt_weight = tabulated.sample_microfacet_tabulated(wl, eta, k, bnd_f,
                                                                           int(au), v0, u1, u3)
                     return sampling.from_tangent_frame(wt, cr, sr), wt_weight * scale
+            if wp.static(f.film):
+                if bnd_f[o + FILM_PHASE] > wp.float32(0.0):
+                    wg, wg_weight = sampling.sample_microfacet_film(
+                        wl, eta, k, bnd_f[o + FILM_ETA], bnd_f[o + FILM_PHASE], au, av, dist,
+                        v0, u1, u2, u3)
+                    return sampling.from_tangent_frame(wg, cr, sr), wg_weight * scale
             wo, weight = sampling.sample_microfacet(wl, eta, k, au, av, dist, v0, u1, u2, u3)
             return sampling.from_tangent_frame(wo, cr, sr), weight * scale
         return d, wp.float32(0.0)       # a kind these features leave out: absorbed

@@ -11,6 +11,10 @@ channel. Roughness and rotation are shared by all channels; a per-channel ``tau`
 Beer-Lambert absorption) is planned for its largest value; the plan takes the most demanding
 channel of a per-channel ``g`` (:mod:`layersim.plan.layers`).
 
+Wavelengths: ``[stack] wavelengths`` (nm, one or three values) gives each channel its vacuum
+wavelength; a thin film on an interface (``film``) needs them, and its records carry their
+channel's wavelength. Per-channel values must then come one per wavelength.
+
 Units: angles in degrees in files, radians in the dataclasses; indices of refraction are absolute
 (the medium above the stack has ``top_ior``, 1 by default); ``tau`` is optical thickness along the
 normal (dimensionless).
@@ -95,6 +99,8 @@ class Scene:
         Short name (file stem or ``[stack] name``).
     source : str or None
         Where the scene came from (file path), used in messages.
+    wavelengths : tuple of float or None
+        Vacuum wavelength (nm) of each channel (``[stack] wavelengths``), or None.
     """
 
     stacks: tuple[tuple[Layer, ...], ...]
@@ -102,6 +108,7 @@ class Scene:
     discretization: Discretization = field(default_factory=Discretization)
     name: str = "scene"
     source: str | None = None
+    wavelengths: tuple[float, ...] | None = None
 
     # ---- construction ------------------------------------------------------------------
 
@@ -161,7 +168,9 @@ class Scene:
         if not 0 <= c < self.channels:
             raise IndexError(f"channel {c} out of range for a {self.channels}-channel scene")
         return replace(self, stacks=(self.stacks[c],),
-                       name=self.name if self.channels == 1 else f"{self.name}[{'RGB'[c]}]")
+                       name=self.name if self.channels == 1 else f"{self.name}[{'RGB'[c]}]",
+                       wavelengths=None if self.wavelengths is None else
+                       (self.wavelengths[c],))
 
     # ---- derived optics (monochromatic) ------------------------------------------------
 
@@ -198,7 +207,9 @@ class Scene:
     def describe(self) -> str:
         """One line per layer, for the CLI and reports."""
         lines = [f"scene '{self.name}': {len(self.stacks[0])} layer(s), top index "
-                 f"{self.top_ior:g}, {self.channels} channel(s)"]
+                 f"{self.top_ior:g}, {self.channels} channel(s)"
+                 + ("" if self.wavelengths is None else
+                    " at " + ", ".join(f"{x:g}" for x in self.wavelengths) + " nm")]
         for i, layers in enumerate(zip(*self.stacks)):
             lines.append(f"  [{i}] " + kind_of(layers[0]).describe(layers))
         return "\n".join(lines)
@@ -230,7 +241,9 @@ def as_scene(value, caller: str = "solve()") -> Scene:
 # --------------------------------------------------------------------------------------------
 
 _TOP_FIELDS = {"layer", "stack", "discretization"}
-_STACK_FIELDS = {"top_ior", "name", "energy_compensation"}
+_STACK_FIELDS = {"top_ior", "name", "energy_compensation", "wavelengths"}
+#: Vacuum wavelengths (nm) a scene may give its channels.
+WAVELENGTH_RANGE = (100.0, 20_000.0)
 _DISC_FIELDS = {"n", "md", "ms", "quadrature", "tol", "theta_full"}
 
 
@@ -266,7 +279,8 @@ def _parse_scene(data: Mapping[str, Any], source: str | None, default_name: str)
     top_ior, name, defaults = _parse_stack(data.get("stack", {}), source, default_name)
     stacks = _parse_layers(data.get("layer"), source, defaults)
     disc = _parse_discretization(data.get("discretization", {}), source)
-    return Scene(stacks=stacks, top_ior=top_ior, discretization=disc, name=name, source=source)
+    return Scene(stacks=stacks, top_ior=top_ior, discretization=disc, name=name, source=source,
+                 wavelengths=defaults["wavelengths"])
 
 
 def _parse_stack(stack: Any, source: str | None, default_name: str) -> tuple:
@@ -277,9 +291,10 @@ def _parse_stack(stack: Any, source: str | None, default_name: str) -> tuple:
     unknown = set(stack) - _STACK_FIELDS
     if unknown:
         raise SceneError(f"unknown field '{sorted(unknown)[0]}' in [stack] (allowed: top_ior, "
-                         "name, energy_compensation)", source=source)
-    top_ior = _real(_Ctx(source), "stack.top_ior", stack.get("top_ior", 1.0), lo=0.0,
-                    hi=_MAX_IOR, lo_open=True)
+                         "name, energy_compensation, wavelengths)", source=source)
+    ctx = _Ctx(source)
+    top_ior = _real(ctx, "stack.top_ior", stack.get("top_ior", 1.0), lo=0.0, hi=_MAX_IOR,
+                    lo_open=True)
     name = stack.get("name", default_name)
     if not isinstance(name, str) or not name:
         raise SceneError("[stack] name must be a non-empty string", source=source)
@@ -287,7 +302,8 @@ def _parse_stack(stack: Any, source: str | None, default_name: str) -> tuple:
     if compensation not in COMPENSATIONS:
         raise SceneError(f"[stack] energy_compensation: unknown compensation {compensation!r}; "
                          "expected one of " + ", ".join(COMPENSATIONS), source=source)
-    return top_ior, name, {"energy_compensation": compensation}
+    wavelengths = _parse_wavelengths(ctx, stack.get("wavelengths"))
+    return top_ior, name, {"energy_compensation": compensation, "wavelengths": wavelengths}
 
 
 def _parse_layers(raw_layers: Any, source: str | None, defaults: Mapping[str, Any]) -> tuple:
@@ -305,9 +321,27 @@ def _parse_layers(raw_layers: Any, source: str | None, defaults: Mapping[str, An
                              f"{len(per_layer) - 1 - i} layer(s) below it would never receive "
                              "light", layer=i, kind=versions[0].kind, field="kind",
                              source=source)
-    channels = max(len(v) for v in per_layer)
-    return tuple(tuple(v[c] if len(v) == 3 else v[0] for v in per_layer)
+    wavelengths = defaults.get("wavelengths")
+    if wavelengths is not None:
+        _check_channels(raw_layers, per_layer, wavelengths, source)
+    channels = len(wavelengths) if wavelengths else max(len(v) for v in per_layer)
+    return tuple(tuple(v[c] if len(v) == channels else v[0] for v in per_layer)
                  for c in range(channels))
+
+
+def _check_channels(raw_layers, per_layer, wavelengths, source) -> None:
+    """Every layer gives one value, or one per wavelength, of its per-channel fields."""
+    for i, (raw, versions) in enumerate(zip(raw_layers, per_layer)):
+        if len(versions) not in (1, len(wavelengths)):
+            kind = kind_of(versions[0])
+            # the field listing the values (a measured base's channels come from its file)
+            fld = next((f.name for f in kind.fields if f.per_channel
+                        and isinstance(raw.get(f.name), (list, tuple))
+                        and len(raw[f.name]) == len(versions)),
+                       kind.fields[0].name if kind.fields else None)
+            raise SceneError(f"gives {len(versions)} per-channel values but [stack] "
+                             f"wavelengths has {len(wavelengths)}: give one value per "
+                             "wavelength", layer=i, kind=kind.name, field=fld, source=source)
 
 
 def _parse_discretization(disc_raw: Any, source: str | None) -> Discretization:
@@ -352,3 +386,16 @@ def _parse_discretization(disc_raw: Any, source: str | None) -> Discretization:
         theta_full = _real(dctx, "discretization.theta_full", theta_full, 0.0, 90.0,
                            lo_open=True, hi_open=True)
     return Discretization(n=n, md=md, ms=ms, quadrature=quad, tol=tol, theta_full=theta_full)
+
+
+def _parse_wavelengths(ctx: _Ctx, value: Any) -> tuple[float, ...] | None:
+    """``[stack] wavelengths``: one or three vacuum wavelengths (nm) within
+    :data:`WAVELENGTH_RANGE`, one per channel (a scene has 1 or 3 channels); None if absent."""
+    if value is None:
+        return None
+    if not isinstance(value, (list, tuple)) or len(value) not in (1, 3):
+        raise ctx.error("stack.wavelengths", "must be a list of one or three wavelengths (nm), "
+                                             "one per channel, e.g. [650, 550, 450], got "
+                                             f"{value!r}")
+    return tuple(_real(ctx, f"stack.wavelengths[{c}]", v, *WAVELENGTH_RANGE)
+                 for c, v in enumerate(value))

@@ -38,10 +38,12 @@ class StackArrays:
     ----------
     bnd_i : ndarray of int32, shape (2 * (n_slabs + 1),)
         Per boundary: kind code (``walk.NULL`` ...), distribution code.
-    bnd_f : ndarray of float32, shape (8 * (n_slabs + 1) + tables,)
-        Per boundary: eta, k (relative to the medium above), alpha_u, alpha_v, cos and sin of the
-        tangent-frame rotation, Lambertian albedo, offset of its energy-compensation tables
-        (0: none); a tabulated-NDF boundary (distribution code
+    bnd_f : ndarray of float32, shape (10 * (n_slabs + 1) + tables,)
+        Per boundary (:data:`layersim.kernels.walk.BND_F` floats): eta, k (relative to the
+        medium above), alpha_u, alpha_v, cos and sin of the tangent-frame rotation, Lambertian
+        albedo, offset of its energy-compensation tables (0: none), the index of its thin film
+        relative to the medium above and the film's phase scale ``4 pi n d / lambda`` (0: no
+        film); a tabulated-NDF boundary (distribution code
         :data:`layersim.kernels.tabulated.TABULATED`) holds in place of ``alpha_u`` the offset of
         its packed table (:meth:`layersim.ndf.NDFTable.packed`), and so does a measured base
         (:data:`layersim.kernels.walk.MEASURED`: one channel of its MERL table,
@@ -67,7 +69,7 @@ class StackArrays:
 
 
 #: The record of a null boundary: an index-matched pass-through.
-NULL_BOUNDARY = WalkBoundary((walk.NULL, 0), (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0))
+NULL_BOUNDARY = WalkBoundary((walk.NULL, 0), (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0))
 
 
 def _boundary(scene: Scene, i: int | None) -> WalkBoundary:
@@ -115,6 +117,11 @@ def flatten(scene: Scene) -> StackArrays:
     if last == "slab":
         boundaries.append(_boundary(scene, None))
         owners.append(None)
+    for i, b in zip(owners, boundaries):
+        if len(b.floats) != walk.BND_F or len(b.ints) != walk.BND_I:
+            raise ValueError(f"the walk record of layer {i} has {len(b.ints)} ints and "
+                             f"{len(b.floats)} floats; a boundary record has {walk.BND_I} and "
+                             f"{walk.BND_F}")
     bnd_i = np.array([x for b in boundaries for x in b.ints], dtype=np.int32)
     bnd_f = np.array([x for b in boundaries for x in b.floats], dtype=np.float32)
     bnd_f = append_tables(scene, owners, _append_tables(boundaries, bnd_f), walk.BND_F)

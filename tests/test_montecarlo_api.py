@@ -191,7 +191,7 @@ def test_stack_layout():
     np.testing.assert_allclose(st.slab_f.reshape(-1, 3), [
         [1.0, 0.5, 0.0], [0.0, 1.0, 0.0], [2.0, 0.7, 0.3], [0.5, 0.9, 0.0], [0.0, 1.0, 0.0]],
         rtol=1e-7)
-    f = st.bnd_f.reshape(-1, 8)
+    f = st.bnd_f.reshape(-1, walk.BND_F)
     assert f[1, :4] == pytest.approx([1.5 / 1.1, 0, 0.1, 0.3])
     assert f[1, 4:6] == pytest.approx([0, 1], abs=1e-7)          # rotated 90 degrees
     assert f[2, 0] == pytest.approx(1.2 / 1.5)

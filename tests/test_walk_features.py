@@ -27,6 +27,10 @@ SCENES = {
         {"layer": [{"kind": "dielectric", "ior": 1.5},
                    {"kind": "conductor", "ior": GOLD, "roughness": [0.1, 0.3]}]},
         {"smooth", "beckmann"}),
+    "filmed gold": ({"layer": [{"kind": "conductor", "ior": GOLD, "roughness": 0.2,
+                                "film": {"thickness": 400.0, "ior": 1.4}}],
+                     "stack": {"wavelengths": [550.0]}},
+                    {"beckmann", "film"}),
     "clear gap between two interfaces": (
         {"layer": [{"kind": "dielectric", "ior": 1.5, "roughness": 0.2},
                    {"kind": "dielectric", "ior": 1.0, "roughness": 0.2}]},
@@ -54,7 +58,8 @@ def test_every_path_is_the_union_and_the_default():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["coated gold", "hg slab", "ggx coat over hg over diffuse"])
+@pytest.mark.parametrize("name", ["coated gold", "hg slab", "ggx coat over hg over diffuse",
+                                  "filmed gold"])
 def test_a_kernel_without_the_unused_paths_walks_the_same_paths(name, monkeypatch):
     """Same seed, same particles: the specialised kernel and the one with every path agree to
     float32 rounding (0.02 standard errors in every bin), and report what was left out."""

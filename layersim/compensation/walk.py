@@ -1,7 +1,8 @@
 """The compensation tables of a stack's boundaries, packed for the random walk.
 
 Each compensated boundary's record (:mod:`layersim.kernels.compensation`) is appended to the
-walk's boundary floats ``bnd_f``, and its offset is stored in the boundary's last float: per side
+walk's boundary floats ``bnd_f``, and its offset is stored in the boundary record's slot
+:data:`OFFSET_SLOT` (:data:`layersim.kernels.walk.BND_F` floats per record): per side
 of incidence (top, then bottom) the block albedos ``a_R = u_R V_R``, ``a_T = u_T V_T`` and the
 outgoing shapes ``g_R = pi v_R / V_R``, ``g_T = pi v_T / V_T`` at the table nodes.
 """

@@ -49,18 +49,22 @@ GPU_BATCH = 1 << 20
 DEVICE_DENSE_MAX = 1 << 28
 
 
-def _half_period_needed(q0, qpi, dist: str, m: int, min_samples: int):
+def _half_period_needed(q0, qpi, dist: str, m: int, min_samples: int, film=None,
+                        alpha: float = 0.0):
     """Series length of each pair (peak factor at :data:`ALIAS_RELERR` plus the smooth factor's
-    orders) and the smallest half period ``M`` (samples of [0, pi] minus one) whose trapezoidal
-    rule keeps the first ``m + EXTRA_ORDERS`` orders clean of aliasing; callers round ``M`` up
-    (FFT-friendly on the host, powers of two on the device)."""
-    length = fourier.peak_length(q0, qpi, dist, ALIAS_RELERR) + microfacet.L_FIT
+    orders, a thin film's included: :func:`~layersim.ingredients.microfacet.film_orders` at
+    roughness ``alpha``) and the smallest half period ``M`` (samples of [0, pi]
+    minus one) whose trapezoidal rule keeps the first ``m + EXTRA_ORDERS`` orders clean of
+    aliasing; callers round ``M`` up (FFT-friendly on the host, powers of two on the
+    device)."""
+    length = (fourier.peak_length(q0, qpi, dist, ALIAS_RELERR) + microfacet.L_FIT
+              + microfacet.film_orders(film, alpha))
     return length, np.maximum(min_samples, m + EXTRA_ORDERS + length + 1) // 2 + 1
 
 
 def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, device,
-                   max_samples, min_samples=16):
-    length, half = _half_period_needed(q0, qpi, dist, m, min_samples)
+                   max_samples, min_samples=16, film=None):
+    length, half = _half_period_needed(q0, qpi, dist, m, min_samples, film, alpha)
     # even sample counts whose half (the DCT length) is FFT-friendly, not powers of two: less
     # oversampling for the same aliasing bound
     N = 2 * np.array([scipy.fft.next_fast_len(int(x)) for x in half])
@@ -74,11 +78,12 @@ def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, 
         out = np.zeros((mu_i.size, m))
         out[aliased] = microfacet.project_pairs(
             mu_i[aliased], mu_o[aliased], o[aliased], i[aliased], q0[aliased], qpi[aliased],
-            K, m, eta, alpha, dist, stats)[2]
+            K, m, eta, alpha, dist, stats, film=film)[2]
         if rest.size:
             out[rest] = _numeric_batch(mu_i[rest], mu_o[rest], o[rest], i[rest], q0[rest],
                                        qpi[rest], K, m, eta, alpha, dist, stats, device=device,
-                                       max_samples=max_samples, min_samples=min_samples)[2]
+                                       max_samples=max_samples, min_samples=min_samples,
+                                       film=film)[2]
         return o, i, out
     # a few orders past m decide truncation exactly as the semi-analytic path does (the series
     # decays monotonically beyond its peak: a significant coefficient at or past m means the
@@ -88,7 +93,8 @@ def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, 
     for n in np.unique(N):
         rows = np.flatnonzero(N == n)
         series[rows] = kproj.uniform_cosine_series(mu_i[rows], mu_o[rows], eta, alpha, alpha,
-                                                   dist, int(n), extra, device=device)
+                                                   dist, int(n), extra, device=device,
+                                                   film=film)
     mag = np.abs(series)
     above = mag >= microfacet.RELERR * np.maximum(mag[:, :1], 1e-300)
     cut = above[:, m:].any(axis=1)
@@ -137,16 +143,16 @@ def numeric_interface_operator(grid: Grid, m: int, layer, eta_above: float,
 
 def _device_block(grid: Grid, name: str, triangle: bool, m: int, eta: complex, alpha: float,
                   dist: str, stats: ProjectionStats, device, max_samples: int,
-                  min_samples: int) -> list:
+                  min_samples: int, film=None) -> list:
     """Series of the significant pairs of one block: ``[(o, i, coef)]`` with ``coef`` a Warp
     array on ``device`` (sampled pairs) or a host array (pairs too peaked to sample, projected
     semi-analytically as in :func:`_numeric_batch`)."""
     mu_i, mu_o, o, i, q0, qpi, keep = microfacet.significant_pairs(grid, name, triangle, eta,
-                                                                   alpha, dist, device)
+                                                                   alpha, dist, device, film)
     stats.pairs += mu_i.size
     stats.projected += keep.size
     t0 = time.perf_counter()
-    length, need = _half_period_needed(q0[keep], qpi[keep], dist, m, min_samples)
+    length, need = _half_period_needed(q0[keep], qpi[keep], dist, m, min_samples, film, alpha)
     # power-of-two half periods: one cosine table serves every pair (the host path's
     # FFT-friendly lengths would need a table per length)
     half = 1 << np.ceil(np.log2(need)).astype(np.int64)
@@ -158,7 +164,8 @@ def _device_block(grid: Grid, name: str, triangle: bool, m: int, eta: complex, a
         K = int(min(fourier.peak_length(q0[sel], qpi[sel], dist, microfacet.RELERR).max(),
                     m + microfacet.L_HARD))
         parts.append(microfacet.project_pairs(mu_i[sel], mu_o[sel], o[sel], i[sel], q0[sel],
-                                               qpi[sel], K, m, eta, alpha, dist, stats))
+                                               qpi[sel], K, m, eta, alpha, dist, stats,
+                                               film=film))
     rest = np.flatnonzero(~aliased)
     if rest.size:
         rest = rest[np.argsort(half[rest], kind="stable")]
@@ -169,7 +176,8 @@ def _device_block(grid: Grid, name: str, triangle: bool, m: int, eta: complex, a
         coef, cut = kproj.ragged_cosine_series(mu_i[sel], mu_o[sel], eta, alpha, alpha, dist,
                                                half[rest], m + EXTRA_ORDERS, m,
                                                microfacet.RELERR, taper,
-                                               fourier.taper_factors(m), device=device)
+                                               fourier.taper_factors(m), device=device,
+                                               film=film)
         stats.truncated += int(cut.numpy().sum())
         parts.append((o[sel], i[sel], coef))
     stats.series_seconds += time.perf_counter() - t0
@@ -187,7 +195,7 @@ def device_interface_operator(grid: Grid, m: int, layer, eta_above: float,
     CPU); it pays off on GPUs. The scratch block takes ``8 m h^2`` bytes of device memory."""
     stats = stats if stats is not None else ProjectionStats()
     t0 = time.perf_counter()
-    eta, dist, alpha, opaque, names = microfacet.interface_setup(layer, eta_above)
+    eta, dist, alpha, opaque, names, film = microfacet.interface_setup(layer, eta_above)
     h = grid.h
     asm = BlockAssembler(m, h, grid.flux_weight, device=device)
     blocks, ttb = {}, None
@@ -202,7 +210,7 @@ def device_interface_operator(grid: Grid, m: int, layer, eta_above: float,
             # reflection blocks are symmetric: one triangle, mirrored off the diagonal
             triangle = reciprocity and name != "Ttb"
             parts = _device_block(grid, name, triangle, m, eta, alpha, dist, stats, device,
-                                  max_samples, min_samples)
+                                  max_samples, min_samples, film)
             for o, i, coef in parts:
                 asm.scatter(coef, o, i, mirror=triangle)
             if name == "Ttb":

@@ -27,12 +27,15 @@ from ..operator import Grid, IsoOperator
 
 
 def smooth_conductor_operator(grid: Grid, m: int, eta: complex, eta_above: float,
-                              reflectance: np.ndarray | None = None) -> IsoOperator:
+                              reflectance: np.ndarray | None = None,
+                              film: tuple | None = None) -> IsoOperator:
     """Opaque operator of a smooth conductor of relative index ``eta`` (complex: ``eta.real +
     i eta.imag``): ``Rt = diag(F(mu))`` in each of the ``m`` orders, all of it a delta.
     ``reflectance`` (h,) replaces ``F``: a near-specular conductor's rough reflected energy
-    (:meth:`layersim.lobe.NearSpecularLobe.reflectance`)."""
-    F = (fresnel(grid.mu, eta.real, eta.imag) if reflectance is None
+    (:meth:`layersim.lobe.NearSpecularLobe.reflectance`); ``film`` (relative index, phase
+    scale) makes ``F`` the Airy reflectance of a filmed conductor
+    (:func:`layersim.kernels.fresnel.fresnel`)."""
+    F = (fresnel(grid.mu, eta.real, eta.imag, film) if reflectance is None
          else np.asarray(reflectance, float))
     diag = sps.diags(F, format="csr")
     return IsoOperator(grid, {"Rt": [diag] * m}, eta_above, None, delta={"Rt": F})

@@ -45,7 +45,10 @@ class DielectricKind(InterfaceKind):
         return self.values(per_channel, lambda x: f"{x.ior.real:g}")
 
     def plan_special(self, scene, i, layer, survey) -> bool:
-        if all(scene.channel(c).relative_ior(i) == 1.0 for c in range(scene.channels)):
+        matched = all(scene.channel(c).relative_ior(i) == 1.0 for c in range(scene.channels))
+        if layer.film is not None:
+            smooth.refuse_film(scene, i, layer, matched)
+        if matched:
             survey.left_out.append(f"layer {i} (dielectric): index-matched interface (relative "
                                    "index 1) is an exact no-op")
             survey.layers.append(LayerPlan(i, self.name, "left out", "index-matched"))
@@ -72,6 +75,8 @@ class DielectricKind(InterfaceKind):
 
     def walk_boundary(self, scene, i):
         if scene.relative_ior(i).real == 1.0:    # nothing changes index: a pass-through
+            if scene.layers[i].film is not None:
+                raise smooth.matched_film_error(i, "the Monte Carlo walk")
             return None
         return super().walk_boundary(scene, i)
 

@@ -48,7 +48,7 @@ class DiffuseKind(LayerKind):
         return diffuse_operator(job.grid, job.layer.albedo, job.eta_above)
 
     def walk_boundary(self, scene, i) -> WalkBoundary:
-        floats = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, scene.layers[i].albedo, 0.0]
+        floats = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, scene.layers[i].albedo, 0.0, 0.0, 0.0]
         return WalkBoundary((walk.DIFFUSE, 0), tuple(floats))
 
 

@@ -16,12 +16,16 @@ from typing import Any, Callable, Mapping
 from ..errors import SceneError
 
 __all__ = ["Ctx", "Field", "parse_fields", "real", "per_channel", "roughness", "conductor_ior",
-           "MAX_IOR", "MAX_K", "MAX_ROUGHNESS"]
+           "film", "MAX_IOR", "MAX_K", "MAX_ROUGHNESS", "FILM_THICKNESS", "FILM_IOR"]
 
 # Guard rails against inputs that are valid numbers but physically meaningless.
 MAX_IOR = 100.0           # absolute index (real part), dielectric or conductor eta
 MAX_K = 100.0             # conductor extinction coefficient
 MAX_ROUGHNESS = 10.0      # Beckmann/GGX alpha; alpha > 1 is already very rough
+#: Bounds of a thin film's thickness (nm; 10 um is far past where interference colours wash
+#: out) and of its real index.
+FILM_THICKNESS = (0.0, 10_000.0)
+FILM_IOR = (1.0, 4.0)
 
 
 class Ctx:
@@ -165,6 +169,24 @@ def conductor_ior(ctx: Ctx, fld: str, value: Any) -> complex:
     eta = real_value(ctx, fld + ".eta", eta, lo=0.0, hi=MAX_IOR)
     k = real_value(ctx, fld + ".k", k, lo=0.0, hi=MAX_K, lo_open=True)
     return complex(eta, k)
+
+
+def film(ctx: Ctx, fld: str, value: Any) -> tuple[float, float]:
+    """A thin film ``{ thickness = d, ior = n }``: ``(d, n)`` with ``d`` in nm within
+    :data:`FILM_THICKNESS` and the real index ``n`` within :data:`FILM_IOR`."""
+    if not isinstance(value, Mapping):
+        raise ctx.error(fld, "must be a table { thickness = <nm>, ior = <real index> }, got "
+                             f"{value!r}")
+    unknown = sorted(set(value) - {"thickness", "ior"})
+    if unknown:
+        raise ctx.error(f"{fld}.{unknown[0]}", "unknown key of a film (allowed: thickness, ior)")
+    for key in ("thickness", "ior"):
+        if key not in value:
+            raise ctx.error(f"{fld}.{key}", "is required (a film is { thickness = <nm>, ior = "
+                                            "<real index> })")
+    d = real_value(ctx, f"{fld}.thickness", value["thickness"], *FILM_THICKNESS)
+    n = real_value(ctx, f"{fld}.ior", value["ior"], *FILM_IOR)
+    return d, n
 
 
 def choice(options: tuple, what: str) -> Callable:

@@ -1,6 +1,6 @@
 """What dielectric and conductor interfaces share: the record (index, roughness, distribution,
-rotation, energy compensation, NDF table), its fields, and how a rough interface is planned,
-projected and walked.
+rotation, energy compensation, NDF table, thin film), its fields, and how a rough interface is
+planned, projected and walked.
 
 A rough interface is projected onto the Fourier basis (numerically or semi-analytically,
 :mod:`layersim.ingredients.numeric`, :mod:`layersim.ingredients.microfacet`; with coupled modes
@@ -8,6 +8,11 @@ where it is anisotropic or tabulated, :mod:`layersim.ingredients.aniso_microface
 checked, and its compensation lobe added (:mod:`layersim.compensation`). The variants live in
 their own modules: :mod:`.smooth` (roughness 0), :mod:`.near_specular` (roughness up to 0.03),
 :mod:`.tabulated` (a measured NDF); :mod:`.dielectric` and :mod:`.conductor` choose among them.
+
+An interface may carry a thin dielectric film (``film = { thickness, ior }``): its Airy
+reflectance replaces the Fresnel reflectance of the interface (and of every microfacet) at the
+channel's wavelength (``[stack] wavelengths``), in the solver and the walk alike
+(:func:`layersim.kernels.physics.fresnel_interface`; Belcour & Barla 2017).
 """
 
 from __future__ import annotations
@@ -29,15 +34,40 @@ from ..kernels.physics import DISTRIBUTION_CODES
 from ..kernels.tabulated import TABULATED
 from . import tabulated
 from .base import Layer, LayerKind, LayerPlan, WalkBoundary
-from .fields import Field, choice, real, roughness
+from .fields import Field, choice, film, real, roughness
 
-__all__ = ["Interface", "InterfaceKind", "DISTRIBUTIONS", "COMPENSATIONS"]
+__all__ = ["Interface", "InterfaceKind", "Film", "DISTRIBUTIONS", "COMPENSATIONS"]
 
 #: Microfacet normal distributions understood by the solver and the random walk.
 DISTRIBUTIONS = ("beckmann", "ggx", "tabulated")
 #: Energy-loss compensation terms of rough interfaces (``energy_compensation``, in [stack] or
 #: per layer; :mod:`layersim.compensation`).
 COMPENSATIONS = ("none", "layerlab", "multiple-scattering")
+
+
+@dataclass(frozen=True)
+class Film:
+    """A thin dielectric film on an interface, at one channel's wavelength.
+
+    Attributes
+    ----------
+    thickness : float
+        Geometric thickness ``d`` (nm), > 0.
+    ior : float
+        Absolute real index ``n`` of the film.
+    wavelength : float
+        Vacuum wavelength ``lambda`` (nm) of the channel the record belongs to.
+    """
+
+    thickness: float
+    ior: float
+    wavelength: float
+
+    @property
+    def phase_scale(self) -> float:
+        """``4 pi n d / lambda``: the round-trip phase through the film at normal incidence
+        inside it (:func:`layersim.kernels.physics.airy_reflectance`)."""
+        return 4.0 * math.pi * self.ior * self.thickness / self.wavelength
 
 
 @dataclass(frozen=True)
@@ -56,6 +86,8 @@ class Interface(Layer):
     ndf: Any = field(default=None, compare=False)
     """The :class:`layersim.ndf.NDFTable` of ``distribution = "tabulated"`` (its ``alpha_u``,
     ``alpha_v`` are then the table's equivalent Beckmann roughness, which sizes the plan)."""
+    film: Film | None = None
+    """The thin film on the interface at this channel's wavelength (None: a bare interface)."""
 
     @property
     def is_interface(self) -> bool:
@@ -81,6 +113,13 @@ class Interface(Layer):
         """The narrower roughness (radians of slope spread)."""
         return min(self.alpha_u, self.alpha_v)
 
+    def film_params(self, eta_above: float) -> tuple[float, float] | None:
+        """The film as the kernels take it: ``(index relative to the medium above, phase
+        scale 4 pi n d / lambda)``, or None without a film."""
+        if self.film is None:
+            return None
+        return self.film.ior / eta_above, self.film.phase_scale
+
 
 class InterfaceKind(LayerKind):
     """Dielectric and conductor interfaces; subclasses declare ``ior`` and choose the smooth and
@@ -98,6 +137,10 @@ class InterfaceKind(LayerKind):
               parse=real(lo=-360.0, hi=360.0), default=0.0, fit=True),
         Field("energy_compensation", "energy-loss compensation of the rough interface "
                                      "(default: [stack] energy_compensation)"),
+        Field("film", "a thin dielectric film on the interface, { thickness = d, ior = n }: d in "
+                      "nm within [0, 10000] (0: no film), n its real index within [1, 4]; "
+                      "needs [stack] wavelengths (its Airy reflectance replaces Fresnel's at each "
+                      "channel's wavelength)", unit="nm", parse=film),
     )
 
     # ---- scene -----------------------------------------------------------------------------
@@ -117,9 +160,40 @@ class InterfaceKind(LayerKind):
                             f"{comp!r} is not available for a tabulated NDF (its albedo tables "
                             "are those of Beckmann and GGX interfaces): set "
                             "energy_compensation = \"none\" on this layer")
+        iors = self.parse_ior(ctx, raw["ior"])
+        films = self._films(ctx, values["film"], defaults.get("wavelengths"), dist, comp)
+        if len(iors) == 1:
+            iors = iors * len(films)
+        elif len(films) == 1:
+            films = films * len(iors)
+        elif len(films) != len(iors):
+            raise ctx.error("ior", f"gives {len(iors)} per-channel values but [stack] "
+                                   f"wavelengths has {len(films)}: give one value per "
+                                   "wavelength")
         return [self.record(ior=e, alpha_u=au, alpha_v=av, distribution=dist, rotation=rot,
-                            energy_compensation=comp, ndf=table)
-                for e in self.parse_ior(ctx, raw["ior"])]
+                            energy_compensation=comp, ndf=table, film=f)
+                for e, f in zip(iors, films)]
+
+    @staticmethod
+    def _films(ctx, value, wavelengths, dist: str, comp: str) -> list:
+        """The film of each channel (``[None]`` without one, or with thickness 0: exactly the
+        bare interface); refused without wavelengths, on a tabulated NDF and with an energy
+        compensation, which have no film."""
+        if value is None or value[0] == 0.0:
+            return [None]
+        d, n = value
+        if not wavelengths:
+            raise ctx.error("film", "needs the channels' wavelengths: add [stack] wavelengths "
+                                    "(nm), e.g. wavelengths = [650, 550, 450]")
+        if dist == "tabulated":
+            raise ctx.error("film", "is not available with a tabulated NDF; use distribution = "
+                                    "\"beckmann\" or \"ggx\"")
+        if comp != "none":
+            raise ctx.error("energy_compensation",
+                            f"{comp!r} is not available with a film (its albedo tables are "
+                            "those of bare interfaces): set energy_compensation = \"none\" on "
+                            "this layer")
+        return [Film(d, n, lam) for lam in wavelengths]
 
     @staticmethod
     def _compensation(ctx, value, au: float, av: float) -> str:
@@ -151,6 +225,8 @@ class InterfaceKind(LayerKind):
             extra += f", rotated {math.degrees(layer.rotation):g} deg"
         if layer.energy_compensation != "none" and not layer.smooth:
             extra += f", energy compensation {layer.energy_compensation}"
+        if layer.film is not None:
+            extra += ", " + film_text(per_channel)
         return f"{layer.kind} ior={self.describe_ior(per_channel)}, {rough}{extra}"
 
     def describe_ior(self, per_channel) -> str:
@@ -160,6 +236,15 @@ class InterfaceKind(LayerKind):
 
     def survey(self, scene, i, survey) -> None:
         layer = scene.channel(0).layers[i]
+        self.plan_layer(scene, i, layer, survey)
+        if layer.film is not None:      # the film changes no lobe width, only the Fresnel term
+            text = film_text([scene.channel(c).layers[i] for c in range(scene.channels)])
+            for lp in survey.layers:
+                if lp.index == i:
+                    lp.detail += "; " + text
+
+    def plan_layer(self, scene, i: int, layer, survey) -> None:
+        """The plan of layer ``i`` (``layer``: its record in channel 0), its film aside."""
         if self.plan_special(scene, i, layer, survey):
             return
         eta_rel = scene.channel(0).relative_ior(i)
@@ -229,8 +314,9 @@ class InterfaceKind(LayerKind):
     def walk_boundary(self, scene, i) -> WalkBoundary:
         layer = scene.layers[i]
         eta = scene.relative_ior(i)
+        film = layer.film_params(scene.ior_above(i)) or (0.0, 0.0)
         floats = (eta.real, eta.imag if layer.opaque else 0.0, layer.alpha_u, layer.alpha_v,
-                  math.cos(layer.rotation), math.sin(layer.rotation), 0.0, 0.0)
+                  math.cos(layer.rotation), math.sin(layer.rotation), 0.0, 0.0, *film)
         code = walk.CONDUCTOR if layer.opaque else walk.DIELECTRIC
         if layer.ndf is not None:       # alpha_u's slot gets the table's offset in flatten()
             return WalkBoundary((code, TABULATED), floats, layer.ndf)
@@ -239,6 +325,9 @@ class InterfaceKind(LayerKind):
     # ---- statistical model -----------------------------------------------------------------
 
     def statistical_atom(self, layer, refuse):
+        if layer.film is not None:
+            raise refuse("film", "a thin film is not represented (the model's atoms have bare "
+                                 "Fresnel terms)")
         if layer.distribution != "ggx":
             raise refuse("distribution", f"'{layer.distribution}' is not represented; use "
                                          "distribution = \"ggx\"")
@@ -257,6 +346,15 @@ def compensation_text(layer) -> str:
     what = {"multiple-scattering": "Kulla & Conty 2017 multiple-scattering lobe",
             "layerlab": "layerlab's near-diffuse correction"}[mode]
     return f"; energy compensation {mode!r} ({what}, order 0, solver and Monte Carlo)"
+
+
+def film_text(per_channel) -> str:
+    """The plan's and the description's words for the film of an interface (its records, one
+    per channel)."""
+    f = per_channel[0].film
+    lams = ", ".join(f"{x.film.wavelength:g}" for x in per_channel)
+    return (f"thin film d = {f.thickness:g} nm, n = {f.ior:g} (Airy reflectance at {lams} "
+            "nm)")
 
 
 def _fmt_eta(eta: complex) -> str:

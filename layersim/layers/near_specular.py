@@ -32,7 +32,8 @@ def plan_coat(scene, i: int, layer, survey) -> bool:
     base that scatters wider than that blur: diffuse, measured, or a conductor rougher than
     :data:`~layersim.lobe.NEAR_SPECULAR_ALPHA`)."""
     lo, hi = min(layer.alpha_u, layer.alpha_v), max(layer.alpha_u, layer.alpha_v)
-    if layer.ndf is not None:       # the lobe of layersim.lobe is analytic
+    if layer.ndf is not None or layer.film is not None:
+        # the lobe of layersim.lobe is analytic, with bare Fresnel factors
         return False
     base = scene.channel(0).layers[-1]
     if (i != 0 or lo > NEAR_SPECULAR_ALPHA or hi > NEAR_SPECULAR_WIDE_MAX
@@ -85,7 +86,8 @@ def plan_conductor(scene, i: int, layer, survey) -> bool:
     the lobe is seen directly, and near the coat's critical angle part of it is trapped, which
     a mirror does not reproduce (``benchmarks/features/near_specular.txt``)."""
     lo, hi = min(layer.alpha_u, layer.alpha_v), max(layer.alpha_u, layer.alpha_v)
-    if lo > NEAR_SPECULAR_ALPHA:
+    if lo > NEAR_SPECULAR_ALPHA or layer.film is not None:
+        # (a film: the mirror's reflectance and its lobe have bare Fresnel factors)
         return False
     if i > 0 and (hi > NEAR_SPECULAR_BASE_ALPHA or not _blurred_below(scene, i)):
         why = (f"its wider roughness exceeds {NEAR_SPECULAR_BASE_ALPHA:g}"

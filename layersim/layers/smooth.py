@@ -9,17 +9,46 @@ on a Snell-matched grid whose inside nodes in the escape cone are the refracted 
 
 from __future__ import annotations
 
-from ..errors import InfeasibleError
+from ..errors import InfeasibleError, SceneError
 from ..ingredients.smooth import boundary_reflector, smooth_conductor_operator
 from .base import LayerPlan
 
-__all__ = ["plan_conductor", "plan_dielectric", "dielectric_operator", "conductor_operator"]
+__all__ = ["plan_conductor", "plan_dielectric", "dielectric_operator", "conductor_operator",
+           "refuse_film", "matched_film_error"]
 
 
 def plan_conductor(i: int, layer, survey) -> None:
     survey.layers.append(LayerPlan(i, layer.kind, "exact (specular delta)",
                                    "smooth: Fresnel reflectance on the diagonal of Rt in "
                                    "every order"))
+
+
+def matched_film_error(i: int, who: str) -> SceneError:
+    """The refusal of a film on an index-matched dielectric interface."""
+    return SceneError(f"a film on an index-matched interface (relative index 1) is not "
+                      f"handled by {who}: a rough one would transmit a delta through every "
+                      "microfacet, which the microfacet model cannot represent; give the "
+                      "interface a different index, or put the film on a neighbouring "
+                      "interface", layer=i, kind="dielectric", field="film")
+
+
+def refuse_film(scene, i: int, layer, matched: bool) -> None:
+    """Refuse what the solver does not solve with a film on a dielectric: an index-matched
+    interface, and a smooth boundary (whose transmission :mod:`layersim.boundary` applies at
+    evaluation, with bare Fresnel factors).
+
+    Raises
+    ------
+    SceneError, InfeasibleError
+    """
+    if matched:
+        raise matched_film_error(i, "the solver")
+    if layer.smooth:
+        raise InfeasibleError(
+            f"layer {i} ({layer.kind}): field 'film': a film on a smooth dielectric boundary "
+            "is not solved (the boundary's transmission is applied where the BSDF is "
+            "evaluated, with bare Fresnel factors); give the interface a roughness > 0, or use "
+            "layersim.montecarlo, which walks it exactly")
 
 
 def plan_dielectric(scene, i: int, layer, survey) -> None:
@@ -86,5 +115,8 @@ def dielectric_operator(job, reflectance=None):
 
 
 def conductor_operator(job):
+    """The Fresnel diagonal of a smooth conductor; of its film's Airy reflectance where it
+    has one."""
     return smooth_conductor_operator(job.grid, job.plan.md, job.scene.relative_ior(job.index),
-                                     job.eta_above)
+                                     job.eta_above,
+                                     film=job.layer.film_params(job.eta_above))
