@@ -54,6 +54,12 @@ STUDIES = {
     "gpu_tabulated_vs_analytic": ("gpu", "benchmarks/features/gpu_tabulated_vs_analytic.py 1e8 "
                                          "warp-cuda",
                                   "benchmarks/features/gpu_tabulated_vs_analytic.txt"),
+    "plans_vs_gpu_mc": ("gpu", "benchmarks/accuracy/plans_vs_gpu_mc.py 1e9 warp-cuda "
+                               "coated_hg_diffuse ggx_coated_gold vandehulst_slab dusty_gold "
+                               "coated_gold", "benchmarks/accuracy/plans_vs_gpu_mc.txt"),
+    "plans_vs_gpu_mc_coupled": ("gpu", "benchmarks/accuracy/plans_vs_gpu_mc.py 1e9 warp-cuda "
+                                       "gold_under_hg additive_validation",
+                                "benchmarks/accuracy/plans_vs_gpu_mc_coupled.txt"),
     "projection_paths_gpu": ("gpu", "benchmarks/speed/projection_paths.py --devices cpu cuda "
                                     "--samples 1024 4096 16384 --repeat 3",
                              "benchmarks/reports/gpu/projection_paths_gpu.txt"),
