@@ -100,7 +100,7 @@ def commit() -> str:
     return head + (" + uncommitted changes" if dirty else "")
 
 
-def run_study(name: str) -> bool:
+def run_study(name: str, tree: str | None = None) -> bool:
     where, command, output = STUDIES[name]
     argv = [sys.executable] + shlex.split(command)
     out = ROOT / output
@@ -116,7 +116,7 @@ def run_study(name: str) -> bool:
         return False
     header = [f"# command: python {command}",
               f"# machine: {machine(where == 'gpu')}",
-              f"# date: {time.strftime('%Y-%m-%d %H:%M')}; commit: {commit()}",
+              f"# date: {time.strftime('%Y-%m-%d %H:%M')}; commit: {tree or commit()}",
               f"# load average (1 min): {load0:.1f} before, {load1:.1f} after; wall time "
               f"{seconds:.0f} s (benchmarks/headline.py)"]
     out.write_text("\n".join(header) + "\n" + tmp.read_text())
@@ -130,6 +130,8 @@ def main() -> int:
     ap.add_argument("where", nargs="?", choices=["cpu", "gpu"])
     ap.add_argument("names", nargs="*")
     ap.add_argument("--list", action="store_true")
+    ap.add_argument("--commit", help="the commit of this tree, where its git metadata is not "
+                                     "this tree's (a copy sent to another machine)")
     args = ap.parse_args()
     if args.list or args.where is None:
         for name, (where, command, output) in STUDIES.items():
@@ -139,7 +141,7 @@ def main() -> int:
     unknown = [n for n in names if n not in STUDIES]
     if unknown:
         ap.error(f"unknown study {unknown[0]!r}; --list shows them")
-    failed = [n for n in names if not run_study(n)]
+    failed = [n for n in names if not run_study(n, args.commit)]
     if failed:
         print("failed: " + ", ".join(failed))
     return 1 if failed else 0
