@@ -9,8 +9,8 @@ Philox generator of :mod:`layersim.kernels.rng`, walk in :mod:`layersim.kernels.
     res = mc.simulate(scene, wi, particles, mu_edges=..., phi_edges=..., backend="auto", seed=0)
     res.reflectance, res.reflectance_stderr, res.bins["top"], res.bins_stderr["top"]
 
-Modules: :mod:`.driver` (entry point, validation, batching), :mod:`.stack` (scene -> kernel
-parameters), :mod:`.backends` (Warp / OpenCL launch), :mod:`.estimates` (integer tallies ->
+Modules: :mod:`.driver` (entry point, validation, batching), :mod:`.work` (path ranges of a
+walk, the unit of work anywhere), :mod:`.stack` (scene -> kernel parameters), :mod:`.backends` (Warp / OpenCL launch), :mod:`.estimates` (integer tallies ->
 fractions and standard errors), :mod:`.result` (:class:`MCResult`).
 """
 

@@ -129,11 +129,18 @@ def resolve_backend(backend: str) -> str:
     return backend
 
 
-def make_runner(backend: str, launch: Launch):
-    """A runner for a resolved backend name: ``runner.run(first, count) -> (tally, counters)``."""
+def make_runner(backend: str, launch: Launch, device: str | None = None):
+    """A runner for a resolved backend name: ``runner.run(first, count) -> (tally, counters)``.
+
+    ``device`` names a Warp CUDA device (``"cuda:1"``) for ``"warp-cuda"``; None is the first."""
     if backend == "opencl":
+        if device is not None:
+            raise ValueError("backend 'opencl' picks its device itself ($PYOPENCL_CTX); "
+                             f"got device={device!r}")
         return _OpenCLRunner(launch)
-    return _WarpRunner(launch, cuda=(backend == "warp-cuda"))
+    if device is not None and not (backend == "warp-cuda" and device.startswith("cuda")):
+        raise ValueError(f"device {device!r} is not a CUDA device of backend 'warp-cuda'")
+    return _WarpRunner(launch, cuda=(backend == "warp-cuda"), device=device)
 
 
 def _kernel_args(launch: Launch, n_threads: int, per_thread: int, first: int, count: int,
@@ -159,7 +166,7 @@ def _reduce(tally: np.ndarray, counters: np.ndarray, n_copies: int, n_bins: int)
 
 
 class _WarpRunner:
-    def __init__(self, launch: Launch, cuda: bool):
+    def __init__(self, launch: Launch, cuda: bool, device: str | None = None):
         ensure_init()
         import warp as wp
         self.wp = wp
@@ -167,7 +174,7 @@ class _WarpRunner:
             reason = why_unavailable("warp-cuda")
             if reason:
                 raise BackendUnavailableError(reason)
-            self.device = wp.get_device("cuda")
+            self.device = wp.get_device(device or "cuda")
         else:
             self.device = wp.get_device("cpu")
         self.name = "warp-cuda" if cuda else "warp-cpu"

@@ -10,10 +10,11 @@ import warnings
 import numpy as np
 
 from ..scene import Scene
-from .backends import BACKENDS, Launch, make_runner, resolve_backend
+from .backends import BACKENDS, resolve_backend
 from .estimates import TallySum
 from .result import MCResult
 from .stack import flatten
+from .work import Walk, run_range, runner_device, split
 
 __all__ = ["simulate", "MAX_BATCH"]
 
@@ -102,14 +103,12 @@ def simulate(scene: Scene, wi, particles: int, mu_edges=(0.0, 1.0), phi_edges=(0
     device = ""
     used = None                     # the walk's code paths any channel needs
     for c in range(scene.channels):
-        stack = flatten(scene.channel(c))
-        used = stack.features if used is None else used | stack.features
-        launch = Launch(stack=stack, wi=wi.astype(np.float32),
-                        mu_edges=mu_edges.astype(np.float32),
-                        phi_edges=phi_edges.astype(np.float32), seed=seed, max_steps=max_steps)
-        runner = make_runner(name, launch)
-        device = runner.device_name
-        per_channel.append(_run(runner, launch, particles, batch, target_stderr, progress,
+        walk = Walk(scene.channel(c), tuple(wi), tuple(mu_edges), tuple(phi_edges), seed,
+                    max_steps, name)
+        features = flatten(walk.scene).features
+        used = features if used is None else used | features
+        device = runner_device(walk)
+        per_channel.append(_run(walk, particles, batch, target_stderr, progress,
                                 f"{scene.name}" + (f"[{'RGB'[c]}]" if scene.channels > 1 else "")))
     seconds = time.perf_counter() - t0
 
@@ -139,20 +138,16 @@ def simulate(scene: Scene, wi, particles: int, mu_edges=(0.0, 1.0), phi_edges=(0
         wi=wi, mu_edges=mu_edges, phi_edges=phi_edges, left_out=tuple(used.left_out()))
 
 
-def _run(runner, launch: Launch, particles: int, batch: int, target, progress: bool, label):
+def _run(walk: Walk, particles: int, batch: int, target, progress: bool, label) -> TallySum:
     from tqdm.auto import tqdm
-    total = TallySum(launch.n_bins)
+    total = TallySum(walk.n_bins)
     bar = tqdm(total=particles, unit="paths", unit_scale=True, desc=label,
                disable=None if progress else True, leave=False)
     try:
-        done = 0
-        while done < particles:
-            count = min(batch, particles - done)
-            tally, counters = runner.run(done, count)
-            total.add(tally, counters, count)
-            done += count
-            bar.update(count)
-            if target is not None and done >= 2:
+        for r in split(walk, 0, particles, batch):
+            total = total + run_range(r)
+            bar.update(r.count)
+            if target is not None and total.particles >= 2:
                 errs = (total.side(0)[1], total.side(1)[1], total.absorbed()[1])
                 if max(errs) <= target:
                     break

@@ -35,6 +35,52 @@ class TallySum:
         self.events += int(counters[0])
         self.truncated += int(counters[1])
 
+    def __add__(self, other: "TallySum") -> "TallySum":
+        """The tally of two disjoint path ranges of the same walk (exact)."""
+        if self.w.shape != other.w.shape:
+            raise ValueError(f"tallies of different bins cannot be added: {self.w.shape[2] - 1} "
+                             f"and {other.w.shape[2] - 1} bins per side")
+        out = TallySum(self.w.shape[2])
+        out.w = self.w + other.w
+        out.particles = self.particles + other.particles
+        out.events = self.events + other.events
+        out.truncated = self.truncated + other.truncated
+        return out
+
+    # ---- exact storage --------------------------------------------------------------------
+
+    #: 64-bit words per stored integer: sums reach particles * 2^32 < 2^96 for any 64-bit count.
+    WORDS = 3
+
+    def to_words(self) -> tuple[np.ndarray, np.ndarray]:
+        """The sums as little-endian uint64 words (for files): ``w`` of shape (2, 2, n_bins, 3)
+        and ``(particles, events, truncated)`` of shape (3, 3)."""
+        def words(values):
+            flat = [int(v) for v in np.ravel(values)]
+            if any(v < 0 for v in flat):
+                raise ValueError("negative tally: not a sum of the walk's fixed-point weights")
+            out = np.array([[(v >> (64 * k)) & 0xFFFFFFFFFFFFFFFF for k in range(self.WORDS)]
+                            for v in flat], dtype=np.uint64)
+            return out.reshape(np.shape(values) + (self.WORDS,))
+        return words(self.w), words(np.array([self.particles, self.events, self.truncated],
+                                             dtype=object))
+
+    @classmethod
+    def from_words(cls, w_words: np.ndarray, counts_words: np.ndarray) -> "TallySum":
+        """Inverse of :meth:`to_words`."""
+        def ints(words):
+            words = np.asarray(words, dtype=np.uint64)
+            out = np.zeros(words.shape[:-1], dtype=object)
+            out[...] = 0
+            for k in range(words.shape[-1]):
+                out = out + (words[..., k].astype(object) << (64 * k))
+            return out
+        w = ints(w_words)
+        total = cls(w.shape[2])
+        total.w = w
+        total.particles, total.events, total.truncated = (int(v) for v in ints(counts_words))
+        return total
+
     # ---- estimates ------------------------------------------------------------------------
 
     def _mean_err(self, w1, w2):
