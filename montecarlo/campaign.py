@@ -201,6 +201,7 @@ class Campaign:
                 i = self.record(r, tally)
                 _advance(bar, self, i, r.count)
                 if checkpoint is not None and time.monotonic() - last >= every:
+                    self.device = str(getattr(executor, "device", None) or self.device)
                     checkpoint(self)
                     last = time.monotonic()
                 if self.complete:

@@ -217,7 +217,9 @@ def test_ctrl_c_checkpoints_and_exits_130(scene_file, tmp_path):
            "--paths", "1e10", "--batch", "20000", "--backend", "warp-cpu", "--no-plot",
            "-o", str(out)]
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(8.0)
+    deadline = time.monotonic() + 120
+    while not out.exists() and time.monotonic() < deadline:     # the first checkpoint
+        time.sleep(0.2)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=60)
     assert p.returncode == 130, err
@@ -225,3 +227,4 @@ def test_ctrl_c_checkpoints_and_exits_130(scene_file, tmp_path):
     assert err.strip().splitlines()[-1].startswith("stopped at ")
     f = resultfile.load(out)
     assert not f.complete and f.done[:, 2].sum() == f.particles.sum() > 0
+    assert str(f.device)                   # the device is recorded at checkpoints
