@@ -97,6 +97,22 @@ class WalkProgress:
         return out
 
 
+def _check_shared(walks: list) -> None:
+    """A campaign's walks share what its result file stores once."""
+    if not walks:
+        raise ValueError("a campaign needs at least one walk")
+    shared = lambda w: (w.mu_edges, w.phi_edges, w.seed, w.max_steps, w.backend)
+    if any(shared(w) != shared(walks[0]) for w in walks):
+        raise ValueError("the walks of a campaign must share bin edges, seed, step cap and "
+                         "backend")
+
+
+def _scene_name(campaign, i: int) -> str:
+    """The name of walk ``i``'s scene (without the channel tag of ``Scene.channel``)."""
+    c = int(campaign.walk_channel[i])
+    return campaign.walks[i].scene.name.removesuffix(f"[{'RGB'[c]}]" if c < 3 else "")
+
+
 class Campaign:
     """The walks of a run, their progress and the run's options.
 
@@ -120,11 +136,18 @@ class Campaign:
     def __init__(self, walks: list, paths: int, batch: int, target_stderr: float | None = None,
                  scene_texts=("",), walk_scene=None, walk_channel=None, scene_names=None):
         self.walks, self.paths, self.batch, self.target = list(walks), paths, batch, target_stderr
+        _check_shared(self.walks)
         self.scene_texts = tuple(scene_texts)
-        self.scene_names = tuple(scene_names or (w.scene.name for w in self.walks[:1]))
         zeros = [0] * len(self.walks)
         self.walk_scene = np.asarray(zeros if walk_scene is None else walk_scene, np.int64)
         self.walk_channel = np.asarray(zeros if walk_channel is None else walk_channel, np.int64)
+        if len(self.walk_scene) != len(self.walks) or len(self.walk_channel) != len(self.walks):
+            raise ValueError("walk_scene and walk_channel need one entry per walk")
+        if np.any(self.walk_scene < 0) or np.any(self.walk_scene >= len(self.scene_texts)):
+            raise ValueError(f"walk_scene must index the {len(self.scene_texts)} scene text(s)")
+        self.scene_names = tuple(scene_names) if scene_names is not None else tuple(
+            _scene_name(self, int(np.argmax(self.walk_scene == s)))
+            for s in range(len(self.scene_texts)))
         self.progress = [WalkProgress(TallySum(w.n_bins)) for w in self.walks]
         self.seconds = 0.0
         self.device = ""

@@ -228,3 +228,38 @@ def test_ctrl_c_checkpoints_and_exits_130(scene_file, tmp_path):
     f = resultfile.load(out)
     assert not f.complete and f.done[:, 2].sum() == f.particles.sum() > 0
     assert str(f.device)                   # the device is recorded at checkpoints
+
+
+def test_one_file_holds_walks_of_several_scenes(tmp_path):
+    """A sweep's layout: scenes x directions x channels, each walk as simulate gives it."""
+    gold = '[[layer]]\nkind = "conductor"\nior = [0.143552, 3.98397]\nroughness = 0.2\n'
+    scenes = [_scene(), Scene.from_dict(tomllib.loads(gold), default_name="gold")]
+    wis = [WI, np.array([0.0, 0.0, 1.0])]
+    walks, where, channel = [], [], []
+    for s, scene in enumerate(scenes):
+        found = walks_of(scene, wis, MU, PHI, 5, 100_000, "warp-cpu")
+        walks += found
+        where += [s] * len(found)
+        channel += [c for _ in wis for c in range(scene.channels)]
+    run_walks(walks, 1000, batch=400, out=tmp_path / "sweep.npz", scene_texts=[SLAB, gold],
+              walk_scene=where, walk_channel=channel)
+    f = resultfile.load(tmp_path / "sweep.npz")
+    assert f.n_walks == 8 and list(f.walk_scene) == [0] * 6 + [1] * 2
+    assert f.label(7) == "gold at 0,0 deg" and f.label(1) == "slab[G] at 30,0 deg"
+    ref = mc.simulate(scenes[1], wis[1], 1000, MU, PHI, backend="warp-cpu", seed=5)
+    assert f.result(7).reflectance == ref.reflectance
+    assert np.array_equal(f.result(7).bins["top"], ref.bins["top"])
+
+
+def test_a_failed_write_keeps_the_previous_file(tmp_path, monkeypatch):
+    out = tmp_path / "run.npz"
+    campaign = _run(out, paths=1000)
+    before = out.read_bytes()
+
+    def broken(fh, **arrays):
+        fh.write(b"partial")
+        raise OSError("disk full")
+    monkeypatch.setattr(np, "savez", broken)
+    with pytest.raises(OSError, match="disk full"):
+        resultfile.save(out, campaign)
+    assert out.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["run.npz"]
