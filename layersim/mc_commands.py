@@ -137,13 +137,17 @@ def is_result_file(path) -> bool:
         return False
 
 
-def _against_bsdf(f, bsdf) -> list:
+def _against_bsdf(f, bsdf, source) -> list:
+    if not hasattr(bsdf, "bin_energies"):
+        raise ValueError(f"{source}: layersim cannot convert this .bsdf file to operators, so "
+                         "its bin energies are not available")
     out = []
     for i in range(f.n_walks):
         c = int(f.walk_channel[i])
-        if c >= bsdf.channels:
-            raise ValueError(f"walk {i} ({f.label(i)}) is channel {c}, but the source has "
-                             f"{bsdf.channels} channel(s)")
+        channels = int(f.walk_channel[f.walk_scene == f.walk_scene[i]].max()) + 1
+        if channels != bsdf.channels:
+            raise ValueError(f"{source} has {bsdf.channels} channel(s), but the scene of walk "
+                             f"{i} ({f.label(i)}) in {f.path} has {channels}")
         pick = (lambda v: np.asarray(v)[..., c]) if bsdf.channels > 1 else np.asarray
         R, T = (float(pick(v)) for v in bsdf.albedo(f.wi[i]))
         bins = {s: pick(v) for s, v in bsdf.bin_energies(f.wi[i], f.mu_edges,
@@ -187,7 +191,7 @@ def run_compare(args, load_source, image: Path | None) -> int:
     else:
         if Path(args.source).suffix.lower() == ".toml":
             print(f"solving {args.source} with the default plan")
-        comparisons = _against_bsdf(f, load_source(args.source))
+        comparisons = _against_bsdf(f, load_source(args.source), args.source)
         print(f"{args.result} against the solve of {args.source}")
     for i, cmp in enumerate(comparisons):
         print("\n".join(_describe(f, i, cmp)))

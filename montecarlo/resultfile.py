@@ -234,27 +234,32 @@ def load(path) -> MCFile:
 
 
 def _differences(f: MCFile, campaign) -> list:
-    """What differs between the run of file ``f`` and ``campaign``: ``(what, file, now)``."""
+    """What differs between the run of file ``f`` and ``campaign``, as phrases."""
     w0 = campaign.walks[0]
     wi = np.array([w.wi for w in campaign.walks], np.float64).reshape(-1, 3)
-    target = np.nan if campaign.target is None else campaign.target
-    same_target = (np.isnan(target) and np.isnan(f.target_stderr)) or target == f.target_stderr
-    checks = [("scene", list(map(str, f.scenes)) == list(campaign.scene_texts), "text", "text"),
-              ("walks", f.n_walks == len(wi), f.n_walks, len(wi)),
-              ("backend", str(f.backend) == w0.backend, str(f.backend), w0.backend),
-              ("seed", int(f.seed) == w0.seed, int(f.seed), w0.seed),
-              ("paths", int(f.paths) == campaign.paths, int(f.paths), campaign.paths),
-              ("batch", int(f.batch) == campaign.batch, int(f.batch), campaign.batch),
-              ("stderr target", same_target, float(f.target_stderr), target),
-              ("max steps", int(f.max_steps) == w0.max_steps, int(f.max_steps), w0.max_steps)]
+    target = math.nan if campaign.target is None else float(campaign.target)
+    show = lambda t: "none" if math.isnan(t) else f"{t:g}"
+    checks = [("the scene text differs", list(map(str, f.scenes)) == list(campaign.scene_texts)),
+              (f"walks: {f.n_walks} in the file, {len(wi)} now", f.n_walks == len(wi)),
+              (f"backend: {f.backend} in the file, {w0.backend} now", str(f.backend) == w0.backend),
+              (f"seed: {int(f.seed)} in the file, {w0.seed} now", int(f.seed) == w0.seed),
+              (f"paths: {int(f.paths)} in the file, {campaign.paths} now",
+               int(f.paths) == campaign.paths),
+              (f"batch: {int(f.batch)} in the file, {campaign.batch} now",
+               int(f.batch) == campaign.batch),
+              (f"stderr target: {show(float(f.target_stderr))} in the file, {show(target)} now",
+               show(float(f.target_stderr)) == show(target)),
+              (f"max steps: {int(f.max_steps)} in the file, {w0.max_steps} now",
+               int(f.max_steps) == w0.max_steps),
+              (f"bins: {f.shape[0]}x{f.shape[1]} in the file, {len(w0.mu_edges) - 1}x"
+               f"{len(w0.phi_edges) - 1} now", np.array_equal(f.mu_edges, w0.mu_edges)
+               and np.array_equal(f.phi_edges, w0.phi_edges))]
     if f.n_walks == len(wi):
-        checks += [("incident directions", np.array_equal(f.wi, wi), "", ""),
-                   ("walk table", np.array_equal(f.walk_scene, campaign.walk_scene)
-                    and np.array_equal(f.walk_channel, campaign.walk_channel), "", "")]
-    checks += [("bins", np.array_equal(f.mu_edges, w0.mu_edges)
-                and np.array_equal(f.phi_edges, w0.phi_edges),
-                f"{f.shape[0]}x{f.shape[1]}", f"{len(w0.mu_edges) - 1}x{len(w0.phi_edges) - 1}")]
-    return [(what, a, b) for what, same, a, b in checks if not same]
+        checks += [("the incident directions differ", np.array_equal(f.wi, wi)),
+                   ("the walk table (scenes, channels) differs",
+                    np.array_equal(f.walk_scene, campaign.walk_scene)
+                    and np.array_equal(f.walk_channel, campaign.walk_channel))]
+    return [what for what, same in checks if not same]
 
 
 def _minus(a: TallySum, b: TallySum) -> TallySum:
@@ -287,10 +292,8 @@ def saved_progress(path, campaign) -> dict | None:
     f = load(path)
     diff = _differences(f, campaign)
     if diff:
-        what = "; ".join(f"{w}: {a} in the file, {b} now" if (a, b) != ("", "") else
-                         f"{w} differ" for w, a, b in diff)
-        raise ValueError(f"{path} holds a different run ({what}); rerun with --restart to "
-                         "overwrite it, or give another -o")
+        raise ValueError(f"{path} holds a different run ({'; '.join(diff)}); rerun with "
+                         "--restart to overwrite it, or give another -o")
     walks = []
     for i in range(f.n_walks):
         rows = np.flatnonzero(f.done[:, 0] == i)

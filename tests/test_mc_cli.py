@@ -263,3 +263,30 @@ def test_a_failed_write_keeps_the_previous_file(tmp_path, monkeypatch):
     with pytest.raises(OSError, match="disk full"):
         resultfile.save(out, campaign)
     assert out.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["run.npz"]
+
+
+def test_compare_refuses_a_source_of_other_channels(scene_file, tmp_path, capsys):
+    out = tmp_path / "run.npz"
+    assert _mc(scene_file, out) == 0                     # three channels
+    mirror = tmp_path / "mirror.toml"
+    mirror.write_text('[[layer]]\nkind = "conductor"\nior = [0.2, 3.0]\nroughness = 0.0\n')
+    capsys.readouterr()
+    assert main(["compare", str(out), str(mirror)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "has 1 channel(s)" in err and "has 3" in err
+
+
+@pytest.mark.parametrize("change, phrase", [({"--wi": "40,0"}, "incident directions differ"),
+                                            ({"--bins": "3,5"}, "bins: 3x4 in the file, 3x5"),
+                                            ({"--stderr": "0.01"}, "stderr target: none in "
+                                                                   "the file, 0.01 now")])
+def test_each_difference_is_named(scene_file, tmp_path, capsys, change, phrase):
+    out = tmp_path / "run.npz"
+    assert _mc(scene_file, out) == 0
+    options = {"--wi": "30,0", "--paths": "3000", "--batch": "1000", "--bins": "3,4",
+               "--backend": "warp-cpu", "--seed": "5", "-o": str(out), **change}
+    capsys.readouterr()
+    assert main(["mc", str(scene_file), "--no-plot", *(x for kv in options.items()
+                                                      for x in kv)]) == 2
+    err = capsys.readouterr().err
+    assert phrase in err and err.count("\n") == 1
