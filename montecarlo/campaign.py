@@ -221,8 +221,8 @@ class Campaign:
         results = executor.map(self.ranges())
         try:
             for r, tally in results:
-                i = self.record(r, tally)
-                _advance(bar, self, i, r.count)
+                self.record(r, tally)
+                _advance(bar, self)
                 if checkpoint is not None and time.monotonic() - last >= every:
                     self.device = str(getattr(executor, "device", None) or self.device)
                     checkpoint(self)
@@ -241,27 +241,31 @@ class Campaign:
         return self
 
 
+def _bar_total(campaign: Campaign) -> int:
+    """Paths the run will count: the cap of each walk still running, the count of the others."""
+    return sum(campaign.paths if not campaign.finished(i) else p.prefix.particles
+               for i, p in enumerate(campaign.progress))
+
+
 def _bar(campaign: Campaign, enabled: bool):
     from tqdm.auto import tqdm
-    total = sum(campaign.paths if not campaign.finished(i) else p.prefix.particles
-                for i, p in enumerate(campaign.progress))
-    return tqdm(total=total, initial=campaign.counted(), unit="paths", unit_scale=True,
-                desc="walks", disable=None if enabled else True, leave=False, smoothing=0.1)
+    return tqdm(total=_bar_total(campaign), initial=campaign.counted(), unit="paths",
+                unit_scale=True, desc="walks", disable=None if enabled else True, leave=False,
+                smoothing=0.1)
 
 
-def _advance(bar, campaign: Campaign, i: int, count: int) -> None:
-    """Progress after a range of walk ``i``: paths, and the largest standard error still over
-    the target (or of all walks without one)."""
+def _advance(bar, campaign: Campaign) -> None:
+    """Progress after a range: paths counted (ranges dropped beyond a stop leave the count),
+    and the largest standard error of the walks still running (of all walks without a
+    target)."""
     if bar.disable:
         return
-    p = campaign.progress[i]
-    if p.target_met:
-        bar.total -= campaign.paths - p.prefix.particles
+    bar.total = _bar_total(campaign)
     errs = [max_stderr(q.total()) for k, q in enumerate(campaign.progress)
             if not campaign.finished(k) or campaign.target is None]
     errs = [e for e in errs if np.isfinite(e)]
     bar.set_postfix_str(f"largest stderr {max(errs):.2e}" if errs else "", refresh=False)
-    bar.update(count)
+    bar.update(campaign.counted() - bar.n)
 
 
 def run_walks(walks: list, paths: int, *, batch: int, target_stderr: float | None = None,
