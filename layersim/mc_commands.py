@@ -63,6 +63,16 @@ def parse_bins(text: str) -> tuple:
     return np.linspace(0.0, 1.0, n_mu + 1), np.linspace(0.0, 2 * math.pi, n_phi + 1)
 
 
+def _incident(text: str, scene: Scene) -> np.ndarray:
+    """``--wi THETA,PHI`` as a direction that lights ``scene`` (the error names the option)."""
+    try:
+        return check_wi(direction(text), scene)
+    except ValueError as exc:
+        message = str(exc)
+        raise ValueError(message if message.startswith("--wi") else f"--wi {text}: {message}") \
+            from None
+
+
 def _backend(name: str) -> str:
     resolved = resolve_backend(name)
     if resolved not in available_backends():
@@ -84,7 +94,7 @@ def run_mc(args, out: Path, image: Path | None, progress: bool) -> int:
     """``layersim mc``: walks of SCENE from each ``--wi`` into ``out`` (resuming it), a
     summary per walk, and the bin picture ``image``. Returns the exit status."""
     scene = Scene.from_toml(args.scene)
-    wis = [check_wi(direction(w), scene) for w in args.wi]
+    wis = [_incident(w, scene) for w in args.wi]
     mu_edges, phi_edges = parse_bins(args.bins)
     paths = parse_count(args.paths, "--paths")
     target = _stderr(args.stderr)

@@ -224,7 +224,8 @@ def load(path) -> MCFile:
     except (OSError, ValueError, EOFError) as exc:
         if isinstance(exc, FileNotFoundError):
             raise
-        raise ValueError(f"{path}: not a layersim mc result file ({exc})") from None
+        raise ValueError(f"{path}: not a layersim mc result file (a numpy .npz archive "
+                         "written by 'layersim mc')") from None
     if str(data.get("format", "")) != FORMAT:
         raise ValueError(f"{path}: not a layersim mc result file (no format = {FORMAT!r})")
     if int(data["format_version"]) > VERSION:
