@@ -290,7 +290,11 @@ def saved_progress(path, campaign) -> dict | None:
     path = Path(path)
     if not path.exists():
         return None
-    f = load(path)
+    try:
+        f = load(path)
+    except ValueError as exc:
+        raise ValueError(f"{exc}; rerun with --restart to overwrite it, or give another -o") \
+            from None
     diff = _differences(f, campaign)
     if diff:
         raise ValueError(f"{path} holds a different run ({'; '.join(diff)}); rerun with "
