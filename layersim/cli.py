@@ -14,6 +14,10 @@
     layersim plot SRC (--wi THETA,PHI | --blocks) [-o F.png]   draw slices or operator blocks
     layersim subtract STACK KNOWN --side top|bottom [-o FILE] [--eps EPS] [--noise NOISE]
                                      recover the unknown layer of a solved two-layer stack
+    layersim mc SCENE --wi THETA,PHI [--paths N | --stderr E] -o OUT.npz
+                                     Monte Carlo walks into a resumable result file
+    layersim compare RESULT SOURCE [--plot PNG]
+                                     a result file against a solve or another result file
 
 SRC is a scene (``.toml``, solved on the fly), a saved BSDF (``.lsim`` from ``solve -o``) or a
 ``.bsdf`` file.
@@ -610,6 +614,14 @@ view, lights, values[, channels]; .csv: light_x,light_y,light_z,view_x,view_y,vi
 see docs/conventions.md). A single view determines D only over part of the hemisphere: the
 table is written only when it is complete, when --fill is given (the rest is interpolated and
 reported) or with --partial.""",
+    "mc": """examples:
+  layersim mc examples/coated_gold.toml --wi 30,0 --wi 60,0 --paths 1e6 -o gold.npz
+  layersim mc examples/coated_gold.toml --wi 30,0 --stderr 1e-4 --paths 1e8 -o gold.npz
+  (Ctrl-C stops after a checkpoint; the same command again continues bit for bit)""",
+    "compare": """examples:
+  layersim compare gold.npz examples/coated_gold.toml --plot z.png
+  layersim compare gold.npz coated_gold.lsim
+  layersim compare gold.npz gold_seed1.npz""",
     "subtract": """examples:
   layersim solve stack.toml                                # stack.lsim
   layersim solve lacquer.toml --like stack.lsim            # lacquer.lsim, same discretisation
@@ -747,7 +759,58 @@ def build_parser() -> argparse.ArgumentParser:
                                                 "estimated from its reciprocity defect)")
     sp.set_defaults(func=cmd_subtract)
     _add_fit_ndf(sub)
+    _add_mc(sub, quiet)
     return p
+
+
+def _add_mc(sub, quiet) -> None:
+    sp = _subparser(sub, "mc", "Monte Carlo ground truth: walks of a scene from given "
+                               "directions into a resumable result file (.npz)", [quiet])
+    sp.add_argument("scene", help="scene file (TOML)")
+    sp.add_argument("--wi", action="append", required=True, metavar="THETA,PHI",
+                    help="direction of the light in degrees (theta from the normal, 0-180, "
+                         "not 90); repeatable: one walk per direction and channel")
+    sp.add_argument("--paths", default="1e6", metavar="N",
+                    help="paths per walk (default 1e6); with --stderr the cap")
+    sp.add_argument("--stderr", type=float, metavar="E",
+                    help="stop each walk once the standard errors of R, T and A are <= E")
+    sp.add_argument("--bins", default="18,36", metavar="N_MU,N_PHI",
+                    help="equal bins in |cos theta_o| and phi_o per side (default 18,36)")
+    sp.add_argument("--backend", default="auto", help="auto (default), warp-cpu, warp-cuda, "
+                                                      "opencl")
+    sp.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    sp.add_argument("--batch", metavar="N", help="paths per range, the unit of work and of "
+                                                 "the stopping test (default: the backend's)")
+    sp.add_argument("--max-steps", type=int, default=100_000,
+                    help="cap on the interactions of one path (default 100000)")
+    sp.add_argument("-o", "--output", required=True, metavar="OUT",
+                    help="result file (.npz); an existing one of the same run is continued")
+    sp.add_argument("--restart", action="store_true",
+                    help="overwrite OUT instead of continuing it")
+    sp.add_argument("--plot", metavar="PNG", help="picture of the bins (default: OUT with "
+                                                  ".png)")
+    sp.add_argument("--no-plot", action="store_true", help="no picture")
+    sp.set_defaults(func=cmd_mc)
+    sp = _subparser(sub, "compare", "compare a Monte Carlo result file with a solve or "
+                                    "another result file, walk by walk", [quiet])
+    sp.add_argument("result", help="result file of 'layersim mc'")
+    sp.add_argument("source", help="scene (.toml, solved with the default plan), saved BSDF "
+                                   "(.lsim), .bsdf file or another result file")
+    sp.add_argument("--plot", metavar="PNG", help="z-score maps per walk and side")
+    sp.set_defaults(func=cmd_compare)
+
+
+def cmd_mc(args) -> int:
+    from . import mc_commands
+    out = _output(args.output, "-o")
+    image = None if args.no_plot else _image(args.plot or out.with_suffix(".png"), "--plot")
+    return mc_commands.run_mc(args, out, image, not args.quiet and sys.stderr.isatty())
+
+
+def cmd_compare(args) -> int:
+    from . import mc_commands
+    image = _image(args.plot, "--plot") if args.plot else None
+    return mc_commands.run_compare(args, lambda path: _load(path, args), image)
 
 
 def _add_fit_ndf(sub) -> None:

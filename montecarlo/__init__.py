@@ -9,9 +9,13 @@ Philox generator of :mod:`layersim.kernels.rng`, walk in :mod:`layersim.kernels.
     res = mc.simulate(scene, wi, particles, mu_edges=..., phi_edges=..., backend="auto", seed=0)
     res.reflectance, res.reflectance_stderr, res.bins["top"], res.bins_stderr["top"]
 
-Modules: :mod:`.driver` (entry point, validation, batching), :mod:`.work` (path ranges of a
-walk, the unit of work anywhere), :mod:`.stack` (scene -> kernel parameters), :mod:`.backends` (Warp / OpenCL launch), :mod:`.estimates` (integer tallies ->
-fractions and standard errors), :mod:`.result` (:class:`MCResult`).
+Modules: :mod:`.driver` (entry point, batching), :mod:`.checks` (input validation),
+:mod:`.work` (path ranges of a walk, the unit of work anywhere), :mod:`.campaign` (resumable runs
+of many walks on a pluggable executor), :mod:`.resultfile` (``layersim mc`` result files),
+:mod:`.compare` (walks against a solve or other walks), :mod:`.plots` (their pictures),
+:mod:`.stack` (scene -> kernel parameters), :mod:`.backends` (Warp / OpenCL launch),
+:mod:`.estimates` (integer tallies -> fractions and standard errors), :mod:`.result`
+(:class:`MCResult`).
 """
 
 from .backends import BACKENDS, BackendUnavailableError, available_backends

@@ -11,16 +11,17 @@ import numpy as np
 
 from ..scene import Scene
 from .backends import BACKENDS, resolve_backend
+from .checks import check_edges, check_int, check_wi
 from .estimates import TallySum
 from .result import MCResult
 from .stack import flatten
 from .work import Walk, run_range, runner_device, split
 
-__all__ = ["simulate", "MAX_BATCH"]
+__all__ = ["simulate", "MAX_BATCH", "DEFAULT_BATCH"]
 
 #: Largest batch: keeps each batch's fixed-point sums (<= count * 2^32) inside int64.
 MAX_BATCH = 1 << 30
-_DEFAULT_BATCH = {"warp-cpu": 1 << 17, "opencl": 1 << 19, "warp-cuda": 1 << 24}
+DEFAULT_BATCH = {"warp-cpu": 1 << 17, "opencl": 1 << 19, "warp-cuda": 1 << 24}
 
 
 def simulate(scene: Scene, wi, particles: int, mu_edges=(0.0, 1.0), phi_edges=(0.0, 2 * math.pi),
@@ -78,23 +79,23 @@ def simulate(scene: Scene, wi, particles: int, mu_edges=(0.0, 1.0), phi_edges=(0
     if not isinstance(scene, Scene):
         raise TypeError(f"scene must be a layersim.Scene (Scene.from_toml / Scene.from_dict), "
                         f"got {type(scene).__name__}")
-    wi = _check_wi(wi, scene)
-    particles = _check_int("particles", particles, 1, None)
-    mu_edges = _check_edges("mu_edges", mu_edges, 1.0, "|cos theta_o|")
-    phi_edges = _check_edges("phi_edges", phi_edges, 2 * math.pi, "phi_o (radians)")
+    wi = check_wi(wi, scene)
+    particles = check_int("particles", particles, 1, None)
+    mu_edges = check_edges("mu_edges", mu_edges, 1.0, "|cos theta_o|")
+    phi_edges = check_edges("phi_edges", phi_edges, 2 * math.pi, "phi_o (radians)")
     if not isinstance(backend, str) or backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; expected one of {', '.join(BACKENDS)}")
-    seed = _check_int("seed", seed, 0, (1 << 64) - 1)
-    max_steps = _check_int("max_steps", max_steps, 1, (1 << 31) - 1)
+    seed = check_int("seed", seed, 0, (1 << 64) - 1)
+    max_steps = check_int("max_steps", max_steps, 1, (1 << 31) - 1)
     if batch_size is not None:
-        batch_size = _check_int("batch_size", batch_size, 1, MAX_BATCH)
+        batch_size = check_int("batch_size", batch_size, 1, MAX_BATCH)
     if target_stderr is not None:
         if not (isinstance(target_stderr, numbers.Real) and math.isfinite(target_stderr)
                 and target_stderr > 0):
             raise ValueError(f"target_stderr must be a positive number, got {target_stderr!r}")
 
     name = resolve_backend(backend)
-    batch = batch_size or _DEFAULT_BATCH[name]
+    batch = batch_size or DEFAULT_BATCH[name]
     n_mu, n_phi = len(mu_edges) - 1, len(phi_edges) - 1
     incident = 0 if wi[2] > 0 else 1
 
@@ -162,54 +163,3 @@ def _stack(values):
         v = values[0]
         return v if np.ndim(v) else (int(v) if isinstance(v, (int, np.integer)) else float(v))
     return np.stack([np.asarray(v) for v in values], axis=-1)
-
-
-def _check_int(name: str, value, lo: int, hi: int | None) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise ValueError(f"{name} must be an integer, got {value!r}")
-    value = int(value)
-    if value < lo or (hi is not None and value > hi):
-        rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
-        raise ValueError(f"{name} must be {rng}, got {value}")
-    return value
-
-
-def _check_wi(wi, scene: Scene) -> np.ndarray:
-    try:
-        w = np.asarray(wi, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"wi must be a direction (x, y, z), got {wi!r}") from None
-    if w.shape != (3,):
-        raise ValueError(f"wi must be one direction of shape (3,), got shape {w.shape}; "
-                         "simulate() takes one incident direction per call")
-    if not np.all(np.isfinite(w)):
-        raise ValueError(f"wi must be finite, got {w}")
-    norm = float(np.linalg.norm(w))
-    if abs(norm - 1.0) > 1e-6:
-        raise ValueError(f"wi must be a unit vector, got |wi| = {norm:.9g}; normalise it")
-    w = w / norm
-    if w[2] == 0.0:
-        raise ValueError("wi.z must be non-zero: light at grazing incidence (wi.z = 0) never "
-                         "enters the stack")
-    if w[2] < 0 and scene.opaque:
-        raise ValueError(f"wi.z < 0 lights the stack from below, but scene '{scene.name}' ends "
-                         f"with an opaque {scene.stacks[0][-1].kind} layer; use wi.z > 0")
-    return w
-
-
-def _check_edges(name: str, edges, hi: float, what: str) -> np.ndarray:
-    try:
-        e = np.asarray(edges, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a 1-D sequence of numbers, got {edges!r}") from None
-    if e.ndim != 1 or e.size < 2:
-        raise ValueError(f"{name} must be a 1-D sequence of at least 2 edges, got shape "
-                         f"{e.shape}")
-    if not np.all(np.isfinite(e)):
-        raise ValueError(f"{name} must be finite, got {e}")
-    if np.any(np.diff(e) <= 0):
-        raise ValueError(f"{name} must be strictly increasing, got {e}")
-    if e[0] < 0 or e[-1] > hi * (1 + 1e-12):
-        raise ValueError(f"{name} are edges in {what} and must lie within [0, {hi:.9g}], "
-                         f"got [{e[0]:.9g}, {e[-1]:.9g}]")
-    return np.minimum(e, hi)

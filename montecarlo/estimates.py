@@ -56,11 +56,12 @@ class TallySum:
         """The sums as little-endian uint64 words (for files): ``w`` of shape (2, 2, n_bins, 3)
         and ``(particles, events, truncated)`` of shape (3, 3)."""
         def words(values):
-            flat = [int(v) for v in np.ravel(values)]
-            if any(v < 0 for v in flat):
+            flat = np.asarray(values, dtype=object).ravel()     # Python ints, elementwise
+            if np.any(flat < 0):
                 raise ValueError("negative tally: not a sum of the walk's fixed-point weights")
-            out = np.array([[(v >> (64 * k)) & 0xFFFFFFFFFFFFFFFF for k in range(self.WORDS)]
-                            for v in flat], dtype=np.uint64)
+            out = np.empty(flat.shape + (self.WORDS,), dtype=np.uint64)
+            for k in range(self.WORDS):
+                out[:, k] = ((flat >> (64 * k)) & 0xFFFFFFFFFFFFFFFF).astype(np.uint64)
             return out.reshape(np.shape(values) + (self.WORDS,))
         return words(self.w), words(np.array([self.particles, self.events, self.truncated],
                                              dtype=object))
