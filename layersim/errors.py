@@ -57,3 +57,8 @@ class BackendUnavailableError(LayersimError, RuntimeError):
     """A Monte Carlo backend is not installed, has no device, or its device cannot build the
     walk; the message names the device and the driver's reason, and says what to install or
     which backend to use instead."""
+
+
+class ClusterError(LayersimError, RuntimeError):
+    """A Dask cluster cannot be reached, or its workers cannot run the walk (layersim missing
+    there, or another version); the message names the scheduler or the workers and what to do."""

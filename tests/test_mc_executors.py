@@ -1,0 +1,211 @@
+"""Executors of path ranges (montecarlo/executors): serial, one thread per device, a Dask cluster.
+
+Every executor must give the same integers as the serial run for any split and any number of
+workers (the random numbers of a path depend on (seed, path) alone and tallies are integer
+sums); a worker that dies mid-run must cost only its range; leaving early must cancel."""
+
+import functools
+import math
+import os
+import sys
+import threading
+
+import numpy as np
+import pytest
+
+from layersim import Scene
+from layersim.errors import ClusterError
+from layersim.montecarlo.executors import Dask, Devices, InProcess, devices as devices_mod
+from layersim.montecarlo.executors import tls_security
+from layersim.montecarlo.work import Walk, run_range, split
+
+SCENES = {
+    "slab": {"layer": [{"kind": "medium", "albedo": 0.95, "g": 0.5, "tau": 2.0}]},
+    "coated_conductor": {"layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": [0.1, 0.2]},
+        {"kind": "conductor", "ior": [0.143552, 3.98397], "roughness": [0.2, 0.1]}]},
+    "coated_medium": {"layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": 0.3},
+        {"kind": "medium", "tau": 1.0, "albedo": 0.8, "g": 0.5}]},
+}
+THETAS = (0.0, 35.0, 70.0)
+PATHS = 1200
+
+
+def _walks():
+    out = []
+    for data in SCENES.values():
+        scene = Scene.from_dict(data)
+        for theta in THETAS:
+            t = math.radians(theta)
+            out.append(Walk(scene, (math.sin(t), 0.0, math.cos(t)), (0.0, 0.5, 1.0),
+                            (0.0, math.pi, 2 * math.pi), 11, 10_000, "warp-cpu"))
+    return out
+
+
+WALKS = _walks()
+
+
+def _ranges(batch):
+    # interleave the walks' ranges, as a sweep hands them out
+    per_walk = [split(w, 0, PATHS, batch) for w in WALKS]
+    return [r for group in zip(*per_walk) for r in group] + [
+        r for rs in per_walk for r in rs[min(map(len, per_walk)):]]
+
+
+def _totals(pairs):
+    """{walk key: summed tally} from (range, tally) pairs."""
+    out = {}
+    for r, t in pairs:
+        k = r.walk.key()
+        out[k] = t if k not in out else out[k] + t
+    return out
+
+
+def _same(a, b):
+    assert a.keys() == b.keys()
+    for k in a:
+        assert a[k].particles == b[k].particles == PATHS
+        assert (a[k].events, a[k].truncated) == (b[k].events, b[k].truncated)
+        assert np.array_equal(a[k].w, b[k].w)
+
+
+@pytest.fixture(scope="module")
+def serial():
+    with InProcess() as ex:
+        return _totals(ex.map(_ranges(PATHS)))     # one range per walk
+
+
+def test_serial_split_equals_whole_walks(serial):
+    with InProcess() as ex:
+        _same(_totals(ex.map(_ranges(250))), serial)
+    # the walks differ from one another, so equal totals are not a coincidence
+    assert len({tuple(t.w.ravel()) for t in serial.values()}) == len(WALKS)
+
+
+def test_two_threads_on_the_cpu_device_equal_serial(serial):
+    with Devices("warp-cpu", ["cpu", "cpu"]) as ex:
+        assert ex.describe() == "warp-cpu on cpu, cpu"
+        _same(_totals(ex.map(_ranges(300))), serial)
+
+
+def test_every_listed_device_by_default_gets_work(serial, monkeypatch):
+    # a host whose backend lists three devices (the CPU device three times stands in for GPUs)
+    monkeypatch.setattr(devices_mod, "device_names", lambda backend: ["cpu"] * 3)
+    used = []
+    real = devices_mod.run_range
+
+    def slow_run_range(r, device):
+        used.append((threading.current_thread().name, device))
+        return real(r, device)
+
+    monkeypatch.setattr(devices_mod, "run_range", slow_run_range)
+    with Devices("warp-cpu") as ex:
+        assert ex.devices == ["cpu"] * 3
+        _same(_totals(ex.map(_ranges(100))), serial)
+    assert {d for _, d in used} == {"cpu"}
+    assert len({name for name, _ in used}) == 3
+
+
+def test_device_names_are_checked():
+    with pytest.raises(ValueError, match="'cuda:0' is not a device of backend 'warp-cpu'"):
+        Devices("warp-cpu", ["cuda:0"])
+    with pytest.raises(ValueError, match="devices: expected 'all' or a comma-separated"):
+        Devices("warp-cpu", "cpu,,cpu")
+    with pytest.raises(ValueError, match="unknown backend"):
+        Devices("gpu")
+
+
+def test_devices_raise_a_worker_error_in_the_consumer():
+    other = Walk(WALKS[0].scene, WALKS[0].wi, WALKS[0].mu_edges, WALKS[0].phi_edges, 1, 100,
+                 "opencl")
+    with Devices("warp-cpu", ["cpu", "cpu"]) as ex:
+        with pytest.raises(ValueError, match="walk backend 'opencl' does not match"):
+            list(ex.map(split(WALKS[0], 0, 400, 100) + split(other, 0, 100, 100)))
+
+
+def _counting(ranges, taken):
+    for r in ranges:
+        taken.append(r)
+        yield r
+
+
+@pytest.mark.parametrize("interrupt", [KeyboardInterrupt, None])
+def test_devices_stop_when_the_consumer_leaves(interrupt):
+    taken = []
+    ex = Devices("warp-cpu", ["cpu", "cpu"])
+    if interrupt is None:
+        for _ in ex.map(_counting(split(WALKS[0], 0, 4000, 50), taken)):
+            break
+    else:
+        with pytest.raises(KeyboardInterrupt):
+            with ex:
+                for _ in ex.map(_counting(split(WALKS[0], 0, 4000, 50), taken)):
+                    raise KeyboardInterrupt
+    ex.close()
+    # one range consumed; at most one more per device was under way or just pulled
+    assert len(taken) <= 1 + 2 * 2
+    assert not [t for t in threading.enumerate() if t.name.startswith("layersim-cpu")]
+
+
+# ---- Dask -------------------------------------------------------------------------------------
+
+def test_dask_arguments_are_checked_before_any_cluster():
+    for kwargs, field in [({}, "workers/address"), ({"workers": 2, "address": "tcp://x:1"},
+                                                      "workers/address"),
+                          ({"workers": 0}, "workers"), ({"workers": True}, "workers"),
+                          ({"workers": 1, "in_flight": 0}, "in_flight"),
+                          ({"workers": 1, "retries": -1}, "retries"),
+                          ({"address": ""}, "address"),
+                          ({"workers": 1, "security": object()}, "security")]:
+        with pytest.raises(ValueError, match=f"^{field}"):
+            Dask(**kwargs)
+
+
+def test_tls_files_are_checked(tmp_path):
+    assert tls_security() is None                   # Dask's own configuration applies
+    ca = tmp_path / "ca.pem"
+    ca.write_text("x")
+    with pytest.raises(ValueError, match="^tls_cert: cannot read"):
+        tls_security(str(ca), str(tmp_path / "missing.pem"))
+    with pytest.raises(ValueError, match="^tls_cert: TLS needs both"):
+        tls_security(str(ca))
+
+
+def test_no_scheduler_is_one_clear_error():
+    with pytest.raises(ClusterError, match="cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'"):
+        Dask(address="tcp://127.0.0.1:9", timeout=1)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("workers,batch,in_flight", [(1, 400, None), (2, 170, 3), (3, 1200, 2)])
+def test_dask_local_cluster_equals_serial(serial, workers, batch, in_flight):
+    with Dask(workers=workers, in_flight=in_flight) as ex:
+        assert ex.describe().startswith(f"dask: {workers} workers at tcp://")
+        _same(_totals(ex.map(_ranges(batch))), serial)
+        if workers == 2:
+            taken = []
+            with pytest.raises(KeyboardInterrupt):
+                for _ in ex.map(_counting(split(WALKS[0], 0, 100_000, 100), taken)):
+                    raise KeyboardInterrupt
+            assert len(taken) <= 1 + 3                 # bounded: in_flight + the next one
+            assert not ex._running
+
+
+def _die_once(flag, r):
+    """Kill this worker process on the first range of the run (whichever worker gets it)."""
+    try:
+        os.close(os.open(flag, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except FileExistsError:
+        return run_range(r)
+    os._exit(1)
+
+
+@pytest.mark.slow
+def test_a_worker_killed_mid_run_costs_only_its_range(serial, tmp_path):
+    import cloudpickle
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    flag = tmp_path / "died"
+    with Dask(workers=2, task=functools.partial(_die_once, str(flag))) as ex:
+        _same(_totals(ex.map(_ranges(400))), serial)
+    assert flag.exists()
