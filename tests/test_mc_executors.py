@@ -9,6 +9,7 @@ import math
 import os
 import sys
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -105,6 +106,41 @@ def test_every_listed_device_by_default_gets_work(serial, monkeypatch):
         _same(_totals(ex.map(_ranges(100))), serial)
     assert {d for _, d in used} == {"cpu"}
     assert len({name for name, _ in used}) == 3
+
+
+def _longest_stall(call) -> float:
+    """The longest time (s) this thread cannot run Python while another thread makes ``call``."""
+    done = threading.Event()
+    other = threading.Thread(target=lambda: (call(), done.set()))
+    longest, last = 0.0, time.perf_counter()
+    other.start()
+    while not done.is_set():
+        now = time.perf_counter()
+        longest, last = max(longest, now - last), now
+    other.join()
+    return longest
+
+
+@pytest.mark.slow
+def test_a_warp_cpu_launch_releases_the_gil():
+    # Devices keeps several devices busy from one process only if a launch lets other Python
+    # threads run meanwhile: a launch that kept the GIL would stall this thread for its length
+    import ctypes
+    from layersim.montecarlo.backends import make_runner
+    runner = make_runner("warp-cpu", WALKS[0].launch())
+    runner.run(0, 1000)
+    t0 = time.perf_counter()
+    runner.run(0, 1 << 16)
+    paths = int((1 << 16) * 0.15 / (time.perf_counter() - t0))      # a launch of ~0.15 s
+    t0 = time.perf_counter()
+    stall = _longest_stall(lambda: runner.run(0, paths))
+    length = time.perf_counter() - t0
+    print(f"longest stall {stall * 1e3:.1f} ms during a {length * 1e3:.0f} ms launch")
+    assert stall < length / 3
+    # the probe tells them apart: a 0.3 s C call that keeps the GIL (ctypes.PyDLL) stalls it
+    held = _longest_stall(lambda: ctypes.PyDLL(None).usleep(300_000))
+    print(f"longest stall {held * 1e3:.1f} ms during a 300 ms GIL-holding call")
+    assert held > 0.2
 
 
 def test_device_names_are_checked():
