@@ -213,19 +213,33 @@ def test_no_scheduler_is_one_clear_error():
         Dask(address="tcp://127.0.0.1:9", timeout=1)
 
 
+@pytest.fixture(scope="module")
+def two_workers():
+    """One local cluster of two workers for the tests below (clusters are slow to start)."""
+    with Dask(workers=2, in_flight=3) as ex:
+        yield ex
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("workers,batch,in_flight", [(1, 400, None), (2, 170, 3), (3, 1200, 2)])
-def test_dask_local_cluster_equals_serial(serial, workers, batch, in_flight):
-    with Dask(workers=workers, in_flight=in_flight) as ex:
-        assert ex.describe().startswith(f"dask: {workers} workers at tcp://")
+@pytest.mark.parametrize("workers,batch", [(1, 400), (2, 170), (3, 1200)])
+def test_dask_local_cluster_equals_serial(serial, two_workers, workers, batch):
+    if workers == 2:
+        ex = two_workers
         _same(_totals(ex.map(_ranges(batch))), serial)
-        if workers == 2:
-            taken = []
-            with pytest.raises(KeyboardInterrupt):
-                for _ in ex.map(_counting(split(WALKS[0], 0, 100_000, 100), taken)):
-                    raise KeyboardInterrupt
-            assert len(taken) <= 1 + 3                 # bounded: in_flight + the next one
-            assert not ex._running
+    else:
+        with Dask(workers=workers, in_flight=None if workers == 1 else 2) as ex:
+            assert ex.describe().startswith(f"dask: {workers} workers at tcp://")
+            _same(_totals(ex.map(_ranges(batch))), serial)
+
+
+@pytest.mark.slow
+def test_dask_interrupted_consumer_cancels_the_rest(two_workers):
+    taken = []
+    with pytest.raises(KeyboardInterrupt):
+        for _ in two_workers.map(_counting(split(WALKS[0], 0, 100_000, 100), taken)):
+            raise KeyboardInterrupt
+    assert len(taken) <= 1 + 3                          # bounded: in_flight + the next one
+    assert not two_workers._running
 
 
 def _die_once(flag, r):
@@ -238,10 +252,51 @@ def _die_once(flag, r):
 
 
 @pytest.mark.slow
-def test_a_worker_killed_mid_run_costs_only_its_range(serial, tmp_path):
+def test_a_worker_killed_mid_run_costs_only_its_range(serial, two_workers, tmp_path):
     import cloudpickle
     cloudpickle.register_pickle_by_value(sys.modules[__name__])
     flag = tmp_path / "died"
-    with Dask(workers=2, task=functools.partial(_die_once, str(flag))) as ex:
+    address = two_workers.client.scheduler.address
+    with Dask(address=address, task=functools.partial(_die_once, str(flag))) as ex:
+        assert ex.describe() == f"dask: 2 workers at {address}"
         _same(_totals(ex.map(_ranges(400))), serial)
     assert flag.exists()
+
+
+@pytest.fixture
+def tls_files(tmp_path):
+    """A self-signed certificate (its own CA) and key for 127.0.0.1, made with openssl."""
+    import shutil
+    import subprocess
+    if shutil.which("openssl") is None:
+        pytest.skip("openssl is not installed")
+    cert, key = tmp_path / "cert.pem", tmp_path / "key.pem"
+    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout",
+                    str(key), "-out", str(cert), "-days", "1", "-subj", "/CN=localhost"],
+                   check=True, capture_output=True)
+    return str(cert), str(key)
+
+
+@pytest.mark.slow
+def test_a_tls_scheduler_with_files_or_dask_config(serial, tls_files):
+    import dask
+    from distributed import LocalCluster
+    from distributed.security import Security
+    cert, key = tls_files
+    sec = Security(tls_ca_file=cert, tls_scheduler_cert=cert, tls_scheduler_key=key,
+                   tls_worker_cert=cert, tls_worker_key=key, tls_client_cert=cert,
+                   tls_client_key=key, require_encryption=True)
+    with LocalCluster(n_workers=1, threads_per_worker=1, protocol="tls://", security=sec,
+                      dashboard_address=None, scheduler_kwargs={"dashboard_address": ":0"}
+                      ) as cluster:
+        address = cluster.scheduler_address
+        assert address.startswith("tls://")
+        with Dask(address=address, security=tls_security(cert, cert, key)) as ex:
+            assert ex.describe() == f"dask: 1 workers at {address}"
+            _same(_totals(ex.map(_ranges(PATHS))), serial)
+        config = {"distributed.comm.tls.ca-file": cert, "distributed.comm.tls.client.cert": cert,
+                  "distributed.comm.tls.client.key": key}
+        with dask.config.set(config), Dask(address=address) as ex:
+            _same(_totals(ex.map(_ranges(PATHS))), serial)
+        with pytest.raises(ValueError, match="^security: the scheduler 'tls://.*' speaks TLS"):
+            Dask(address=address)

@@ -119,11 +119,14 @@ class Dask(Executor):
         self._cluster = None
         self._running: dict = {}
         if workers is not None:
+            # no dashboard; the scheduler's own HTTP endpoint on a free local port, so that
+            # several runs on one machine do not contend for Dask's default port 8787
             self._cluster = distributed.LocalCluster(
                 n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                silence_logs=logging.ERROR)
+                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}, silence_logs=logging.ERROR)
             self.client = distributed.Client(self._cluster)
         else:
+            _check_tls(distributed, address, security)
             try:
                 self.client = distributed.Client(address, security=security, timeout=timeout)
             except (OSError, TimeoutError) as exc:
@@ -204,6 +207,20 @@ class Dask(Executor):
         if self._cluster is not None:
             self._cluster.close()
             self._cluster = None
+
+
+def _check_tls(distributed, address: str, security) -> None:
+    """A ``tls://`` scheduler with no TLS files given or configured: say so in one line (Dask
+    itself fails deep inside its comm layer)."""
+    import dask
+    if not address.startswith("tls://") or (
+            security is None and dask.config.get("distributed.client.security-loader", None)):
+        return
+    security = security or distributed.security.Security()
+    if security.get_connection_args("client").get("ssl_context") is None:
+        raise ValueError(f"security: the scheduler {address!r} speaks TLS; give the CA file, "
+                         "certificate and key (tls_security; layersim mc --tls-ca-file, "
+                         "--tls-cert, --tls-key) or set Dask's distributed.comm.tls config")
 
 
 def _check_args(workers, address, security, in_flight, retries) -> None:
