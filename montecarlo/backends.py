@@ -244,7 +244,9 @@ class _WarpRunner:
 # OpenCL
 # ------------------------------------------------------------------------------------------------
 
-_KERNELS: dict = {}        # (id(context), features) -> the built walk kernel
+#: (id(context), features) -> the built walk program. Each runner makes its own kernel object
+#: from it: a kernel's arguments are state, and runners of other threads set theirs concurrently.
+_PROGRAMS: dict = {}
 
 
 def opencl_source(features: walk.Features | None = None) -> str:
@@ -266,11 +268,10 @@ class _OpenCLRunner:
         self.queue = cl.CommandQueue(self.ctx)
         features = launch.stack.features
         key = (id(self.ctx), features)
-        if key not in _KERNELS:
-            program = cl.Program(self.ctx, opencl_source(features)).build(
+        if key not in _PROGRAMS:
+            _PROGRAMS[key] = cl.Program(self.ctx, opencl_source(features)).build(
                 options=build_options(device))
-            _KERNELS[key] = cl.Kernel(program, "walk")
-        self.kernel = _KERNELS[key]
+        self.kernel = cl.Kernel(_PROGRAMS[key], "walk")
         gpu = bool(device.type & cl.device_type.GPU)
         self.n_copies = 256 if gpu else 4 * max(device.max_compute_units, 1)
         self.per_thread = GPU_PARTICLES_PER_THREAD if gpu else 1

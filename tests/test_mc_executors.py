@@ -143,6 +143,21 @@ def test_a_warp_cpu_launch_releases_the_gil():
     assert held > 0.2
 
 
+@pytest.mark.slow
+def test_two_threads_on_an_opencl_device_equal_serial(cl_device):
+    # one OpenCL device twice: two runners (each its own queue and kernel object) at once
+    walks = [Walk(w.scene, w.wi, w.mu_edges, w.phi_edges, w.seed, w.max_steps, "opencl")
+             for w in WALKS[:2]]
+    ranges = [r for w in walks for r in split(w, 0, 4000, 500)]
+    with InProcess() as ex:
+        serial = _totals(ex.map(ranges))
+    with Devices("opencl", ["opencl:0", "opencl:0"]) as ex:
+        threaded = _totals(ex.map(ranges))
+    for k in serial:
+        assert np.array_equal(serial[k].w, threaded[k].w)
+        assert serial[k].events == threaded[k].events and serial[k].particles == 4000
+
+
 def test_device_names_are_checked():
     with pytest.raises(ValueError, match="'cuda:0' is not a device of backend 'warp-cpu'"):
         Devices("warp-cpu", ["cuda:0"])
