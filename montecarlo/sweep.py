@@ -26,6 +26,8 @@ import numbers
 import tomllib
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import SweepError
 from ..scene import Scene
 from .backends import BACKENDS, resolve_backend
@@ -67,7 +69,8 @@ def read_sweep(path) -> tuple[list[Walk], dict, dict]:
     options : dict
         ``paths`` (int), ``stderr`` (float or None), ``bins`` ((n_mu, n_phi)), ``seed``,
         ``backend`` (resolved), ``max_steps``, ``angles`` (list of (theta, phi) degrees),
-        ``channels`` ("all" or list), ``source`` (str).
+        ``channels`` ("all" or list), ``source`` (str), and per walk ``walk_scene`` (index
+        into the scenes, in file order) and ``walk_channel``; ``scene_names``.
 
     Raises
     ------
@@ -87,7 +90,8 @@ def read_sweep(path) -> tuple[list[Walk], dict, dict]:
     table = _table(data, source)
     options = _options(table, source)
     scenes, texts = _scenes(table["scenes"], path.parent, source)
-    walks = _walks(scenes, options, source)
+    walks, options["walk_scene"], options["walk_channel"] = _walks(scenes, options, source)
+    options["scene_names"] = [s.name for s in scenes]
     return walks, texts, options
 
 
@@ -189,13 +193,15 @@ def _scenes(names, folder: Path, source: str) -> tuple[list, dict]:
     return scenes, texts
 
 
-def _walks(scenes: list, o: dict, source: str) -> list[Walk]:
-    """One walk per scene x angle x channel."""
+def _walks(scenes: list, o: dict, source: str) -> tuple[list[Walk], list, list]:
+    """One walk per scene x angle x channel, with each walk's scene index and channel. The bin
+    edges are those of ``layersim mc --bins`` (``numpy.linspace``), so that a sweep's walk and
+    the same walk run alone are the same walk."""
     n_mu, n_phi = o["bins"]
-    mu_edges = tuple(i / n_mu for i in range(n_mu + 1))
-    phi_edges = tuple(2 * math.pi * i / n_phi for i in range(n_phi + 1))
-    walks = []
-    for scene in scenes:
+    mu_edges = tuple(map(float, np.linspace(0.0, 1.0, n_mu + 1)))
+    phi_edges = tuple(map(float, np.linspace(0.0, 2 * math.pi, n_phi + 1)))
+    walks, walk_scene, walk_channel = [], [], []
+    for s, scene in enumerate(scenes):
         channels = range(scene.channels) if o["channels"] == "all" else o["channels"]
         if max(channels) >= scene.channels:
             raise SweepError(f"channel {max(channels)} does not exist in scene '{scene.name}' "
@@ -205,6 +211,9 @@ def _walks(scenes: list, o: dict, source: str) -> list[Walk]:
                 raise SweepError(f"theta {theta:g} > 90 lights the stack from below, but scene "
                                  f"'{scene.name}' is opaque", f"angles[{k}]", source)
             wi = direction(theta, phi)
-            walks += [Walk(scene.channel(c), wi, mu_edges, phi_edges, o["seed"], o["max_steps"],
-                           o["backend"]) for c in channels]
-    return walks
+            for c in channels:
+                walks.append(Walk(scene.channel(c), wi, mu_edges, phi_edges, o["seed"],
+                                  o["max_steps"], o["backend"]))
+                walk_scene.append(s)
+                walk_channel.append(c)
+    return walks, walk_scene, walk_channel

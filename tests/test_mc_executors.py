@@ -79,7 +79,9 @@ def serial():
 
 def test_serial_split_equals_whole_walks(serial):
     with InProcess() as ex:
+        assert ex.describe() == "in process"
         _same(_totals(ex.map(_ranges(250))), serial)
+        assert ex.describe().startswith("in process on cpu") and ex.device == ex.describe()
     # the walks differ from one another, so equal totals are not a coincidence
     assert len({tuple(t.w.ravel()) for t in serial.values()}) == len(WALKS)
 

@@ -71,6 +71,9 @@ def test_scenes_angles_channels_become_walks_in_order(folder, monkeypatch, tmp_p
     assert walks[3].scene.stacks[0][1].ior == pytest.approx(complex(0.5, 2.4))
     assert texts == {"scenes/slab.toml": SLAB, "scenes/gold.toml": RGB_GOLD}
     assert (options["paths"], options["stderr"], options["bins"]) == (1_000_000, None, (4, 3))
+    assert options["walk_scene"] == [0, 0] + [1] * 6
+    assert options["walk_channel"] == [0, 0, 0, 1, 2, 0, 1, 2]
+    assert options["scene_names"] == ["slab", "gold"]
 
 
 def test_chosen_channels_stderr_target_and_light_from_below(folder):

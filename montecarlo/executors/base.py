@@ -3,17 +3,34 @@ executor's backend."""
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+from typing import Iterable, Iterator
+
+from ..estimates import TallySum
 from ..work import PathRange
 
 __all__ = ["Executor", "check_backend"]
 
 
-class Executor:
+class Executor(ABC):
     """Base of the executors: ``with`` closes the executor on the way out (an exception or a
     KeyboardInterrupt in the consumer included), which cancels outstanding work."""
 
     def close(self) -> None:
         """Release what the executor holds (nothing here)."""
+
+    @abstractmethod
+    def describe(self) -> str:
+        """One line naming where the ranges run (for a result file's metadata)."""
+
+    @abstractmethod
+    def map(self, ranges: Iterable[PathRange]) -> Iterator[tuple[PathRange, TallySum]]:
+        """``(range, tally)`` for every range, in completion order."""
+
+    @property
+    def device(self) -> str:
+        """Where the ranges run, as :meth:`describe` says it (what a result file records)."""
+        return self.describe()
 
     def __enter__(self):
         return self

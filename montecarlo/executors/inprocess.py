@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Iterable, Iterator
 
 from ..estimates import TallySum
-from ..work import PathRange, run_range
+from ..work import PathRange, run_range, runner_device
 from .base import Executor
 
 __all__ = ["InProcess"]
@@ -21,13 +21,17 @@ class InProcess(Executor):
     """
 
     def __init__(self, device: str | None = None):
-        self.device = device
+        self.device_request = device
+        self.ran_on = None            # the device's name, once a range has run
 
     def map(self, ranges: Iterable[PathRange]) -> Iterator[tuple[PathRange, TallySum]]:
         """Yield ``(range, tally)`` for each range, in order (serial order is completion order)."""
         for r in ranges:
-            yield r, run_range(r, self.device)
+            if self.ran_on is None:
+                self.ran_on = runner_device(r.walk, self.device_request)
+            yield r, run_range(r, self.device_request)
 
     def describe(self) -> str:
-        """One line: ``"in process"`` and the device, if one was named."""
-        return "in process" + (f" on {self.device}" if self.device else "")
+        """One line: ``"in process on cpu (AMD EPYC ...)"`` once a range has run."""
+        where = self.ran_on or self.device_request
+        return "in process" + (f" on {where}" if where else "")
