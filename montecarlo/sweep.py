@@ -31,9 +31,10 @@ import numpy as np
 from ..errors import SweepError
 from ..scene import Scene
 from .backends import BACKENDS, resolve_backend
+from .checks import check_wi
 from .work import Walk
 
-__all__ = ["read_sweep", "direction", "FIELDS", "MAX_PATHS", "MAX_BINS"]
+__all__ = ["read_sweep", "is_sweep_file", "direction", "FIELDS", "MAX_PATHS", "MAX_BINS"]
 
 #: Fields of ``[sweep]`` and whether each must be given.
 FIELDS = {"scenes": True, "angles": True, "channels": False, "paths": False, "stderr": False,
@@ -51,13 +52,26 @@ def direction(theta_deg: float, phi_deg: float) -> tuple:
     return (math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t))
 
 
-def read_sweep(path) -> tuple[list[Walk], dict, dict]:
+def is_sweep_file(path) -> bool:
+    """Whether ``path`` is a TOML file with a ``[sweep]`` table (False for anything unreadable:
+    the scene reader then says what is wrong with it)."""
+    try:
+        return "sweep" in tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return False
+
+
+def read_sweep(path, resolve=resolve_backend) -> tuple[list[Walk], dict, dict]:
     """Read and check a sweep file.
 
     Parameters
     ----------
     path : str or os.PathLike
         The sweep file.
+    resolve : callable
+        Turns the ``backend`` field into the backend the walks name (default
+        :func:`~layersim.montecarlo.backends.resolve_backend`, which resolves ``"auto"`` here;
+        ``layersim mc --cluster`` resolves it on the workers instead).
 
     Returns
     -------
@@ -89,6 +103,7 @@ def read_sweep(path) -> tuple[list[Walk], dict, dict]:
         raise SweepError(f"not a TOML sweep file: {exc}", source=source) from None
     table = _table(data, source)
     options = _options(table, source)
+    options["backend"] = resolve(options["backend"])
     scenes, texts = _scenes(table["scenes"], path.parent, source)
     walks, options["walk_scene"], options["walk_channel"] = _walks(scenes, options, source)
     options["scene_names"] = [s.name for s in scenes]
@@ -133,7 +148,7 @@ def _options(t: dict, source: str) -> dict:
         seed=_count(t.get("seed", 0), "seed", 0, (1 << 64) - 1, source),
         max_steps=_count(t.get("max_steps", 100_000), "max_steps", 1, (1 << 31) - 1, source),
         angles=_angles(t["angles"], source), channels=_channels(t.get("channels", "all"), source),
-        backend=resolve_backend(backend), source=source)
+        backend=backend, source=source)
 
 
 def _real(v) -> bool:
@@ -210,7 +225,8 @@ def _walks(scenes: list, o: dict, source: str) -> tuple[list[Walk], list, list]:
             if theta > 90 and scene.opaque:
                 raise SweepError(f"theta {theta:g} > 90 lights the stack from below, but scene "
                                  f"'{scene.name}' is opaque", f"angles[{k}]", source)
-            wi = direction(theta, phi)
+            # normalised as layersim mc --wi does, so a sweep's walk is the same walk run alone
+            wi = tuple(float(x) for x in check_wi(direction(theta, phi), scene))
             for c in channels:
                 walks.append(Walk(scene.channel(c), wi, mu_edges, phi_edges, o["seed"],
                                   o["max_steps"], o["backend"]))

@@ -250,6 +250,16 @@ def test_dask_local_cluster_equals_serial(serial, two_workers, workers, batch):
 
 
 @pytest.mark.slow
+def test_the_workers_resolve_and_check_the_backend(two_workers):
+    from layersim.montecarlo.backends import resolve_backend, why_unavailable
+    assert two_workers.resolve_backend("auto") == resolve_backend("auto")
+    if why_unavailable("warp-cuda"):                   # no GPU on the workers (this machine)
+        with pytest.raises(ClusterError, match=r"^Dask worker tcp://\S+ \(and 1 more\) cannot "
+                                               r"run the walk: backend 'warp-cuda'"):
+            two_workers.resolve_backend("warp-cuda")
+
+
+@pytest.mark.slow
 def test_dask_interrupted_consumer_cancels_the_rest(two_workers):
     taken = []
     with pytest.raises(KeyboardInterrupt):

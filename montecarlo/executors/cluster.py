@@ -77,6 +77,14 @@ def _worker_layersim() -> str:
     return layersim.__version__
 
 
+def _worker_backend(name: str) -> tuple:
+    """Runs on each worker: the backend ``name`` resolves to there and why it cannot run (or
+    None)."""
+    from ..backends import resolve_backend, why_unavailable
+    backend = resolve_backend(name)
+    return backend, why_unavailable(backend)
+
+
 class Dask(Executor):
     """Path ranges as tasks of a Dask distributed cluster.
 
@@ -154,6 +162,31 @@ class Dask(Executor):
             raise ClusterError(f"{len(other)} Dask worker(s) run layersim {v} (e.g. {w}), this "
                                f"client {layersim.__version__}; install the same layersim on "
                                "every worker")
+
+    def resolve_backend(self, name: str) -> str:
+        """The backend the workers run for ``name`` (``"auto"`` resolved there, not here),
+        checked on every worker.
+
+        Raises
+        ------
+        ClusterError
+            No workers, a worker that cannot run it (named, with its reason), or workers that
+            resolve ``"auto"`` differently (tallies of different backends differ).
+        """
+        found = self.client.run(_worker_backend, name)
+        if not found:
+            raise ClusterError(f"the Dask cluster at {self.client.scheduler.address} has no "
+                               "workers")
+        bad = {w: reason for w, (_, reason) in found.items() if reason}
+        if bad:
+            w, reason = next(iter(bad.items()))
+            more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+            raise ClusterError(f"Dask worker {w}{more} cannot run the walk: {reason}")
+        names = sorted({b for b, _ in found.values()})
+        if len(names) > 1:
+            raise ClusterError(f"backend {name!r} is {' on some workers, '.join(names)} on "
+                               "others; name one backend (tallies of different backends differ)")
+        return names[0]
 
     def _threads(self) -> int:
         workers = self.client.scheduler_info().get("workers", {})
