@@ -619,7 +619,11 @@ reported) or with --partial.""",
     "mc": """examples:
   layersim mc examples/coated_gold.toml --wi 30,0 --wi 60,0 --paths 1e6 -o gold.npz
   layersim mc examples/coated_gold.toml --wi 30,0 --stderr 1e-4 --paths 1e8 -o gold.npz
-  (Ctrl-C stops after a checkpoint; the same command again continues bit for bit)""",
+  layersim mc sweep.toml --workers 8 -o truth.npz          (a [sweep] file: docs/conventions.md)
+  layersim mc sweep.toml --devices cuda:0,cuda:1 -o truth.npz
+  layersim mc sweep.toml --cluster tls://head:8786 --tls-ca-file ca.pem --tls-cert me.pem -o t.npz
+  (Ctrl-C stops after a checkpoint; the same command again continues bit for bit, on any
+  executor)""",
     "compare": """examples:
   layersim compare gold.npz examples/coated_gold.toml --plot z.png
   layersim compare gold.npz coated_gold.lsim

@@ -32,6 +32,6 @@ class InProcess(Executor):
             yield r, run_range(r, self.device_request)
 
     def describe(self) -> str:
-        """One line: ``"in process on cpu (AMD EPYC ...)"`` once a range has run."""
-        where = self.ran_on or self.device_request
-        return "in process" + (f" on {where}" if where else "")
+        """One line: the device's name once a range has run (``"cpu (AMD EPYC ...)"``, what
+        :func:`~layersim.montecarlo.simulate` reports), else ``"in process"``."""
+        return self.ran_on or self.device_request or "in process"
