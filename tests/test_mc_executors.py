@@ -328,3 +328,19 @@ def test_a_tls_scheduler_with_files_or_dask_config(serial, tls_files):
             _same(_totals(ex.map(_ranges(PATHS))), serial)
         with pytest.raises(ValueError, match="^security: the scheduler 'tls://.*' speaks TLS"):
             Dask(address=address)
+
+
+@pytest.mark.slow
+def test_a_range_that_keeps_killing_workers_is_one_line():   # imports distributed
+    import distributed
+    from layersim.montecarlo.executors import cluster
+
+    class Killed:
+        def result(self):
+            last = type("WorkerState", (), {"address": "tcp://10.0.0.5:4000"})()
+            raise distributed.KilledWorker("run_range-abc", last, 3)
+
+    r = split(WALKS[0], 0, 3000, 1000)[1]
+    with pytest.raises(ClusterError, match=r"^paths 1000 to 1999 of the walk of 'scene' killed 4 "
+                                           r"Dask workers \(the last tcp://10.0.0.5:4000\); see"):
+        cluster._result(Killed(), r, distributed)

@@ -9,6 +9,11 @@ without layersim, or with another version, are named in the error). Only a bound
 ranges is in flight at a time, so a campaign of 1e12 paths never holds millions of futures; a
 worker that dies costs only the ranges it held, which the scheduler runs again elsewhere.
 
+GPUs: a worker runs its walks on its backend's default device, so start one worker per GPU with
+``CUDA_VISIBLE_DEVICES`` naming it (as ``dask-cuda-worker`` does), or run
+:class:`~layersim.montecarlo.executors.Devices` on each host; ``Dask(workers=N)`` on one GPU
+host puts every worker on its first GPU.
+
 Security: ``security=`` is passed to :class:`distributed.Client`; :func:`tls_security` builds one
 from a CA file, certificate and key. With none given, Dask's own configuration applies
 (``distributed.comm.tls.*``, ``distributed.client.security-loader``).
@@ -218,7 +223,7 @@ class Dask(Executor):
                 submit()
             for future in pending:
                 r = self._running.pop(future)
-                tally = future.result()
+                tally = _result(future, r, distributed)
                 future.release()
                 submit()
                 yield r, tally
@@ -240,6 +245,18 @@ class Dask(Executor):
         if self._cluster is not None:
             self._cluster.close()
             self._cluster = None
+
+
+def _result(future, r: PathRange, distributed) -> TallySum:
+    """A range's tally; a range that keeps killing its workers is one line naming it."""
+    try:
+        return future.result()
+    except distributed.KilledWorker as exc:
+        last = getattr(exc.last_worker, "address", exc.last_worker)
+        raise ClusterError(f"paths {r.first} to {r.first + r.count - 1} of the walk of "
+                           f"'{r.walk.scene.name}' killed {exc.allowed_failures + 1} Dask workers "
+                           f"(the last {last}); see the workers' logs (memory limit, GPU "
+                           "errors)") from None
 
 
 def _check_tls(distributed, address: str, security) -> None:
