@@ -291,6 +291,29 @@ def test_a_worker_killed_mid_run_costs_only_its_range(serial, two_workers, tmp_p
     assert flag.exists()
 
 
+def _fail_once(flag, r):
+    """Raise on the first range of the run (whichever worker gets it), then walk normally."""
+    try:
+        os.close(os.open(flag, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except FileExistsError:
+        return run_range(r)
+    raise RuntimeError("a transient failure")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("retries", [1, 0])
+def test_a_failed_range_is_retried(serial, two_workers, tmp_path, retries):
+    import cloudpickle
+    cloudpickle.register_pickle_by_value(sys.modules[__name__])
+    task = functools.partial(_fail_once, str(tmp_path / "failed"))
+    with Dask(address=two_workers.client.scheduler.address, task=task, retries=retries) as ex:
+        if retries:
+            _same(_totals(ex.map(_ranges(PATHS))), serial)
+        else:
+            with pytest.raises(RuntimeError, match="a transient failure"):
+                list(ex.map(_ranges(PATHS)))
+
+
 @pytest.fixture
 def tls_files(tmp_path):
     """A self-signed certificate (its own CA) and key for 127.0.0.1, made with openssl."""
