@@ -131,14 +131,18 @@ def main(argv=None) -> int:
     unknown = [s for s in args.scenes if s not in SCENES]
     if unknown:
         ap.error(f"unknown scene {unknown[0]!r}; choose from {', '.join(SCENES)}")
-    devices = parse_devices(args.devices) or device_names(args.backend)
+    present = device_names(args.backend)
+    devices = parse_devices(args.devices) or present
+    missing = [d for d in devices if d not in present]
+    if present and missing:
+        ap.error(f"device {missing[0]!r} is not visible here (visible: {', '.join(present)})")
     print("# multi_gpu.py: walk paths/s on 1..N devices of one host (Devices executor)")
     print(f"# command: python benchmarks/montecarlo/multi_gpu.py {' '.join(argv or sys.argv[1:])}")
     print(f"# machine: {machine(args.backend != 'warp-cpu')}")
     print(f"# date: {time.strftime('%Y-%m-%d %H:%M')}; commit: {commit()}")
     print(f"# layersim {layersim.__version__} from {Path(layersim.__file__).parent}; "
           f"load average (1 min) {os.getloadavg()[0]:.2f}; batch {BATCH[args.backend]} paths")
-    if not devices:
+    if not present:
         print(f"no {args.backend} device is visible here: nothing to measure "
               f"(on a CUDA machine check nvidia-smi and CUDA_VISIBLE_DEVICES)")
         return 0
