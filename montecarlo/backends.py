@@ -208,6 +208,10 @@ class _WarpRunner:
         self.launch = launch
         self.kernel = walk.program(launch.stack.features,
                                    CUDA_MAX_REGISTERS if cuda else None).kernel
+        # compile and load the kernel's module on the device now, not at the first launch: a
+        # runner is built under work.py's build lock, while launches of several device threads
+        # run at the same time and must find the module loaded
+        wp.load_module(self.kernel.module, device=self.device)
         # GPUs: replicas spread the atomics, a few particles per thread amortise the counters;
         # Warp's CPU device runs a launch serially on one core, so one replica suffices.
         self.n_copies = 256 if cuda else 1
