@@ -158,8 +158,9 @@ class Dask(Executor):
         try:
             found = self.client.run(_worker_layersim)
         except Exception as exc:
+            first = (str(exc).splitlines() or [""])[0]
             raise ClusterError(f"the Dask workers cannot import layersim ({type(exc).__name__}: "
-                               f"{exc}); install layersim {layersim.__version__} on every "
+                               f"{first}); install layersim {layersim.__version__} on every "
                                "worker") from None
         other = {w: v for w, v in found.items() if v != layersim.__version__}
         if other:
