@@ -270,6 +270,16 @@ def test_dask_interrupted_consumer_cancels_the_rest(two_workers):
     assert not two_workers._running
 
 
+@pytest.mark.slow
+def test_workers_with_another_layersim_are_refused(two_workers, monkeypatch):
+    import layersim
+    theirs = layersim.__version__
+    monkeypatch.setattr(layersim, "__version__", "0.0.0-client")
+    with pytest.raises(ClusterError, match=rf"^2 Dask worker\(s\) run layersim {theirs} \(e.g. "
+                                           r"tcp://.*\), this client 0.0.0-client; install"):
+        Dask(address=two_workers.client.scheduler.address)
+
+
 def _die_once(flag, r):
     """Kill this worker process on the first range of the run (whichever worker gets it)."""
     try:
