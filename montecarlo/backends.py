@@ -158,7 +158,8 @@ def check_device(backend: str, device: str | None) -> None:
 def device_names(backend: str) -> list[str]:
     """Every device of a resolved backend here, by the names :func:`make_runner` takes:
     ``["cuda:0", "cuda:1", ...]`` (Warp's CUDA devices), ``["cpu"]``, or ``["opencl:0", ...]``
-    (the OpenCL devices that can build the walk)."""
+    (the OpenCL devices that can build the walk; ``$PYOPENCL_CTX``, which picks the one device
+    of a plain ``"opencl"`` run, is not consulted)."""
     if backend == "warp-cuda":
         if _cuda_count() == 0:
             return []
