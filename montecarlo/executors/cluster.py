@@ -104,8 +104,9 @@ class Dask(Executor):
     security : distributed.security.Security, optional
         Passed to the client (:func:`tls_security`); None lets Dask's configuration decide.
     in_flight : int, optional
-        Ranges submitted and not yet returned, at most; default twice the workers' threads
-        (at least 4), which keeps every worker fed while it sends a result back.
+        Ranges submitted and not yet returned, at most; default twice the workers' threads when
+        :meth:`map` starts (at least 4), which keeps every worker fed while it sends a result
+        back.
     retries : int
         Times a range whose task raised is run again (a lost worker's ranges are rerun by the
         scheduler anyway, up to its ``allowed-failures``).
