@@ -16,6 +16,8 @@
                                      recover the unknown layer of a solved two-layer stack
     layersim mc SCENE --wi THETA,PHI [--paths N | --stderr E] -o OUT.npz
                                      Monte Carlo walks into a resumable result file
+    layersim mc SWEEP.toml [--workers N | --cluster ADDR | --devices all] -o OUT.npz
+                                     scenes x angles x channels, on a cluster or several GPUs
     layersim compare RESULT SOURCE [--plot PNG]
                                      a result file against a solve or another result file
 
@@ -617,7 +619,11 @@ reported) or with --partial.""",
     "mc": """examples:
   layersim mc examples/coated_gold.toml --wi 30,0 --wi 60,0 --paths 1e6 -o gold.npz
   layersim mc examples/coated_gold.toml --wi 30,0 --stderr 1e-4 --paths 1e8 -o gold.npz
-  (Ctrl-C stops after a checkpoint; the same command again continues bit for bit)""",
+  layersim mc sweep.toml --workers 8 -o truth.npz          (a [sweep] file: docs/conventions.md)
+  layersim mc sweep.toml --devices cuda:0,cuda:1 -o truth.npz
+  layersim mc sweep.toml --cluster tls://head:8786 --tls-ca-file ca.pem --tls-cert me.pem -o t.npz
+  (Ctrl-C stops after a checkpoint; the same command again continues bit for bit, on any
+  executor)""",
     "compare": """examples:
   layersim compare gold.npz examples/coated_gold.toml --plot z.png
   layersim compare gold.npz coated_gold.lsim
@@ -765,23 +771,24 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _add_mc(sub, quiet) -> None:
     sp = _subparser(sub, "mc", "Monte Carlo ground truth: walks of a scene from given "
-                               "directions into a resumable result file (.npz)", [quiet])
-    sp.add_argument("scene", help="scene file (TOML)")
-    sp.add_argument("--wi", action="append", required=True, metavar="THETA,PHI",
+                               "directions (or of a sweep file) into a resumable result file "
+                               "(.npz)", [quiet])
+    sp.add_argument("scene", help="scene file (TOML), or a sweep file (TOML with a [sweep] "
+                                  "table: scenes x angles x channels, docs/conventions.md)")
+    sp.add_argument("--wi", action="append", metavar="THETA,PHI",
                     help="direction of the light in degrees (theta from the normal, 0-180, "
                          "not 90); repeatable: one walk per direction and channel")
-    sp.add_argument("--paths", default="1e6", metavar="N",
+    sp.add_argument("--paths", metavar="N",
                     help="paths per walk (default 1e6); with --stderr the cap")
     sp.add_argument("--stderr", type=float, metavar="E",
                     help="stop each walk once the standard errors of R, T and A are <= E")
-    sp.add_argument("--bins", default="18,36", metavar="N_MU,N_PHI",
+    sp.add_argument("--bins", metavar="N_MU,N_PHI",
                     help="equal bins in |cos theta_o| and phi_o per side (default 18,36)")
-    sp.add_argument("--backend", default="auto", help="auto (default), warp-cpu, warp-cuda, "
-                                                      "opencl")
-    sp.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    sp.add_argument("--backend", help="auto (default), warp-cpu, warp-cuda, opencl")
+    sp.add_argument("--seed", type=int, help="seed (default 0)")
     sp.add_argument("--batch", metavar="N", help="paths per range, the unit of work and of "
                                                  "the stopping test (default: the backend's)")
-    sp.add_argument("--max-steps", type=int, default=100_000,
+    sp.add_argument("--max-steps", type=int,
                     help="cap on the interactions of one path (default 100000)")
     sp.add_argument("-o", "--output", required=True, metavar="OUT",
                     help="result file (.npz); an existing one of the same run is continued")
@@ -790,6 +797,8 @@ def _add_mc(sub, quiet) -> None:
     sp.add_argument("--plot", metavar="PNG", help="picture of the bins (default: OUT with "
                                                   ".png)")
     sp.add_argument("--no-plot", action="store_true", help="no picture")
+    from . import mc_scaleout
+    mc_scaleout.add_options(sp)
     sp.set_defaults(func=cmd_mc)
     sp = _subparser(sub, "compare", "compare a Monte Carlo result file with a solve or "
                                     "another result file, walk by walk", [quiet])

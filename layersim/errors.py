@@ -57,3 +57,18 @@ class BackendUnavailableError(LayersimError, RuntimeError):
     """A Monte Carlo backend is not installed, has no device, or its device cannot build the
     walk; the message names the device and the driver's reason, and says what to install or
     which backend to use instead."""
+
+
+class ClusterError(LayersimError, RuntimeError):
+    """A Dask cluster cannot be reached, or its workers cannot run the walk (layersim missing
+    there, or another version); the message names the scheduler or the workers and what to do."""
+
+
+class SweepError(LayersimError, ValueError):
+    """A sweep file (``layersim mc SWEEP.toml``) is malformed; the message names the file and
+    the field (``angles[2]``)."""
+
+    def __init__(self, message: str, field: str | None = None, source: str | None = None):
+        where = [str(p) for p in (source, f"field '{field}'" if field else None) if p]
+        super().__init__(": ".join(where + [message]))
+        self.field, self.source = field, source

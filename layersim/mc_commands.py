@@ -10,15 +10,18 @@ from __future__ import annotations
 
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from . import mc_scaleout
 from .montecarlo import compare, resultfile
 from .montecarlo.backends import available_backends, resolve_backend, why_unavailable
 from .montecarlo.campaign import Stopped, run_walks, walks_of
 from .montecarlo.checks import check_int, check_wi
 from .montecarlo.driver import DEFAULT_BATCH, MAX_BATCH
+from .montecarlo.sweep import is_sweep_file, read_sweep
 from .scene import Scene
 
 __all__ = ["run_mc", "run_compare", "direction", "parse_count", "parse_bins", "EXIT_STOPPED"]
@@ -90,29 +93,65 @@ def _stderr(value) -> float | None:
     return float(value)
 
 
-def run_mc(args, out: Path, image: Path | None, progress: bool) -> int:
-    """``layersim mc``: walks of SCENE from each ``--wi`` into ``out`` (resuming it), a
-    summary per walk, and the bin picture ``image``. Returns the exit status."""
+#: ``layersim mc`` options that a sweep file sets itself, and their defaults for one scene.
+SCENE_OPTIONS = {"wi": None, "paths": "1e6", "stderr": None, "bins": "18,36", "backend": "auto",
+                 "seed": 0, "max_steps": 100_000}
+
+
+def _scene_run(args) -> dict:
+    """The walks of ``layersim mc SCENE --wi ...`` (backend not yet resolved) and their record."""
+    for name, default in SCENE_OPTIONS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, default)
+    if not args.wi:
+        raise ValueError("--wi THETA,PHI is required for a scene (a sweep file lists angles)")
     scene = Scene.from_toml(args.scene)
     wis = [_incident(w, scene) for w in args.wi]
     mu_edges, phi_edges = parse_bins(args.bins)
-    paths = parse_count(args.paths, "--paths")
-    target = _stderr(args.stderr)
     seed = check_int("--seed", args.seed, 0, (1 << 64) - 1)
-    backend = _backend(args.backend)
-    batch = parse_count(args.batch, "--batch", MAX_BATCH) if args.batch \
-        else DEFAULT_BATCH[backend]
-    walks = walks_of(scene, wis, mu_edges, phi_edges, seed, args.max_steps, backend)
-    channels = [c for _ in wis for c in range(scene.channels)]
+    return dict(walks=walks_of(scene, wis, mu_edges, phi_edges, seed, args.max_steps,
+                               args.backend),
+                paths=parse_count(args.paths, "--paths"), target=_stderr(args.stderr),
+                backend=args.backend, scene_texts=[Path(args.scene).read_text(encoding="utf-8")],
+                scene_names=[scene.name], walk_scene=None,
+                walk_channel=[c for _ in wis for c in range(scene.channels)])
+
+
+def _sweep_run(args) -> dict:
+    """The walks of ``layersim mc SWEEP.toml`` (backend not yet resolved) and their record."""
+    given = [n for n in SCENE_OPTIONS if getattr(args, n) is not None]
+    if given:
+        option = "--" + given[0].replace("_", "-")
+        raise ValueError(f"{option}: the sweep file {args.scene} sets it ([sweep] "
+                         f"{'angles' if given[0] == 'wi' else given[0]}); drop {option}")
+    walks, texts, o = read_sweep(args.scene, resolve=lambda name: name)
+    return dict(walks=walks, paths=o["paths"], target=o["stderr"], backend=o["backend"],
+                scene_texts=list(texts.values()), scene_names=o["scene_names"],
+                walk_scene=o["walk_scene"], walk_channel=o["walk_channel"])
+
+
+def run_mc(args, out: Path, image: Path | None, progress: bool) -> int:
+    """``layersim mc``: the walks of SCENE from each ``--wi`` (or of a sweep file) into ``out``
+    (resuming it), on the executor the options ask for; a summary per walk, and the bin
+    picture ``image``. Returns the exit status."""
+    mc_scaleout.check_options(args)
+    run = _sweep_run(args) if is_sweep_file(args.scene) else _scene_run(args)
+    batch = parse_count(args.batch, "--batch", MAX_BATCH) if args.batch else None
+    executor, backend = mc_scaleout.make_executor(args, run["backend"], _backend)
     try:
-        run_walks(walks, paths, batch=batch, target_stderr=target, out=out,
-                  scene_texts=[Path(args.scene).read_text(encoding="utf-8")],
-                  scene_names=[scene.name], walk_channel=channels, restart=args.restart,
-                  progress=progress)
+        walks = [replace(w, backend=backend) for w in run["walks"]]
+        run_walks(walks, run["paths"], batch=batch or DEFAULT_BATCH[backend],
+                  target_stderr=run["target"], executor=executor, out=out,
+                  scene_texts=run["scene_texts"], scene_names=run["scene_names"],
+                  walk_scene=run["walk_scene"], walk_channel=run["walk_channel"],
+                  restart=args.restart, progress=progress)
     except Stopped as stop:
         print(f"stopped at {stop.paths:,} paths; rerun the same command to continue",
               file=sys.stderr)
         return EXIT_STOPPED
+    finally:
+        if executor is not None:
+            executor.close()
     f = resultfile.load(out)
     print(summary(f))
     print(f"wrote {out}")

@@ -11,7 +11,9 @@ Philox generator of :mod:`layersim.kernels.rng`, walk in :mod:`layersim.kernels.
 
 Modules: :mod:`.driver` (entry point, batching), :mod:`.checks` (input validation),
 :mod:`.work` (path ranges of a walk, the unit of work anywhere), :mod:`.campaign` (resumable runs
-of many walks on a pluggable executor), :mod:`.resultfile` (``layersim mc`` result files),
+of many walks on a pluggable executor), :mod:`.executors` (where ranges run: serially, one thread
+per device, a Dask cluster), :mod:`.sweep` (sweep files: scenes x angles x channels as walks),
+:mod:`.resultfile` (``layersim mc`` result files),
 :mod:`.compare` (walks against a solve or other walks), :mod:`.plots` (their pictures),
 :mod:`.stack` (scene -> kernel parameters), :mod:`.backends` (Warp / OpenCL launch),
 :mod:`.estimates` (integer tallies -> fractions and standard errors), :mod:`.result`

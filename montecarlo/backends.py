@@ -34,11 +34,12 @@ from ..errors import BackendUnavailableError
 from ..kernels import walk
 from ..kernels.opencl_codegen import Program, parameters
 from ..kernels.runtime import ensure_init
-from .opencl_device import build_options, device_label, opencl_device
+from .opencl_device import (build_options, device_label, opencl_device, opencl_device_named,
+                            opencl_device_names)
 from .stack import StackArrays
 
-__all__ = ["BACKENDS", "BackendUnavailableError", "Launch", "available_backends", "make_runner",
-           "resolve_backend", "why_unavailable"]
+__all__ = ["BACKENDS", "BackendUnavailableError", "Launch", "available_backends", "check_device",
+           "device_names", "make_runner", "resolve_backend", "why_unavailable"]
 
 BACKENDS = ("auto", "warp-cpu", "warp-cuda", "opencl")
 #: An OpenCL CPU device needs this many compute units to be preferred over warp-cpu by "auto".
@@ -132,15 +133,41 @@ def resolve_backend(backend: str) -> str:
 def make_runner(backend: str, launch: Launch, device: str | None = None):
     """A runner for a resolved backend name: ``runner.run(first, count) -> (tally, counters)``.
 
-    ``device`` names a Warp CUDA device (``"cuda:1"``) for ``"warp-cuda"``; None is the first."""
+    ``device`` names the device: a Warp CUDA device (``"cuda:1"``) for ``"warp-cuda"``,
+    ``"cpu"`` for ``"warp-cpu"``, ``"opencl:K"`` (:func:`.opencl_device.opencl_device_names`)
+    for ``"opencl"``; None is the backend's default device."""
+    check_device(backend, device)
     if backend == "opencl":
-        if device is not None:
-            raise ValueError("backend 'opencl' picks its device itself ($PYOPENCL_CTX); "
-                             f"got device={device!r}")
-        return _OpenCLRunner(launch)
-    if device is not None and not (backend == "warp-cuda" and device.startswith("cuda")):
-        raise ValueError(f"device {device!r} is not a CUDA device of backend 'warp-cuda'")
+        return _OpenCLRunner(launch, None if device is None else opencl_device_named(device))
     return _WarpRunner(launch, cuda=(backend == "warp-cuda"), device=device)
+
+
+def check_device(backend: str, device: str | None) -> None:
+    """Refuse a device name of another backend (one line naming both)."""
+    if device is None:
+        return
+    fits = {"warp-cuda": lambda d: d == "cuda" or d.startswith("cuda:"),
+            "warp-cpu": lambda d: d == "cpu",
+            "opencl": lambda d: d.startswith("opencl:")}
+    if not isinstance(device, str) or not fits.get(backend, lambda d: False)(device):
+        want = {"warp-cuda": "'cuda:K'", "warp-cpu": "'cpu'", "opencl": "'opencl:K'"}
+        raise ValueError(f"device {device!r} is not a device of backend {backend!r} "
+                         f"(expected {want.get(backend, 'none')})")
+
+
+def device_names(backend: str) -> list[str]:
+    """Every device of a resolved backend here, by the names :func:`make_runner` takes:
+    ``["cuda:0", "cuda:1", ...]`` (Warp's CUDA devices), ``["cpu"]``, or ``["opencl:0", ...]``
+    (the OpenCL devices that can build the walk; ``$PYOPENCL_CTX``, which picks the one device
+    of a plain ``"opencl"`` run, is not consulted)."""
+    if backend == "warp-cuda":
+        if _cuda_count() == 0:
+            return []
+        import warp as wp
+        return [d.alias for d in wp.get_cuda_devices()]
+    if backend == "opencl":
+        return opencl_device_names()
+    return ["cpu"]
 
 
 def _kernel_args(launch: Launch, n_threads: int, per_thread: int, first: int, count: int,
@@ -182,6 +209,10 @@ class _WarpRunner:
         self.launch = launch
         self.kernel = walk.program(launch.stack.features,
                                    CUDA_MAX_REGISTERS if cuda else None).kernel
+        # compile and load the kernel's module on the device now, not at the first launch: a
+        # runner is built under work.py's build lock, while launches of several device threads
+        # run at the same time and must find the module loaded
+        wp.load_module(self.kernel.module, device=self.device)
         # GPUs: replicas spread the atomics, a few particles per thread amortise the counters;
         # Warp's CPU device runs a launch serially on one core, so one replica suffices.
         self.n_copies = 256 if cuda else 1
@@ -218,7 +249,9 @@ class _WarpRunner:
 # OpenCL
 # ------------------------------------------------------------------------------------------------
 
-_KERNELS: dict = {}        # (id(context), features) -> the built walk kernel
+#: (id(context), features) -> the built walk program. Each runner makes its own kernel object
+#: from it: a kernel's arguments are state, and runners of other threads set theirs concurrently.
+_PROGRAMS: dict = {}
 
 
 def opencl_source(features: walk.Features | None = None) -> str:
@@ -230,21 +263,20 @@ def opencl_source(features: walk.Features | None = None) -> str:
 
 
 class _OpenCLRunner:
-    def __init__(self, launch: Launch):
+    def __init__(self, launch: Launch, device=None):
         import pyopencl as cl
         self.cl = cl
-        device = opencl_device()
+        device = device or opencl_device()
         self.name = "opencl"
         self.device_name = device_label(device)
         self.ctx = _context_for(device)
         self.queue = cl.CommandQueue(self.ctx)
         features = launch.stack.features
         key = (id(self.ctx), features)
-        if key not in _KERNELS:
-            program = cl.Program(self.ctx, opencl_source(features)).build(
+        if key not in _PROGRAMS:
+            _PROGRAMS[key] = cl.Program(self.ctx, opencl_source(features)).build(
                 options=build_options(device))
-            _KERNELS[key] = cl.Kernel(program, "walk")
-        self.kernel = _KERNELS[key]
+        self.kernel = cl.Kernel(_PROGRAMS[key], "walk")
         gpu = bool(device.type & cl.device_type.GPU)
         self.n_copies = 256 if gpu else 4 * max(device.max_compute_units, 1)
         self.per_thread = GPU_PARTICLES_PER_THREAD if gpu else 1

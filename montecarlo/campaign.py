@@ -9,8 +9,9 @@ restarted run continues. The executor is anything with a method
 that takes an iterable of :class:`~layersim.montecarlo.work.PathRange` (consumed lazily: a walk
 that stops early yields no more ranges) and yields each range with its tally in *completion*
 order, which may differ from the order of ``ranges`` (several GPUs, a cluster). It may have a
-``device`` attribute (a string naming where it runs) that the result file records.
-:class:`InProcess` runs the ranges one after another in this process.
+``device`` attribute (a string naming where it runs) that the result file records. The executors
+of :mod:`.executors` (this process, several devices, a Dask cluster) are such objects; the default,
+:class:`~layersim.montecarlo.executors.InProcess`, runs the ranges one after another here.
 
 Each walk's paths ``[0, paths)`` are cut into ranges of ``batch`` paths, in order. The tallies of
 the ranges completed so far are kept as the sum over the *in-order prefix* (ranges ``0 .. k-1``
@@ -34,24 +35,10 @@ import numpy as np
 from ..scene import Scene
 from . import resultfile
 from .estimates import TallySum
-from .work import PathRange, Walk, run_range, runner_device, split
+from .executors import InProcess
+from .work import PathRange, Walk, split
 
 __all__ = ["InProcess", "Campaign", "Stopped", "walks_of", "max_stderr", "run_walks"]
-
-
-class InProcess:
-    """The default executor: the ranges one after another in this process (:func:`run_range`)."""
-
-    def __init__(self, device: str | None = None):
-        self.device_request = device
-        self.device = None
-
-    def map(self, ranges):
-        """Yield ``(range, tally)`` for each range, in the order given."""
-        for r in ranges:
-            if self.device is None:
-                self.device = runner_device(r.walk, self.device_request)
-            yield r, run_range(r, self.device_request)
 
 
 class Stopped(KeyboardInterrupt):

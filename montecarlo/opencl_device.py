@@ -21,7 +21,8 @@ from functools import lru_cache
 
 from ..errors import BackendUnavailableError
 
-__all__ = ["DeviceCheck", "checked_devices", "opencl_device", "build_options", "device_label"]
+__all__ = ["DeviceCheck", "checked_devices", "opencl_device", "opencl_device_names",
+           "opencl_device_named", "build_options", "device_label"]
 
 #: Extensions the walk needs: the deterministic fixed-point tallies are 64-bit atomic adds.
 REQUIRED_EXTENSIONS = ("cl_khr_int64_base_atomics",)
@@ -183,3 +184,26 @@ def opencl_device():
     failed = "; ".join(f"{c.label}: {c.reason}" for c in checks)
     raise BackendUnavailableError(f"backend 'opencl': no OpenCL device can build the walk here "
                                   f"({failed}); {_INSTALL_HINT}")
+
+
+def opencl_device_names() -> list[str]:
+    """Names ``"opencl:K"`` of the devices that can build the walk here, K counting only those
+    (GPUs first, as :func:`checked_devices` orders them): what several-device runs spread over."""
+    return [f"opencl:{k}" for k in range(len([c for c in checked_devices() if c.ok]))]
+
+
+def opencl_device_named(name: str):
+    """The device an ``"opencl:K"`` name of :func:`opencl_device_names` stands for.
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not ``"opencl:K"`` or K is not the index of a device that can build the walk.
+    """
+    usable = [c.device for c in checked_devices() if c.ok]
+    head, _, index = str(name).partition(":")
+    if head != "opencl" or not index.isdigit() or int(index) >= len(usable):
+        have = ", ".join(opencl_device_names()) or "none"
+        raise ValueError(f"device {name!r} is not an OpenCL device that can build the walk here "
+                         f"(those: {have})")
+    return usable[int(index)]

@@ -12,13 +12,14 @@ whatever number of processes, devices or machines run them, provided they run th
 
 A :class:`PathRange` pickles small (the scene record and a few numbers), which is what a Dask
 worker receives; :func:`run_range` builds the backend's runner once per walk and device in each
-process and reuses it for the next range of the same walk.
+thread and reuses it for the next range of the same walk.
 """
 
 from __future__ import annotations
 
 import hashlib
 import pickle
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -91,22 +92,32 @@ def split(walk: Walk, first: int, stop: int, batch: int) -> list[PathRange]:
     return [PathRange(walk, a, min(batch, stop - a)) for a in range(first, stop, batch)]
 
 
-#: Runners kept per process: building one compiles (or loads) the walk's kernel and allocates
+#: Runners kept per thread: building one compiles (or loads) the walk's kernel and allocates
 #: its buffers, so the ranges of one walk reuse it; a few walks cover a sweep's interleaving.
 _RUNNER_CACHE_SIZE = 4
-_RUNNERS: OrderedDict = OrderedDict()
+#: Each thread keeps its own runners: a runner owns mutable device buffers, so two threads (one
+#: per device in :class:`~layersim.montecarlo.executors.Devices`, or several threads of a Dask
+#: worker) must never share one, and a per-thread cache cannot be thrashed by other devices.
+_LOCAL = threading.local()
+#: Runners are built one at a time in a process: building compiles and loads the walk's Warp
+#: module, which Warp does not guard against concurrent builds; launches then run in parallel.
+_BUILD_LOCK = threading.Lock()
 
 
 def _runner(walk: Walk, device: str | None):
+    cache = getattr(_LOCAL, "runners", None)
+    if cache is None:
+        cache = _LOCAL.runners = OrderedDict()
     key = (walk.key(), device)
-    runner = _RUNNERS.get(key)
+    runner = cache.get(key)
     if runner is None:
-        runner = make_runner(walk.backend, walk.launch(), device=device)
-        _RUNNERS[key] = runner
-        while len(_RUNNERS) > _RUNNER_CACHE_SIZE:
-            _RUNNERS.popitem(last=False)
+        with _BUILD_LOCK:
+            runner = make_runner(walk.backend, walk.launch(), device=device)
+        cache[key] = runner
+        while len(cache) > _RUNNER_CACHE_SIZE:
+            cache.popitem(last=False)
     else:
-        _RUNNERS.move_to_end(key)
+        cache.move_to_end(key)
     return runner
 
 
@@ -117,8 +128,9 @@ def run_range(r: PathRange, device: str | None = None) -> TallySum:
     ----------
     r : PathRange
     device : str, optional
-        The backend's device: a Warp CUDA device (``"cuda:1"``) for ``"warp-cuda"``; None for the
-        backend's default device.
+        The backend's device: a Warp CUDA device (``"cuda:1"``) for ``"warp-cuda"``, ``"cpu"``
+        for ``"warp-cpu"``, ``"opencl:K"`` for ``"opencl"``; None for the backend's default
+        device. Each thread keeps its own runners, so threads may run ranges at the same time.
 
     Returns
     -------
