@@ -19,7 +19,7 @@ if [ -n "${2:-}" ]; then
         --backends warp-cuda --seconds 2 --repeat 3 2>&1 | tee "$out/walk_vs_base.txt"
 fi
 scene=benchmarks/scenes/coated_gold.toml
-run() { echo "\$ layersim $*"; /usr/bin/time -f "wall %e s, peak RSS %M KiB" python3 -m layersim.cli "$@"; }
+run() { echo "\$ layersim $*"; local t0=$SECONDS; python3 -m layersim.cli "$@"; echo "wall $((SECONDS - t0)) s"; }
 run mc "$scene" --wi 0,0 --wi 30,0 --wi 60,0 --paths 1e10 --backend warp-cuda --devices all \
     -o "$out/coated_gold_mc.npz" --quiet 2>&1 | tee "$out/coated_gold_mc.txt"
 run compare "$out/coated_gold_mc.npz" "$scene" --plot "$out/compare_default_plan.png" 2>&1 \
