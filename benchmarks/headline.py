@@ -81,8 +81,12 @@ def machine(gpu: bool) -> str:
     mem = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
     line = f"{cpu}, {os.cpu_count()} cores, {mem:.0f} GiB, Python {platform.python_version()}"
     if gpu:
-        line += "; GPU " + (_run(["nvidia-smi", "--query-gpu=name,driver_version",
-                                  "--format=csv,noheader"]) or "none found")
+        # one line per GPU from nvidia-smi: a host of identical GPUs is named once with its count
+        gpus = (_run(["nvidia-smi", "--query-gpu=name,driver_version",
+                      "--format=csv,noheader"]) or "").splitlines()
+        names = sorted(set(gpus), key=gpus.index)
+        line += "; GPU " + ("none found" if not gpus else "; ".join(
+            (f"{gpus.count(g)}x " if gpus.count(g) > 1 else "") + g for g in names))
     return line
 
 

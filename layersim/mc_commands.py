@@ -166,7 +166,7 @@ def summary(f) -> str:
     lines = [f"Monte Carlo ({f.backend}, {f.device}): seed {int(f.seed)}, "
              f"{int(f.particles.sum()):,} paths in {float(f.seconds):.2f} s"]
     for i in range(f.n_walks):
-        est = "; ".join(f"{k} = {f.data[key][i]:.6f} +- {f.data[key + '_stderr'][i]:.6f}"
+        est = "; ".join(f"{k} = {f.data[key][i]:.6f} +- {f.data[key + '_stderr'][i]:.1e}"
                        for k, key in (("R", "reflectance"), ("T", "transmittance"),
                                       ("A", "absorbed")))
         met = ", stderr target met" if f.target_met[i] else ""
@@ -218,7 +218,7 @@ def _against_file(f, g) -> list:
 def _describe(f, i: int, cmp) -> list:
     def albedo(key):
         est, err, other = cmp.albedo[key]
-        return f"{key}: MC {est:.6f} +- {err:.6f}, other {other:.6f} ({cmp.albedo_z[key]:+.2f} sigma)"
+        return f"{key}: MC {est:.7f} +- {err:.1e}, other {other:.7f} ({cmp.albedo_z[key]:+.2f} sigma)"
     z, side, a, b = cmp.largest()
     mu, ph = f.mu_edges, np.degrees(f.phi_edges)
     th = np.degrees(np.arccos([mu[a + 1], mu[a]]))

@@ -91,7 +91,7 @@ class MCResult:
         """A few lines for reports and the command line."""
         def fmt(x, e):
             x, e = np.atleast_1d(x), np.atleast_1d(e)
-            return ", ".join(f"{a:.6f} +- {b:.6f}" for a, b in zip(x, e))
+            return ", ".join(f"{a:.6f} +- {b:.1e}" for a, b in zip(x, e))
         return (f"Monte Carlo ({self.backend}, {self.device}): {np.sum(self.particles):,} "
                 f"particles in {self.seconds:.2f} s, seed {self.seed}\n"
                 f"  R = {fmt(self.reflectance, self.reflectance_stderr)}\n"
