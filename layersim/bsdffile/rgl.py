@@ -336,7 +336,7 @@ def channel_values(table: RGLTable, wi, wo, channels: int, wavelengths=None) -> 
 
 
 def reconstruction_error(bsdf: BSDF, table: RGLTable, wavelengths=None,
-                         samples: int = ERROR_SAMPLES, seed: int = 0) -> float:
+                         samples: int = ERROR_SAMPLES, seed: int = 0, evaluate=None) -> float:
     """Relative L2 error of the file's ``f cos(theta_o)`` against ``bsdf.eval`` (times the
     cosine) over direction pairs, all channels together.
 
@@ -346,6 +346,8 @@ def reconstruction_error(bsdf: BSDF, table: RGLTable, wavelengths=None,
     ``1 / p``, ``p = (pdf_bsdf + 1 / (2 pi)) / 2`` the mixture's density: the ratio
     ``sqrt(sum |F_file - F|^2 / p) / sqrt(sum F^2 / p)`` estimates
     ``||F_file - F|| / ||F||`` in L2 over the outgoing hemisphere, averaged over ``wi``.
+    ``evaluate(wi, wo)`` -> (n, channels) replaces the numpy reconstruction
+    (:func:`channel_values`), e.g. by a renderer's own evaluation of the file.
     """
     rng = np.random.default_rng(seed)
     half = samples // 2
@@ -356,7 +358,8 @@ def reconstruction_error(bsdf: BSDF, table: RGLTable, wavelengths=None,
     wo[bad] = _directions_uniform(rng, int(bad.sum()))
     p = 0.5 * np.asarray(bsdf.pdf(wi, wo)) + 0.5 / (2 * np.pi)
     ref = np.asarray(bsdf.eval(wo, wi)).reshape(len(wi), -1) * wo[:, 2:3]
-    got = channel_values(table, wi, wo, bsdf.channels, wavelengths)
+    got = channel_values(table, wi, wo, bsdf.channels, wavelengths) if evaluate is None \
+        else np.asarray(evaluate(wi, wo), np.float64).reshape(len(wi), -1)
     den = np.sum(ref ** 2 / p[:, None])
     return float(np.sqrt(np.sum((got - ref) ** 2 / p[:, None]) / den)) if den > 0 else 0.0
 
