@@ -305,11 +305,12 @@ def build(bsdf: BSDF, resolution: int | None = None, wavelengths=None,
     return table
 
 
-def _directions_cosine(rng, count: int) -> np.ndarray:
-    """Cosine-distributed directions (count, 3) over the upper hemisphere."""
+def _directions_cosine(rng, count: int, max_sin: float = 1.0) -> np.ndarray:
+    """Cosine-distributed directions (count, 3) over the upper hemisphere, within
+    ``sin(theta) <= max_sin``."""
     u = rng.random((count, 2))
-    r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
-    return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1 - u[:, 0])], -1)
+    r, phi = max_sin * np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
+    return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1 - r * r)], -1)
 
 
 def _directions_uniform(rng, count: int) -> np.ndarray:
@@ -336,7 +337,8 @@ def channel_values(table: RGLTable, wi, wo, channels: int, wavelengths=None) -> 
 
 
 def reconstruction_error(bsdf: BSDF, table: RGLTable, wavelengths=None,
-                         samples: int = ERROR_SAMPLES, seed: int = 0, evaluate=None) -> float:
+                         samples: int = ERROR_SAMPLES, seed: int = 0, evaluate=None,
+                         max_theta_i: float = np.pi / 2) -> float:
     """Relative L2 error of the file's ``f cos(theta_o)`` against ``bsdf.eval`` (times the
     cosine) over direction pairs, all channels together.
 
@@ -347,11 +349,13 @@ def reconstruction_error(bsdf: BSDF, table: RGLTable, wavelengths=None,
     ``sqrt(sum |F_file - F|^2 / p) / sqrt(sum F^2 / p)`` estimates
     ``||F_file - F|| / ||F||`` in L2 over the outgoing hemisphere, averaged over ``wi``.
     ``evaluate(wi, wo)`` -> (n, channels) replaces the numpy reconstruction
-    (:func:`channel_values`), e.g. by a renderer's own evaluation of the file.
+    (:func:`channel_values`), e.g. by a renderer's own evaluation of the file;
+    ``max_theta_i`` (radians) restricts ``wi`` to elevations up to it (the cosine
+    distribution cut there), to separate grazing incidence, where most of the error is.
     """
     rng = np.random.default_rng(seed)
     half = samples // 2
-    wi = _directions_cosine(rng, 2 * half)
+    wi = _directions_cosine(rng, 2 * half, np.sin(min(max_theta_i, np.pi / 2)))
     drawn = bsdf.sample(wi[:half], rng.random((half, 2)))
     wo = np.concatenate([np.asarray(drawn.wo), _directions_uniform(rng, half)])
     bad = ~np.isfinite(wo).all(-1) | (np.linalg.norm(wo, axis=-1) < 0.5) | (wo[:, 2] <= 0)
