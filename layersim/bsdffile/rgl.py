@@ -46,15 +46,18 @@ How layersim fills it (:func:`build`)
 -------------------------------------
 ``D`` is the retro-reflection NDF of the solved BSDF (:mod:`layersim.bsdffile.rgl_ndf`, which
 says why), ``vndf`` is ``D(h) max(0, wi . h)`` times the Jacobian ``u sin(theta_h)`` of the
-``(u, v)`` square; every node ``s`` of the ``n x n`` sample square of every slice is warped
-to its half vector exactly as the renderers warp it, and ``R(s)`` is the solved BSDF there,
+``(u, v)`` square. Points of the ``n x n`` sample square of every slice are warped to their
+half vectors exactly as the renderers warp them, and ``R(s)`` is the solved BSDF there,
 ``f cos(theta_o) 4 sigma(wi) / D(h)`` with ``D`` and ``sigma`` as the renderer interpolates
-them. The file is therefore exact at every node (to float32), and between nodes the error
-is interpolation error, which :func:`reconstruction_error` measures. ``luminance`` is the
-Rec. 709 luminance (RGB) or the mean over wavelengths of ``R``, so that sampling follows
-``f cos(theta_o)``. Incident elevations: ``theta_i = THETA_MAX (1 - (1 - k / (T - 1))^2)``,
-dense toward grazing (:func:`_slices`; renderers clamp above the last one, 89.9 degrees); anisotropic BSDFs get ``P`` azimuths over ``[-pi, pi]`` (reduction 1, the only
-one pbrt-v4 reads).
+them: at the nodes first, then the node values are fitted by weighted least squares to the
+BSDF at four points per cell, so that the bilinear interpolant the renderers use has the
+least L2 error over the outgoing hemisphere (:mod:`layersim.bsdffile.rgl_fit`, which says
+why node values alone are not enough). What is left, :func:`reconstruction_error` measures.
+``luminance`` is the Rec. 709 luminance (RGB) or the value (one channel) of ``R``, so that
+sampling follows ``f cos(theta_o)``. Incident elevations:
+``theta_i = THETA_MAX (1 - (1 - k / (T - 1))^2)``, dense toward grazing (:func:`_slices`;
+renderers clamp above the last one, 89.9 degrees); anisotropic BSDFs get ``P`` azimuths
+over ``[-pi, pi]`` (reduction 1, the only one pbrt-v4 reads).
 
 Colour
 ------
@@ -83,7 +86,7 @@ import numpy as np
 
 from ..bsdf import BSDF
 from ..errors import InfeasibleError
-from . import rgl_color
+from . import rgl_color, rgl_fit
 from .marginal2d import Marginal2D
 from .rgl_ndf import THETA_MAX, direction, retro_ndf, table_directions, theta2u, u2phi, u2theta
 from .rgl_table import RGLTable, read
@@ -202,19 +205,20 @@ def _vndf(ndf: np.ndarray, wi: np.ndarray, size: int, isotropic: bool) -> np.nda
     return d.reshape(size, size) * cos * u * np.sin(theta)
 
 
-def _remainder(bsdf, wi, table: RGLTable, params, n: int) -> np.ndarray:
-    """``R = f cos(theta_o) 4 sigma(wi) / D(h)`` (P, T, n, n, channels) at the nodes of each
-    slice's sample square, warped to half vectors as the renderers warp them."""
-    P, T = wi.shape[:2]
-    x = np.linspace(0.0, 1.0, n)
-    sx, sy = np.meshgrid(x, x, indexing="xy")
-    s = np.tile(np.stack([sx.ravel(), sy.ravel()], -1), (P * T, 1))
-    par = tuple(np.repeat(p.reshape(-1), n * n) for p in params)
-    u_m, _ = table.warp("vndf").sample(s, par)
-    wi_r = np.repeat(wi.reshape(-1, 3), n * n, axis=0)
-    phi = u2phi(u_m[:, 1]) + (par[0] if table.isotropic else 0.0)
-    h = direction(u2theta(u_m[:, 0]), phi)
-    wo = 2 * np.sum(wi_r * h, -1, keepdims=True) * h - wi_r
+def _warped(bsdf, wi, table: RGLTable, params, s: np.ndarray):
+    """The BSDF at the points ``s`` (N, 2) of every slice's sample square, warped to half
+    vectors as the renderers warp them: ``f cos(theta_o)`` (P T N, channels), whether ``wo``
+    is above the horizon (P T N,), ``J = D(h) / (4 sigma(wi))`` and the density of ``wo``
+    under the warp (both 1/sr, (P T N,))."""
+    count = len(s)
+    s = np.tile(s, (wi.shape[0] * wi.shape[1], 1))
+    par = tuple(np.repeat(p.reshape(-1), count) for p in params)
+    u_m, density = table.warp("vndf").sample(s, par)
+    wi_r = np.repeat(wi.reshape(-1, 3), count, axis=0)
+    theta = u2theta(u_m[:, 0])
+    h = direction(theta, u2phi(u_m[:, 1]) + (par[0] if table.isotropic else 0.0))
+    cos_ih = np.sum(wi_r * h, -1)
+    wo = 2 * cos_ih[:, None] * h - wi_r
     up = wo[:, 2] > 0
     f = np.zeros((len(wo), bsdf.channels))
     for a in range(0, len(wo), 1 << 16):            # bounded memory in eval
@@ -225,8 +229,31 @@ def _remainder(bsdf, wi, table: RGLTable, params, n: int) -> np.ndarray:
         f[np.arange(len(wo))[sl][ok]] = val * w[:, 2:3]
     u_i = np.stack([theta2u(par[1]), (par[0] + np.pi) / (2 * np.pi)], -1)
     jac = table.warp("ndf").eval(u_m) / (4 * table.warp("sigma").eval(u_i))
-    r = f / np.maximum(jac, 1e-30)[:, None]
-    return fill_hidden(r.reshape(P, T, n, n, -1), up.reshape(P, T, n, n))
+    dwo = np.maximum(2 * np.pi ** 2 * u_m[:, 0] * np.sin(theta), 1e-6) * 4 * cos_ih
+    return f, up, jac, density / np.maximum(dwo, 1e-30)
+
+
+def _remainder(bsdf, wi, table: RGLTable, params, n: int) -> np.ndarray:
+    """``R`` (P, T, n, n, channels) at the nodes of each slice's sample square: the BSDF's
+    ``f cos(theta_o) 4 sigma(wi) / D(h)`` there (:func:`fill_hidden` below the horizon),
+    then fitted by least squares over each cell (:mod:`layersim.bsdffile.rgl_fit`)."""
+    P, T = wi.shape[:2]
+    x = np.linspace(0.0, 1.0, n)
+    nodes = np.stack([g.ravel() for g in np.meshgrid(x, x, indexing="xy")], -1)
+    f, up, jac, _ = _warped(bsdf, wi, table, params, nodes)
+    r0 = fill_hidden((f / np.maximum(jac, 1e-30)[:, None]).reshape(P, T, n, n, -1),
+                     up.reshape(P, T, n, n))
+    pts = rgl_fit.cell_points(n)
+    A = rgl_fit.bilinear_matrix(pts, n)
+    f, up, jac, density = _warped(bsdf, wi, table, params, pts)
+    omega = np.where(up, 1.0 / np.maximum(density, 1e-30), 0.0)
+    shape = (P * T, len(pts))
+    f, jac, omega = f.reshape(shape + (-1,)), jac.reshape(shape), omega.reshape(shape)
+    out = np.empty_like(r0)
+    for k, (p, t) in enumerate(np.ndindex(P, T)):
+        out[p, t] = rgl_fit.fit_slice(A, jac[k], f[k], omega[k],
+                                      r0[p, t].reshape(n * n, -1)).reshape(n, n, -1)
+    return out
 
 
 def _fill_along(r: np.ndarray, valid: np.ndarray, axis: int):
