@@ -414,23 +414,14 @@ def _rgl_wavelengths(args):
     """Channel wavelengths (nm) for an RGL export: ``--wavelengths``, else the scene's
     ``[stack] wavelengths`` when SOURCE is a scene, else None."""
     if args.wavelengths:
-        lam = [float(x) for x in args.wavelengths.split(",") if x.strip()] \
-            if all(_is_number(x) for x in args.wavelengths.split(",")) else []
-        if not lam:
+        try:
+            return [float(x) for x in args.wavelengths.split(",")]
+        except ValueError:
             raise ValueError(f"--wavelengths {args.wavelengths!r}: give comma-separated "
-                             "wavelengths in nm, one per channel")
-        return lam
+                             "wavelengths in nm, one per channel") from None
     if Path(args.source).suffix.lower() == ".toml":
         return _scene(args.source).wavelengths
     return None
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-        return True
-    except ValueError:
-        return False
 
 
 def cmd_export_rgl(args) -> int:
@@ -443,6 +434,8 @@ def cmd_export_rgl(args) -> int:
         raise ValueError(f"--resolution {resolution}: must be within [4, 256]")
     out = _output(args.output if args.output else Path(args.source).stem + ".rgl.bsdf", "-o")
     wavelengths = _rgl_wavelengths(args)
+    if Path(args.source).suffix.lower() == ".toml":              # colour checked before solving
+        rgl.colour_mode(_scene(args.source).channels, wavelengths, args.color)
     bsdf = _load(args.source, args)
     if isinstance(bsdf, FourierTable):
         raise ValueError(f"{args.source}: layersim cannot convert this .bsdf file into a "

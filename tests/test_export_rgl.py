@@ -280,6 +280,10 @@ def test_cli_export_rgl(tmp_path):
                           "-o", str(out)], capture_output=True, text=True, cwd=ROOT)
     assert bad.returncode == 2 and bad.stderr.count("\n") == 1
     assert "--resolution" in bad.stderr and "Traceback" not in bad.stderr
+    bad = subprocess.run([sys.executable, "-m", "layersim.cli", "export",
+                          "examples/coated_gold.toml", "--format", "rgl", "--wavelengths",
+                          "500,600", "-o", str(out)], capture_output=True, text=True, cwd=ROOT)
+    assert bad.returncode == 2 and "wavelengths 500, 600" in bad.stderr
 
 
 def test_fit_recovers_a_bilinear_remainder():

@@ -169,8 +169,8 @@ def colour_mode(channels: int, wavelengths, color: str):
         lam = np.asarray(wavelengths, np.float64).ravel()
         if lam.size != channels or not np.all(np.isfinite(lam)) or np.any(lam <= 0) \
                 or len(np.unique(lam)) != lam.size:
-            raise ValueError(f"wavelengths {list(lam)}: give {channels} distinct positive "
-                             "values in nm, one per channel")
+            raise ValueError(f"wavelengths {', '.join(f'{x:g}' for x in lam)}: give "
+                             f"{channels} distinct positive value(s) in nm, one per channel")
         order = np.argsort(lam)
         return (lambda v: v[..., order]), lam[order]
     if channels == 1:
