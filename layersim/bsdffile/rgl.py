@@ -88,7 +88,7 @@ from ..bsdf import BSDF
 from ..errors import InfeasibleError
 from . import rgl_color, rgl_fit
 from .marginal2d import Marginal2D
-from .rgl_ndf import THETA_MAX, direction, retro_ndf, table_directions, theta2u, u2phi, u2theta
+from .rgl_ndf import FLOOR, THETA_MAX, direction, retro_ndf, theta2u, u2phi, u2theta
 from .rgl_table import RGLTable, read
 
 __all__ = ["DEFAULT_RESOLUTION", "RGLExport", "RGLTable", "build", "export", "read",
@@ -178,15 +178,18 @@ def colour_mode(channels: int, wavelengths, color: str):
     return rgl_color.to_spectra, rgl_color.WAVELENGTHS
 
 
-def _slices(grid: dict):
-    """Incident nodes: ``theta_i`` (T,), ``phi_i`` (P,) and the directions (P, T, 3).
+#: Incident elevations of ``T`` slices as functions of ``x = k / (T - 1)``: "grazing" (the
+#: default) is dense toward grazing, where a layered BSDF changes fastest (Fresnel, the lobe
+#: moving toward the horizon); benchmarks/features/rgl_export.txt compares the three.
+SPACINGS = {"grazing": lambda x: THETA_MAX * (1.0 - (1.0 - x) ** 2),
+            "uniform": lambda x: THETA_MAX * x,
+            "cosine": lambda x: np.arccos(1.0 - x * (1.0 - np.cos(THETA_MAX)))}
 
-    Elevations are dense toward grazing, ``THETA_MAX (1 - (1 - k / (T - 1))^2)``: a layered
-    BSDF changes fastest there (Fresnel, the lobe moving toward the horizon), and of
-    uniform, uniform-in-cosine and this spacing this gave the smallest error
-    (benchmarks/features/rgl_export.py)."""
-    x = np.linspace(0.0, 1.0, grid["theta_i"])
-    theta_i = THETA_MAX * (1.0 - (1.0 - x) ** 2)
+
+def _slices(grid: dict, spacing: str = "grazing"):
+    """Incident nodes: ``theta_i`` (T,) by :data:`SPACINGS`, ``phi_i`` (P,) and the
+    directions (P, T, 3)."""
+    theta_i = SPACINGS[spacing](np.linspace(0.0, 1.0, grid["theta_i"]))
     phi_i = np.linspace(-np.pi, np.pi, grid["phi_i"]) if grid["phi_i"] > 1 else np.zeros(1)
     return theta_i, phi_i, direction(theta_i[None, :], phi_i[:, None])
 
@@ -233,7 +236,8 @@ def _warped(bsdf, wi, table: RGLTable, params, s: np.ndarray):
     return f, up, jac, density / np.maximum(dwo, 1e-30)
 
 
-def _remainder(bsdf, wi, table: RGLTable, params, n: int) -> np.ndarray:
+def _remainder(bsdf, wi, table: RGLTable, params, n: int,
+               per_cell: int = rgl_fit.PER_CELL) -> np.ndarray:
     """``R`` (P, T, n, n, channels) at the nodes of each slice's sample square: the BSDF's
     ``f cos(theta_o) 4 sigma(wi) / D(h)`` there (:func:`fill_hidden` below the horizon),
     then fitted by least squares over each cell (:mod:`layersim.bsdffile.rgl_fit`)."""
@@ -243,7 +247,9 @@ def _remainder(bsdf, wi, table: RGLTable, params, n: int) -> np.ndarray:
     f, up, jac, _ = _warped(bsdf, wi, table, params, nodes)
     r0 = fill_hidden((f / np.maximum(jac, 1e-30)[:, None]).reshape(P, T, n, n, -1),
                      up.reshape(P, T, n, n))
-    pts = rgl_fit.cell_points(n)
+    if per_cell == 0:                         # node values only (a study's baseline)
+        return r0
+    pts = rgl_fit.cell_points(n, per_cell)
     A = rgl_fit.bilinear_matrix(pts, n)
     f, up, jac, density = _warped(bsdf, wi, table, params, pts)
     omega = np.where(up, 1.0 / np.maximum(density, 1e-30), 0.0)
@@ -294,7 +300,8 @@ def _luminance(r: np.ndarray) -> np.ndarray:
 
 
 def build(bsdf: BSDF, resolution: int | None = None, wavelengths=None,
-          color: str = "spectral", description: str = "") -> RGLTable:
+          color: str = "spectral", description: str = "", *, theta_spacing: str = "grazing",
+          ndf_floor: float = FLOOR, per_cell: int = rgl_fit.PER_CELL) -> RGLTable:
     """The RGL table of the top-side reflection of ``bsdf`` (module docstring).
 
     Parameters
@@ -309,24 +316,28 @@ def build(bsdf: BSDF, resolution: int | None = None, wavelengths=None,
     color : {"spectral", "rgb"}
         The ``spectra`` field (Mitsuba 3 spectral variants, pbrt-v4) or the ``rgb`` field
         (Mitsuba 3 RGB variants).
+    theta_spacing, ndf_floor, per_cell
+        Design choices, for studies (benchmarks/features/rgl_export.py): the incident
+        elevations (:data:`SPACINGS`), the NDF's floor (:data:`rgl_ndf.FLOOR`) and the fit's
+        points per cell side (:data:`rgl_fit.PER_CELL`; 0: node values, no fit).
     """
     check_exportable(bsdf)
     to_spectra, lam = colour_mode(bsdf.channels, wavelengths, color)
     grid = resolution_grid(DEFAULT_RESOLUTION if resolution is None else int(resolution),
                            bsdf.anisotropic)
-    theta_i, phi_i, wi = _slices(grid)
+    theta_i, phi_i, wi = _slices(grid, theta_spacing)
 
     def retro(w):
         return np.asarray(bsdf.eval(w, w)).reshape(w.shape[:-1] + (-1,)).mean(axis=-1)
 
-    ndf, sigma = retro_ndf(retro, grid["ndf_theta"], grid["ndf_phi"])
+    ndf, sigma = retro_ndf(retro, grid["ndf_theta"], grid["ndf_phi"], floor=ndf_floor)
     n, size = grid["n"], grid["ndf_theta"]
     table = RGLTable(theta_i=theta_i, phi_i=phi_i, ndf=ndf, sigma=sigma,
                      vndf=_vndf(ndf, wi, size, not bsdf.anisotropic),
                      luminance=np.ones(wi.shape[:2] + (n, n)), spectra=None, wavelengths=lam,
                      description=description)
     params = np.meshgrid(phi_i, theta_i, indexing="ij")
-    r = _remainder(bsdf, wi, table, params, n)
+    r = _remainder(bsdf, wi, table, params, n, per_cell)
     table.spectra = np.moveaxis(to_spectra(r), -1, 2)
     table.luminance = _luminance(r)
     return table

@@ -26,9 +26,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-#: Points per cell side of the fit (``m``). Coated gold at n = 32, ``wi`` within 80 degrees:
-#: node values alone 5.7 %; m = 1: 25-30 % (fewer points than nodes: the fit is decided by
-#: the regularisation); m = 2: 3.4-3.6 %; m = 3: 3.2-3.4 % at twice the time of m = 2.
+#: Points per cell side of the fit (``m``): with 1 there are fewer points than nodes and the
+#: regularisation decides the fit; benchmarks/features/rgl_export.txt compares 1, 2 and 3.
 PER_CELL = 2
 #: Tikhonov weight toward the node values, relative to the normal matrix's mean diagonal.
 LAMBDA = 1e-6

@@ -43,8 +43,8 @@ THETA_MAX = np.radians(89.9)
 #: where the half vector is far from the normal and ``D`` tiny; ``R = f cos 4 sigma / D``
 #: then jumps by orders of magnitude between neighbouring nodes, and its bilinear
 #: interpolation against an exponentially falling ``D`` overshoots by as much. The floor
-#: bounds ``R``; it costs the lobe the few nodes the warp gives the floor. 1e-3 measured
-#: best of 0, 1e-3, 1e-2, 3e-2 (relative L2 error, rough gold and coated gold, n = 16, 32).
+#: bounds ``R``; it costs the lobe the few nodes the warp gives the floor
+#: (benchmarks/features/rgl_export.txt compares 0, 1e-3, 1e-2).
 FLOOR = 1e-3
 
 
@@ -103,7 +103,7 @@ def projected_area(ndf: np.ndarray, dirs: np.ndarray, quad: int = 128) -> np.nda
     return out.reshape(dirs.shape[:-1])
 
 
-def retro_ndf(retro, n_theta: int, n_phi: int, quad: int = 128):
+def retro_ndf(retro, n_theta: int, n_phi: int, quad: int = 128, floor: float = FLOOR):
     """The retro-reflection NDF and its projected area (module docstring).
 
     Parameters
@@ -114,6 +114,8 @@ def retro_ndf(retro, n_theta: int, n_phi: int, quad: int = 128):
     n_theta, n_phi : int
         Table size; ``n_phi = 2`` for an isotropic BSDF (azimuth-independent, evaluated at
         ``phi = 0``).
+    floor : float
+        :data:`FLOOR`, relative to the largest retro-reflection.
 
     Returns
     -------
@@ -130,7 +132,7 @@ def retro_ndf(retro, n_theta: int, n_phi: int, quad: int = 128):
         raise ValueError("the BSDF reflects nothing back toward the light at any direction: "
                          "no normal distribution can be derived (is it a transmitting "
                          "layer without reflection?)")
-    shape = (shape + FLOOR * shape.max()) * probe[..., 2]
+    shape = (shape + floor * shape.max()) * probe[..., 2]
     sigma = np.ones_like(shape)
     for _ in range(ITERATIONS):
         ndf = shape * sigma
