@@ -229,16 +229,28 @@ def test_read_back_own_file(exported):
 
 
 @pytest.mark.slow
-def test_retro_ndf_is_a_fixed_point(exported):
-    """The NDF written is normalised (unit projected area toward the normal) and ``sigma``
-    is its projected area (the power iteration converged)."""
-    from layersim.bsdffile.rgl_ndf import projected_area, table_directions
-    _, res = exported("conductor")
+def test_retro_ndf_is_a_fixed_point(exported, monkeypatch):
+    """The NDF written is normalised (unit projected area toward the normal), ``sigma`` is
+    its projected area, and one more power-iteration step leaves it unchanged."""
+    from layersim.bsdffile import rgl_ndf
+    bsdf, res = exported("conductor")
     t = res.table
     ndf = np.asarray(t.ndf, np.float64)
-    assert projected_area(ndf, np.array([0.0, 0.0, 1.0])) == pytest.approx(1.0, rel=1e-5)
-    sigma = projected_area(ndf, table_directions(ndf.shape[1], ndf.shape[0]))
+    assert rgl_ndf.projected_area(ndf, np.array([0.0, 0.0, 1.0])) == pytest.approx(1.0, 1e-5)
+    sigma = rgl_ndf.projected_area(ndf, rgl_ndf.table_directions(ndf.shape[1], ndf.shape[0]))
     assert np.allclose(sigma, t.sigma, rtol=1e-4)
+
+    def retro(w):
+        return np.asarray(bsdf.eval(w, w)).reshape(w.shape[:-1])
+
+    base, _ = rgl_ndf.retro_ndf(retro, *ndf.shape[::-1])
+    assert np.allclose(base, ndf, rtol=1e-5)               # the file holds this NDF
+    monkeypatch.setattr(rgl_ndf, "ITERATIONS", rgl_ndf.ITERATIONS + 1)
+    more, _ = rgl_ndf.retro_ndf(retro, *ndf.shape[::-1])
+    assert np.linalg.norm(more - base) < 1e-6 * np.linalg.norm(base)
+    monkeypatch.setattr(rgl_ndf, "ITERATIONS", 1)
+    one, _ = rgl_ndf.retro_ndf(retro, *ndf.shape[::-1])
+    assert np.linalg.norm(one - base) > 1e-3 * np.linalg.norm(base)    # iterating matters
 
 
 # ---- refusals -----------------------------------------------------------------------------
