@@ -371,6 +371,10 @@ def _load(path, args=None):
             print(f"note: {path}: {exc}; evaluating the table as renderers do",
                   file=sys.stderr)
             return table
+    if head == b"tensor_f":                                   # an RGL material file
+        raise ValueError(f"{path}: an RGL material (tensor file, reflection only), which "
+                         "layersim writes but does not take as a SOURCE; read it with "
+                         "layersim.bsdffile.rgl.read")
     if head[:2] == b"PK" or path.suffix.lower() == ".lsim":   # numpy .npz of BSDF.save
         return BSDF.load(path)
     if path.suffix.lower() not in ("", ".toml"):

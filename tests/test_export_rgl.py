@@ -319,3 +319,10 @@ def test_fit_recovers_a_bilinear_remainder():
     assert np.allclose(fit, truth, rtol=1e-3)
     assert not np.allclose(rgl_fit.fit_slice(A, jac, f, np.ones(len(pts)),
                                              np.zeros_like(truth)), truth, rtol=1e-2)
+
+
+def test_rgl_file_as_source_is_refused_by_name(tmp_path):
+    """An RGL file given where layersim expects a BSDF is named as what it is."""
+    path = tensorfile.write(tmp_path / "m.bsdf", {"x": np.zeros(2, np.float32)})
+    with pytest.raises(ValueError, match="RGL material"):
+        layersim.BSDF.load(path)
