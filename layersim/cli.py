@@ -458,8 +458,9 @@ def cmd_export_rgl(args) -> int:
           f"{len(t.theta_i)} incident directions, {t.spectra.shape[-1]} x "
           f"{t.spectra.shape[-1]} nodes each, {colour}), {res.bytes} bytes "
           f"({res.bytes / 2**20:.2f} MiB), in {res.seconds:.1f} s")
-    print(f"reconstruction error: {res.error:.3g} (relative L2 of f cos(theta_o) against the "
-          f"solved BSDF, {rgl.ERROR_SAMPLES} direction pairs)")
+    print(f"reconstruction error: {res.error:.3g}, {res.error_to_80:.3g} for incidence "
+          f"within 80 deg of the normal (relative L2 of f cos(theta_o) against the solved "
+          f"BSDF, {rgl.ERROR_SAMPLES} direction pairs)")
     return 0
 
 

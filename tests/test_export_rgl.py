@@ -140,7 +140,7 @@ def test_mitsuba_measured_matches_layersim(exported, name):
     """Mitsuba 3 loads the file unchanged; its eval equals the numpy reconstruction (to
     float32) and matches layersim's eval times cos(theta_o) within the reported error."""
     bsdf, res = exported(name)
-    assert 0.0 < res.error < 0.25
+    assert 0.0 < res.error < 0.25 and 0.0 < res.error_to_80 < 0.25
     _, evaluate = _mitsuba_evaluator(res.path, "scalar_spectral", [550.0])
     rng = np.random.default_rng(7)
     wi = rgl._directions_cosine(rng, 300)
@@ -285,7 +285,8 @@ def test_cli_export_rgl(tmp_path):
                           "examples/coated_gold.toml", "--format", "rgl", "--resolution", "8",
                           "-o", str(out)], capture_output=True, text=True, cwd=ROOT)
     assert run.returncode == 0, run.stderr
-    assert "reconstruction error" in run.stdout and out.exists()
+    assert "reconstruction error" in run.stdout and "within 80 deg" in run.stdout
+    assert out.exists()
     assert rgl.read(out).spectra.shape[-1] == 8
     bad = subprocess.run([sys.executable, "-m", "layersim.cli", "export",
                           "examples/coated_gold.toml", "--format", "rgl", "--resolution", "2",

@@ -118,11 +118,14 @@ def resolution_grid(n: int, anisotropic: bool) -> dict:
 class RGLExport:
     """What :func:`export` wrote: the table, the file, its size, the time it took, the
     reconstruction error (relative L2 of ``f cos(theta_o)``, :func:`reconstruction_error`)
-    and notes (e.g. the transmission the format cannot hold)."""
+    over all incident directions and within 80 degrees of the normal (grazing incidence
+    carries most of the error and most of its scatter), and notes (e.g. the transmission
+    the format cannot hold)."""
 
     path: Path
     table: RGLTable
     error: float
+    error_to_80: float
     seconds: float
     notes: list
 
@@ -423,4 +426,6 @@ def export(bsdf: BSDF, path, resolution: int | None = None, wavelengths=None,
     path = table.write(path)
     seconds = time.perf_counter() - start
     error = reconstruction_error(bsdf, table, wavelengths, samples, seed)
-    return RGLExport(Path(path), table, error, seconds, notes)
+    error_80 = reconstruction_error(bsdf, table, wavelengths, samples, seed,
+                                    max_theta_i=np.radians(80.0))
+    return RGLExport(Path(path), table, error, error_80, seconds, notes)
