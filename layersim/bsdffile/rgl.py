@@ -399,8 +399,10 @@ def reconstruction_error(bsdf: BSDF, table: RGLTable, wavelengths=None,
     wi = _directions_cosine(rng, 2 * half, np.sin(min(max_theta_i, np.pi / 2)))
     drawn = bsdf.sample(wi[:half], rng.random((half, 2)))
     wo = np.concatenate([np.asarray(drawn.wo), _directions_uniform(rng, half)])
-    bad = ~np.isfinite(wo).all(-1) | (np.linalg.norm(wo, axis=-1) < 0.5) | (wo[:, 2] <= 0)
-    wo[bad] = _directions_uniform(rng, int(bad.sum()))
+    # pairs drawn below the horizon (transmission) or invalid add nothing to either sum:
+    # the file and the reflection it stands for are zero there
+    up = np.isfinite(wo).all(-1) & (wo[:, 2] > 0)
+    wi, wo = wi[up], wo[up]
     p = 0.5 * np.asarray(bsdf.pdf(wi, wo)) + 0.5 / (2 * np.pi)
     ref = np.asarray(bsdf.eval(wo, wi)).reshape(len(wi), -1) * wo[:, 2:3]
     got = channel_values(table, wi, wo, bsdf.channels, wavelengths) if evaluate is None \
