@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import layersim
-from layersim.bsdffile import cie, rgl, rgl_color, tensorfile
+from layersim.bsdffile import cie, rgl, rgl_color, rgl_error, tensorfile
 from layersim.bsdffile.marginal2d import Marginal2D
 from layersim.errors import FileFormatError, InfeasibleError
 
@@ -143,8 +143,8 @@ def test_mitsuba_measured_matches_layersim(exported, name):
     assert 0.0 < res.error < 0.25 and 0.0 < res.error_to_80 < 0.25
     _, evaluate = _mitsuba_evaluator(res.path, "scalar_spectral", [550.0])
     rng = np.random.default_rng(7)
-    wi = rgl._directions_cosine(rng, 300)
-    wo = rgl._directions_uniform(rng, 300)
+    wi = rgl_error.cosine_directions(rng, 300)
+    wo = rgl_error.uniform_directions(rng, 300)
     theirs = evaluate(wi, wo)[:, 0]
     ours = rgl.channel_values(res.table, wi, wo, 1)[:, 0]
     assert np.linalg.norm(theirs - ours) <= 2e-4 * np.linalg.norm(ours)
@@ -207,7 +207,7 @@ def test_rgb_stack_spectral_round_trip(exported):
     assert res2.table.wavelengths is None and "rgb" in tensorfile.read(res2.path)
     _, evaluate_rgb = _mitsuba_evaluator(res2.path, "scalar_rgb", [0, 1, 2])
     rng = np.random.default_rng(2)
-    wi, wo = rgl._directions_cosine(rng, 200), rgl._directions_uniform(rng, 200)
+    wi, wo = rgl_error.cosine_directions(rng, 200), rgl_error.uniform_directions(rng, 200)
     theirs = evaluate_rgb(wi, wo)
     ours = rgl.channel_values(res2.table, wi, wo, 3)
     assert np.linalg.norm(theirs - ours) <= 2e-4 * np.linalg.norm(ours)
@@ -223,7 +223,7 @@ def test_read_back_own_file(exported):
     for name, arr in back.fields().items():
         assert np.array_equal(arr, written[name]), name
     rng = np.random.default_rng(4)
-    wi, wo = rgl._directions_cosine(rng, 100), rgl._directions_uniform(rng, 100)
+    wi, wo = rgl_error.cosine_directions(rng, 100), rgl_error.uniform_directions(rng, 100)
     assert np.array_equal(back.eval(wi, wo, [550.0]), res.table.eval(wi, wo, [550.0]))
     assert "top-side reflection only" in back.description
 

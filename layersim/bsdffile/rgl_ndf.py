@@ -10,12 +10,14 @@ exact file at the grid nodes; a ``D`` close to the BSDF's lobe puts the nodes wh
 is and leaves ``R`` nearly constant (close to the Fresnel factor for one microfacet interface).
 
 Why retro-reflection (the first step of Dupuy & Jakob 2018's acquisition, which measures
-retro-reflection to obtain the NDF before anything else; section and equation numbers are not
-quoted here because the paper was not at hand when this was written): for a microfacet BSDF at ``wi = wo = w``
-the half vector is ``w`` itself, ``G2(w, w) = G1(w) = cos(theta) / sigma(w)``, and so
-``f(w, w) = F D(w) / (4 cos(theta) sigma(w))``, that is ``D(w) ∝ f(w, w) cos(theta) sigma(w)``.
-``sigma`` depends on ``D``: the fixed point is found by power iteration from ``sigma = 1``,
-normalising ``int D(m) cos(theta_m) dm = 1`` at every step (:data:`ITERATIONS`). For a layered stack this is not the top interface's ``D`` but a
+retro-reflection to obtain the NDF before anything else; section and equation numbers are
+not quoted here because the paper was not at hand when this was written): for a microfacet
+BSDF at ``wi = wo = w`` the half vector is ``w`` itself and, masking and shadowing of one
+direction being the same event, ``G2(w, w) = G1(w) = cos(theta) / sigma(w)``, so
+``f(w, w) = F D(w) / (4 cos(theta) sigma(w))``, that is ``D(w) ∝ f(w, w) cos(theta)
+sigma(w)``. ``sigma`` depends on ``D``: the fixed point is found by power iteration from
+``sigma = 1``, normalising ``int D(m) cos(theta_m) dm = 1`` at every step
+(:data:`ITERATIONS`). For a layered stack this is not the top interface's ``D`` but a
 distribution shaped like the whole reflection lobe (a coating's peak on the broader lobe of
 what lies under it), which is what the grid needs; the top interface's own ``D`` would be
 exact only for a single interface and would put no nodes where a rough base's lobe is.
