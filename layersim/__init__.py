@@ -6,6 +6,7 @@ Public entry points (see docs/conventions.md)::
     bsdf = layersim.solve(scene)
     bsdf.eval(wi, wo); bsdf.albedo(wi); bsdf.bin_energies(wi, mu_edges, phi_edges)
     layersim.export(bsdf, path)                   # .bsdf file for renderers
+    layersim.export(bsdf, path, format="rgl")     # RGL file (Mitsuba 3 / pbrt-v4), reflection
     stack = layersim.add(top, bottom); layer = layersim.subtract(stack, known, side="top")
     layersim.statistical.lobes(scene, theta_i); layersim.design(targets)   # Bati et al. 2021
 """

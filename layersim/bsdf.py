@@ -89,6 +89,10 @@ def foreign_file(head: bytes, path) -> str:
     if head.startswith(b"SCATFUN"):
         return ("a tabulated Fourier .bsdf file, not a saved layersim BSDF (.lsim); read it "
                 "with layersim.bsdffile.read, or give it to 'layersim eval', 'plot' or 'export'")
+    if head.startswith(b"tensor_f"):
+        return ("an RGL material (tensor file, top-side reflection only) as 'layersim export "
+                "--format rgl' writes it, not a saved layersim BSDF (.lsim); read it with "
+                "layersim.bsdffile.rgl.read")
     if path.suffix.lower() == ".toml":
         return ("a scene file, not a saved layersim BSDF (.lsim); solve it first "
                 "('layersim solve' writes the .lsim file)")

@@ -7,9 +7,10 @@
     layersim info FILE               summary and albedos of a saved BSDF (.lsim) or .bsdf file
     layersim bench [--quick] [--stability] [--backend B ...] --out DIR
                                      solver vs Monte Carlo report and stability suite
-    layersim export SRC [-o F.bsdf] [--version 1|2]
+    layersim export SRC [-o F.bsdf] [--version 1|2] [--format rgl [--resolution N]]
                                      write a tabulated Fourier BSDF file (v1: layerlab/Mitsuba
-                                     0.6/pbrt-v3; v2, anisotropic: the Layer Laboratory)
+                                     0.6/pbrt-v3; v2, anisotropic: the Layer Laboratory) or an
+                                     RGL material (Mitsuba 3 / pbrt-v4, reflection only)
     layersim eval SRC --wi X,Y,Z --wo X,Y,Z     print f(wi, wo) (per channel for RGB)
     layersim plot SRC (--wi THETA,PHI | --blocks) [-o F.png]   draw slices or operator blocks
     layersim subtract STACK KNOWN --side top|bottom [-o FILE] [--eps EPS] [--noise NOISE]
@@ -37,6 +38,7 @@ import os
 import sys
 import tempfile
 import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -375,6 +377,10 @@ def _load(path, args=None):
             print(f"note: {path}: {exc}; evaluating the table as renderers do",
                   file=sys.stderr)
             return table
+    if head == b"tensor_f":                                   # an RGL material file
+        raise ValueError(f"{path}: an RGL material (tensor file, reflection only), which "
+                         "layersim writes but does not take as a SOURCE; read it with "
+                         "layersim.bsdffile.rgl.read")
     if head[:2] == b"PK" or path.suffix.lower() == ".lsim":   # numpy .npz of BSDF.save
         return BSDF.load(path)
     if path.suffix.lower() not in ("", ".toml"):
@@ -414,7 +420,61 @@ def _format(f) -> str:
     return " ".join(f"{x:.6g}" for x in vals)
 
 
+def _rgl_wavelengths(args):
+    """Channel wavelengths (nm) for an RGL export: ``--wavelengths``, else the scene's
+    ``[stack] wavelengths`` when SOURCE is a scene, else None."""
+    if args.wavelengths:
+        try:
+            return [float(x) for x in args.wavelengths.split(",")]
+        except ValueError:
+            raise ValueError(f"--wavelengths {args.wavelengths!r}: give comma-separated "
+                             "wavelengths in nm, one per channel") from None
+    if Path(args.source).suffix.lower() == ".toml":
+        return _scene(args.source).wavelengths
+    return None
+
+
+def cmd_export_rgl(args) -> int:
+    """``layersim export --format rgl``: options checked, then solve, write and measure."""
+    from .bsdffile import rgl
+    if args.version is not None or args.relerr or args.alpha:
+        raise ValueError("--version, --relerr and --alpha belong to --format bsdf")
+    resolution = rgl.DEFAULT_RESOLUTION if args.resolution is None else args.resolution
+    if not 4 <= resolution <= 256:                         # before solving
+        raise ValueError(f"--resolution {resolution}: must be within [4, 256]")
+    out = _output(args.output if args.output else Path(args.source).stem + ".rgl.bsdf", "-o")
+    wavelengths = _rgl_wavelengths(args)
+    if Path(args.source).suffix.lower() == ".toml":              # colour checked before solving
+        rgl.colour_mode(_scene(args.source).channels, wavelengths, args.color)
+    bsdf = _load(args.source, args)
+    if isinstance(bsdf, FourierTable):
+        raise ValueError(f"{args.source}: layersim cannot convert this .bsdf file into a "
+                         "BSDF, so it cannot export it as RGL")
+    rgl.colour_mode(bsdf.channels, wavelengths, args.color)    # before the heavy part
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")                        # printed below as notes
+        res = export(bsdf, out, format="rgl", resolution=resolution, wavelengths=wavelengths,
+                     color=args.color, name=Path(args.source).stem)
+    for note in res.notes:
+        print(f"note: {note}", file=sys.stderr)
+    t = res.table
+    colour = "rgb field" if t.wavelengths is None else f"{len(t.wavelengths)} wavelengths"
+    print(f"wrote {out}: RGL material for Mitsuba 3 / pbrt-v4 'measured' "
+          f"({'isotropic' if t.isotropic else 'anisotropic'}, {len(t.phi_i)} x "
+          f"{len(t.theta_i)} incident directions, {t.spectra.shape[-1]} x "
+          f"{t.spectra.shape[-1]} nodes each, {colour}), {res.bytes} bytes "
+          f"({res.bytes / 2**20:.2f} MiB), in {res.seconds:.1f} s")
+    print(f"reconstruction error: {res.error:.3g}, {res.error_to_80:.3g} for incidence "
+          f"within 80 deg of the normal (relative L2 of f cos(theta_o) against the solved "
+          f"BSDF, {rgl.ERROR_SAMPLES} direction pairs)")
+    return 0
+
+
 def cmd_export(args) -> int:
+    if args.format == "rgl":
+        return cmd_export_rgl(args)
+    if args.resolution is not None or args.wavelengths or args.color != "spectral":
+        raise ValueError("--resolution, --wavelengths and --color belong to --format rgl")
     if not 0.0 <= args.relerr < 1.0:          # before solving the scene
         raise ValueError(f"--relerr {args.relerr:g}: the relative truncation must be in [0, 1)")
     out = _output(args.output if args.output else Path(args.source).stem + ".bsdf", "-o")
@@ -598,7 +658,9 @@ command exits with status 2, as 'layersim solve' would refuse it.""",
   layersim bench --out bench --scene coated_gold""",
     "export": """examples:
   layersim export examples/coated_gold.toml -o coated_gold.bsdf
-  layersim export brushed.lsim -o brushed.bsdf --version 2 --relerr 1e-3""",
+  layersim export brushed.lsim -o brushed.bsdf --version 2 --relerr 1e-3
+  layersim export examples/coated_gold.toml --format rgl -o coated_gold.rgl.bsdf
+  layersim export paint.lsim --format rgl --color rgb --resolution 48 -o paint_rgb.bsdf""",
     "eval": """examples:
   layersim eval coated_gold.lsim --wi 0.5,0,0.866 --wo -0.5,0,0.866     # specular
   layersim eval examples/coated_gold.toml --wi 0,0,1 --wo 0.3,0.2,0.93""",
@@ -710,11 +772,28 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_design)
 
     src_help = "scene (.toml, solved on the fly), saved BSDF (.lsim) or .bsdf file"
-    sp = _subparser(sub, "export", "write a tabulated Fourier BSDF file (.bsdf) for "
-                                   "layerlab, Mitsuba 0.6, pbrt-v3 or the Layer Laboratory",
+    sp = _subparser(sub, "export", "write a BSDF file for renderers: a tabulated Fourier "
+                                   "BSDF (.bsdf) for layerlab, Mitsuba 0.6, pbrt-v3 or the "
+                                   "Layer Laboratory, or (--format rgl) an RGL material for "
+                                   "Mitsuba 3 and pbrt-v4 (reflection only)",
                     [quiet])
     sp.add_argument("source", help=src_help)
-    sp.add_argument("-o", "--output", help="output file (default: SOURCE_STEM.bsdf)")
+    sp.add_argument("-o", "--output", help="output file (default: SOURCE_STEM.bsdf, with "
+                                           "--format rgl SOURCE_STEM.rgl.bsdf)")
+    sp.add_argument("--format", choices=("bsdf", "rgl"), default="bsdf",
+                    help="bsdf: tabulated Fourier series (default); rgl: the RGL tensor "
+                         "format of Mitsuba 3's and pbrt-v4's 'measured' material, top-side "
+                         "REFLECTION ONLY (a stack's transmission is dropped, with a note)")
+    sp.add_argument("--resolution", type=int, default=None,
+                    help="rgl: side of each incident direction's sample square (4-256; "
+                         "default 32); prints the measured reconstruction error")
+    sp.add_argument("--color", choices=("spectral", "rgb"), default="spectral",
+                    help="rgl: 'spectral' (Mitsuba 3 spectral variants, pbrt-v4; RGB "
+                         "channels become spectra with those sRGB values) or 'rgb' (Mitsuba 3 "
+                         "RGB variants only)")
+    sp.add_argument("--wavelengths", metavar="W1[,W2,W3]",
+                    help="rgl: channel wavelengths in nm (default: the scene's [stack] "
+                         "wavelengths)")
     sp.add_argument("--version", type=int, choices=(1, 2), default=None,
                     help="1: isotropic format of layerlab/Mitsuba 0.6/pbrt-v3 (default for "
                          "isotropic sources); 2: the Layer Laboratory's anisotropic layout "

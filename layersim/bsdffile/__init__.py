@@ -1,6 +1,9 @@
 """The tabulated Fourier BSDF file format (``.bsdf``, header ``SCATFUN``) of layerlab, Mitsuba 0.6
 and pbrt-v3 (version 1, isotropic), and the Layer Laboratory's anisotropic version 2.
 
+(The RGL tensor format of Mitsuba 3's and pbrt-v4's ``measured`` material, reflection only, is
+:mod:`layersim.bsdffile.rgl`; ``export(..., format="rgl")`` writes it.)
+
 Byte layout (little-endian; offsets in bytes; ``N`` nodes, ``P = N * N`` ordinate pairs)
 ---------------------------------------------------------------------------------------
 ======  ==========================  ==============================================================

@@ -488,11 +488,30 @@ class FourierTable:
 
 
 def export(bsdf: BSDF, path, version: int | None = None, alpha=(0.0, 0.0),
-           relerr: float = 0.0) -> FourierTable:
-    """Write a solved BSDF as a ``.bsdf`` file: version 1 for layerlab, Mitsuba 0.6 and pbrt-v3
-    (isotropic BSDFs), version 2 in the Layer Laboratory's anisotropic layout (default: 1 for
-    isotropic, 2 for anisotropic BSDFs); ``relerr``: see :meth:`FourierTable.from_bsdf`.
-    Returns the table written."""
+           relerr: float = 0.0, format: str = "bsdf", **rgl_options):
+    """Write a solved BSDF for renderers.
+
+    ``format="bsdf"`` (default): a ``.bsdf`` file, version 1 for layerlab, Mitsuba 0.6 and
+    pbrt-v3 (isotropic BSDFs), version 2 in the Layer Laboratory's anisotropic layout
+    (default: 1 for isotropic, 2 for anisotropic BSDFs); ``relerr``: see
+    :meth:`FourierTable.from_bsdf`. Returns the table written.
+
+    ``format="rgl"``: the RGL tensor format of Mitsuba 3's and pbrt-v4's ``measured``
+    material, top-side reflection only; ``rgl_options`` are those of
+    :func:`layersim.bsdffile.rgl.export` (``resolution``, ``wavelengths``, ``color``,
+    ``samples``, ``seed``, ``name``). Returns its :class:`~layersim.bsdffile.rgl.RGLExport`
+    (with the measured reconstruction ``error``).
+    """
+    if format == "rgl":
+        if version is not None or relerr or tuple(alpha) != (0.0, 0.0):
+            raise ValueError("version, relerr and alpha belong to the .bsdf format; the RGL "
+                             "format takes resolution, wavelengths and color")
+        from . import rgl
+        return rgl.export(bsdf, path, **rgl_options)
+    if format != "bsdf":
+        raise ValueError(f"format {format!r}: must be 'bsdf' or 'rgl'")
+    if rgl_options:
+        raise TypeError(f"export(format='bsdf') got RGL options {sorted(rgl_options)}")
     if not isinstance(bsdf, BSDF):
         raise TypeError("export() takes a solved BSDF (from layersim.solve or BSDF.load), got "
                         f"{type(bsdf).__name__}")
