@@ -32,8 +32,8 @@ from typing import Any, Mapping
 import numpy as np
 
 from .errors import SceneError
-from .layers import (COMPENSATIONS, DISTRIBUTIONS, Conductor, Dielectric, Diffuse, Layer,
-                     Measured, Medium, kind_named, kind_of, names)
+from .layers import (COMPENSATIONS, DISTRIBUTIONS, SHADOWINGS, Conductor, Dielectric, Diffuse,
+                     Layer, Measured, Medium, kind_named, kind_of, names)
 from .layers.fields import MAX_IOR as _MAX_IOR
 from .layers.fields import Ctx as _Ctx
 from .layers.fields import real_value as _real
@@ -241,7 +241,7 @@ def as_scene(value, caller: str = "solve()") -> Scene:
 # --------------------------------------------------------------------------------------------
 
 _TOP_FIELDS = {"layer", "stack", "discretization"}
-_STACK_FIELDS = {"top_ior", "name", "energy_compensation", "wavelengths"}
+_STACK_FIELDS = {"top_ior", "name", "energy_compensation", "wavelengths", "shadowing"}
 #: Vacuum wavelengths (nm) a scene may give its channels.
 WAVELENGTH_RANGE = (100.0, 20_000.0)
 _DISC_FIELDS = {"n", "md", "ms", "quadrature", "tol", "theta_full"}
@@ -291,7 +291,7 @@ def _parse_stack(stack: Any, source: str | None, default_name: str) -> tuple:
     unknown = set(stack) - _STACK_FIELDS
     if unknown:
         raise SceneError(f"unknown field '{sorted(unknown)[0]}' in [stack] (allowed: top_ior, "
-                         "name, energy_compensation, wavelengths)", source=source)
+                         "name, energy_compensation, wavelengths, shadowing)", source=source)
     ctx = _Ctx(source)
     top_ior = _real(ctx, "stack.top_ior", stack.get("top_ior", 1.0), lo=0.0, hi=_MAX_IOR,
                     lo_open=True)
@@ -302,8 +302,13 @@ def _parse_stack(stack: Any, source: str | None, default_name: str) -> tuple:
     if compensation not in COMPENSATIONS:
         raise SceneError(f"[stack] energy_compensation: unknown compensation {compensation!r}; "
                          "expected one of " + ", ".join(COMPENSATIONS), source=source)
+    shadowing = stack.get("shadowing", "separable")
+    if shadowing not in SHADOWINGS:
+        raise SceneError(f"[stack] shadowing: unknown shadowing {shadowing!r}; expected one of "
+                         + ", ".join(SHADOWINGS), source=source)
     wavelengths = _parse_wavelengths(ctx, stack.get("wavelengths"))
-    return top_ior, name, {"energy_compensation": compensation, "wavelengths": wavelengths}
+    return top_ior, name, {"energy_compensation": compensation, "wavelengths": wavelengths,
+                           "shadowing": shadowing}
 
 
 def _parse_layers(raw_layers: Any, source: str | None, defaults: Mapping[str, Any]) -> tuple:

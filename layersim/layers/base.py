@@ -160,9 +160,9 @@ class OperatorJob:
 
 @dataclass(frozen=True)
 class WalkBoundary:
-    """A boundary record of the random walk (:mod:`layersim.kernels.walk`): two ints (kind code,
-    distribution code), :data:`~layersim.kernels.walk.BND_F` floats, and a table packed after
-    the records (an object with ``packed(dtype)``, or None)."""
+    """A boundary record of the random walk (:mod:`layersim.kernels.walk`): three ints (kind
+    code, distribution code, shadowing code), :data:`~layersim.kernels.walk.BND_F` floats,
+    and a table packed after the records (an object with ``packed(dtype)``, or None)."""
 
     ints: tuple
     floats: tuple

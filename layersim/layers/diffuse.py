@@ -49,7 +49,7 @@ class DiffuseKind(LayerKind):
 
     def walk_boundary(self, scene, i) -> WalkBoundary:
         floats = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, scene.layers[i].albedo, 0.0, 0.0, 0.0]
-        return WalkBoundary((walk.DIFFUSE, 0), tuple(floats))
+        return WalkBoundary((walk.DIFFUSE, 0, 0), tuple(floats))
 
 
 register(DiffuseKind())
