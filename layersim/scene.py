@@ -113,6 +113,21 @@ class Scene:
     # ---- construction ------------------------------------------------------------------
 
     @classmethod
+    def from_pbrt(cls, text: str, name: str = "pbrt") -> "Scene":
+        """The scene of the one material of a pbrt-v4 scene text (``coatedconductor``,
+        ``coateddiffuse``, ``conductor``, ``dielectric``, ``diffuse``; GGX with pbrt-v4's
+        height-correlated Smith term): :func:`layersim.pbrtimport.pbrt_to_dict`, whose notes
+        say what was not needed.
+
+        Raises
+        ------
+        SceneError
+            An unsupported material, parameter or named spectrum (the parameter is named).
+        """
+        from .pbrtimport import pbrt_to_dict
+        return cls.from_dict(pbrt_to_dict(text, name)[0])
+
+    @classmethod
     def from_toml(cls, path: str | Path) -> "Scene":
         """Read and validate a TOML scene file (see ``docs/conventions.md`` for the format).
 
