@@ -175,7 +175,7 @@ class InterfaceKind(LayerKind):
                             f"{comp!r} is not available for a tabulated NDF (its albedo tables "
                             "are those of Beckmann and GGX interfaces): set "
                             "energy_compensation = \"none\" on this layer")
-        shadow = self._shadowing(ctx, raw.get("shadowing", defaults.get("shadowing",
+        shadow = self._parse_shadow_choice(ctx, raw.get("shadowing", defaults.get("shadowing",
                                                                          "separable")),
                                  dist, comp, au, av)
         iors = self.parse_ior(ctx, raw["ior"])
@@ -214,7 +214,7 @@ class InterfaceKind(LayerKind):
         return [Film(d, n, lam) for lam in wavelengths]
 
     @staticmethod
-    def _shadowing(ctx, value, dist: str, comp: str, au: float, av: float) -> str:
+    def _parse_shadow_choice(ctx, value, dist: str, comp: str, au: float, av: float) -> str:
         """A value of ``shadowing``; the height-correlated term is refused where a table of
         the separable one stands in for the BSDF: a tabulated NDF (its shadowing is derived
         from D, Wang et al. 2008), an energy compensation (its albedo tables) and a
