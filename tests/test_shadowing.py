@@ -15,8 +15,17 @@ import pytest
 import layersim
 from layersim import montecarlo as mc
 from layersim.errors import SceneError
-from layersim.kernels import pointwise
+from layersim.kernels import physics, pointwise, sampling
 from layersim.statistical import lobes
+
+from probes import ProbeSet
+
+V, T, I = "double3", "double", "int"
+CASES = [
+    (sampling.sample_microfacet_shadowed, [V, T, T, T, T, T, T, I, I, T, T, T, T]),   # 0
+    (sampling.microfacet_pdf_film, [V, V, T, T, T, T, T, T, I]),                     # 1
+    (physics.microfacet_eval_shadowed, [V, V, T, T, T, T, T, T, I, I]),              # 2
+]
 
 REFDATA = [Path(__file__).resolve().parents[1] / ".." / "shared" / "refdata" / "pbrt4_layered.json",
            Path("/work/shared/refdata/pbrt4_layered.json")]
@@ -86,9 +95,43 @@ def test_bsdf_reciprocity(shadowing, eta):
         np.testing.assert_allclose(ft / eta ** 2, back, rtol=1e-10)
 
 
+@pytest.fixture(scope="module")
+def probes(tmp_path_factory):
+    return ProbeSet(CASES, tmp_path_factory.mktemp("shadowing"),
+                    name="layersim_test_shadowing_probes")
+
+
+@pytest.mark.parametrize("shadow", [1, 2])
+@pytest.mark.parametrize("conductor", [False, True])
+def test_walk_weight_is_eval_cos_over_pdf(probes, shadow, conductor):
+    """The walk's sampler weights by G2 / G1(wi): weight == f |wo.z| / pdf pointwise for the
+    height-correlated terms (codes of physics.SHADOWING_CODES), reflection and refraction from
+    both sides, both distributions, anisotropic slopes; films off (phase 0)."""
+    r = np.random.default_rng(11 + shadow + 2 * conductor)
+    n = 3000
+    wi = _directions(r, n)
+    if not conductor:
+        wi[r.random(n) < 0.5, 2] *= -1
+    eta = np.where(r.random(n) < 0.5, r.uniform(1.1, 2.0, n), r.uniform(0.5, 0.9, n))
+    k = r.uniform(1, 4, n) if conductor else np.zeros(n)
+    zero = np.zeros(n)
+    au, av = r.uniform(0.05, 0.8, n), r.uniform(0.05, 0.8, n)
+    d, sh = r.integers(0, 2, n), np.full(n, shadow)
+    us = [r.uniform(1e-9, 1 - 1e-9, n) for _ in range(4)]
+    wo, weight = probes.warp(0, wi, eta, k, zero, zero, au, av, d, sh, *us)
+    pdf = probes.warp(1, wi, wo, eta, k, zero, zero, au, av, d)[0]
+    f = probes.warp(2, wi, wo, eta, k, zero, zero, au, av, d, sh)[0]
+    live = weight > 0
+    assert live.mean() > 0.8 and np.all(pdf[live] > 0)
+    np.testing.assert_allclose(weight[live], f[live] * np.abs(wo[live, 2]) / pdf[live],
+                               rtol=1e-7)
+    assert np.all(weight <= 1 + 1e-12)
+
+
 def _coat(stack_shadowing=None, **interface):
     layer = {"kind": "dielectric", "ior": 1.5, "roughness": 0.2, "distribution": "ggx",
              **interface}
+    layer = {k: v for k, v in layer.items() if v is not None}
     stack = {} if stack_shadowing is None else {"shadowing": stack_shadowing}
     return {"stack": stack, "layer": [layer, {"kind": "conductor", "ior": [0.2, 3.6],
                                               "roughness": 0.2, "distribution": "ggx"}]}
@@ -96,9 +139,9 @@ def _coat(stack_shadowing=None, **interface):
 
 @pytest.mark.parametrize("interface, field", [
     ({"shadowing": "height"}, "shadowing"),
-    ({"shadowing": "height-correlated", "energy_compensation": "multiple-scattering"},
-     "shadowing"),
-    ({"shadowing": "height-correlated", "roughness": [0.2, 0.3]}, "shadowing"),
+    ({"shadowing": "height-correlated", "distribution": "tabulated", "roughness": None,
+      "ndf": {"theta": [0.0, 45.0, 90.0], "phi": [0.0, 90.0, 180.0, 270.0],
+              "D": [[1.0] * 4, [0.5] * 4, [0.0] * 4]}}, "shadowing"),
     ({"shadowing": "height-correlated", "roughness": 0.02}, "shadowing"),
 ])
 def test_refusals_name_the_layer_and_field(interface, field):
@@ -116,6 +159,29 @@ def test_stack_default_and_refusals():
         layersim.Scene.from_dict(_coat("pbrt"))
     with pytest.raises(Exception, match="shadowing"):
         lobes(scene, 0.3)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("shadowing", ["height-correlated", "height-correlated-beta"])
+def test_compensation_tables_of_the_height_correlated_term(shadowing):
+    """The albedo tables are keyed by the term (the height-correlated interface keeps more
+    energy in reflection, eq. 99 >= the product; the Beta form less in transmission), and the
+    compensated rough dielectric conserves energy from both sides with it."""
+    from layersim.compensation import tables
+    sep = tables.albedos(1.5, 0.0, 0.5, "ggx")
+    hc = tables.albedos(1.5, 0.0, 0.5, "ggx", shadowing=shadowing)
+    assert np.all(hc.r_top >= sep.r_top - 1e-15) and np.any(hc.r_top > sep.r_top + 1e-3)
+    if shadowing == "height-correlated-beta":
+        assert np.all(hc.t_top <= sep.t_top + 1e-15)
+    scene = layersim.Scene.from_dict({
+        "stack": {"energy_compensation": "multiple-scattering", "shadowing": shadowing},
+        "layer": [{"kind": "dielectric", "ior": 1.5, "roughness": 0.5, "distribution": "ggx"}]})
+    bsdf = layersim.solve(scene)
+    angles = np.radians(np.arange(0, 86, 5))
+    for side in (1.0, -1.0):
+        wi = np.stack([np.sin(angles), 0 * angles, side * np.cos(angles)], -1)
+        r, t = bsdf.albedo(wi)
+        assert np.abs(r + t - 1).max() < 1e-9, (side, r + t)
 
 
 def _pbrt_sets():
@@ -159,7 +225,10 @@ def test_pbrt_v4_layered_acceptance():
     and ``f_patched`` (``f`` with the MIS fix of pbrt-v4 issue 187) of sets a and c within
     1.5 % relative L2 over their pairs."""
     for key, data in _pbrt_sets().items():
-        bsdf = layersim.solve(_pbrt_scene(data["material_params"]), tol=1e-3)
+        # the planner's default discretisation, but for set b (alpha 0.3 coat, grazing
+        # albedos), which needs finer ordinates for 1e-3 (benchmarks/accuracy/
+        # pbrt_v4_layered.py solves every set to tol = 1e-3 instead)
+        bsdf = layersim.solve(_pbrt_scene(data["material_params"], n=200 if key == "b" else None))
         for a in data["albedo_Sample_f_1e7"]:
             got = float(bsdf.albedo(np.array(a["wo"]))[0])
             assert abs(got - a["albedo"]) <= max(3 * a["albedo_stderr"], 1e-3), (key, a)
@@ -169,3 +238,38 @@ def test_pbrt_v4_layered_acceptance():
             ref = np.array([q["f_patched"] for q in data["pairs"]])
             err = np.linalg.norm(bsdf.eval(wi, wo) - ref) / np.linalg.norm(ref)
             assert err < 0.015, (key, err)
+
+
+@pytest.mark.slow
+def test_solver_matches_walk_height_correlated_compensated():
+    """Compensation lobes from the height-correlated albedo tables, in the solver and the walk
+    (a GGX coat over a scattering medium and a rough GGX exit)."""
+    scene = layersim.Scene.from_dict({
+        "stack": {"energy_compensation": "multiple-scattering",
+                  "shadowing": "height-correlated"},
+        "layer": [{"kind": "dielectric", "ior": 1.5, "roughness": 0.5, "distribution": "ggx"},
+                  {"kind": "medium", "tau": 0.5, "albedo": 0.9, "g": 0.3},
+                  {"kind": "dielectric", "ior": 1.0, "roughness": 0.3, "distribution": "ggx"}]})
+    bsdf = layersim.solve(scene)
+    wi = np.array([np.sin(0.6), 0.0, np.cos(0.6)])
+    res = mc.simulate(scene, wi, 400_000, backend="warp-cpu", seed=7)
+    r, t = (float(x) for x in bsdf.albedo(wi))
+    assert abs(r - res.reflectance) < 4 * res.reflectance_stderr
+    assert abs(t - res.transmittance) < 4 * res.transmittance_stderr
+
+
+@pytest.mark.slow
+def test_anisotropic_height_correlated_solver_matches_walk():
+    """The coupled-mode projection carries the term too: an anisotropic GGX conductor, lit
+    obliquely off its axes, against the walk; the separable term is measurably apart."""
+    def scene(shadowing):
+        return layersim.Scene.from_dict({"stack": {"shadowing": shadowing}, "layer": [
+            {"kind": "conductor", "ior": [0.2, 3.6], "roughness": [0.25, 0.5],
+             "distribution": "ggx", "rotation": 30.0}]})
+    t = math.radians(75.0)
+    wi = np.array([math.sin(t) * math.cos(0.4), math.sin(t) * math.sin(0.4), math.cos(t)])
+    hc = float(layersim.solve(scene("height-correlated")).albedo(wi)[0])
+    sep = float(layersim.solve(scene("separable")).albedo(wi)[0])
+    r = mc.simulate(scene("height-correlated"), wi, 400_000, backend="warp-cpu", seed=4)
+    assert abs(hc - r.reflectance) < 4 * r.reflectance_stderr
+    assert hc - sep > 10 * r.reflectance_stderr

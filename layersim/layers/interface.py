@@ -175,9 +175,8 @@ class InterfaceKind(LayerKind):
                             f"{comp!r} is not available for a tabulated NDF (its albedo tables "
                             "are those of Beckmann and GGX interfaces): set "
                             "energy_compensation = \"none\" on this layer")
-        shadow = self._parse_shadow_choice(ctx, raw.get("shadowing", defaults.get("shadowing",
-                                                                         "separable")),
-                                 dist, comp, au, av)
+        shadow = self._parse_shadow_choice(
+            ctx, raw.get("shadowing", defaults.get("shadowing", "separable")), dist, au, av)
         iors = self.parse_ior(ctx, raw["ior"])
         films = self._films(ctx, values["film"], defaults.get("wavelengths"), dist, comp)
         if len(iors) == 1:
@@ -214,12 +213,10 @@ class InterfaceKind(LayerKind):
         return [Film(d, n, lam) for lam in wavelengths]
 
     @staticmethod
-    def _parse_shadow_choice(ctx, value, dist: str, comp: str, au: float, av: float) -> str:
+    def _parse_shadow_choice(ctx, value, dist: str, au: float, av: float) -> str:
         """A value of ``shadowing``; the height-correlated term is refused where a table of
         the separable one stands in for the BSDF: a tabulated NDF (its shadowing is derived
-        from D, Wang et al. 2008), an energy compensation (its albedo tables) and a
-        near-specular coat (its lobe tables); and for anisotropic roughness, whose coupled-mode
-        projection does not carry it."""
+        from D, Wang et al. 2008) and a near-specular coat (its lobe tables)."""
         if value not in SHADOWINGS:
             raise ctx.error("shadowing", f"unknown shadowing {value!r}; expected one of "
                                          + ", ".join(SHADOWINGS))
@@ -230,15 +227,6 @@ class InterfaceKind(LayerKind):
                                          "NDF (its shadowing S(k) is derived from D as a "
                                          "separable product, Wang et al. 2008): use "
                                          "shadowing = \"separable\" on this layer")
-        if comp != "none":
-            raise ctx.error("shadowing", f"{value!r} is not available with "
-                                         f"energy_compensation = {comp!r} (its albedo tables are "
-                                         "those of the separable term): set "
-                                         "energy_compensation = \"none\" on this layer")
-        if au != av:
-            raise ctx.error("shadowing", f"{value!r} is not available for anisotropic "
-                                         f"roughness [{au:g}, {av:g}] (the coupled-mode "
-                                         "projection carries the separable term)")
         if min(au, av) <= NEAR_SPECULAR_ALPHA:
             raise ctx.error("shadowing", f"{value!r} is not available for roughness "
                                          f"<= {NEAR_SPECULAR_ALPHA:g} (the near-specular lobe "
