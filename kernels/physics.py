@@ -361,6 +361,28 @@ def smith_g2(wi: Any, wo: Any, m: Any, au: Any, av: Any, dist: int, shadow: int)
 
 
 @wp.func
+def g2_from_masking(g1i: Any, g1o: Any, transmission: bool, shadow: int):
+    """``G2`` of a pair from the masking ``G1`` of each direction, for a masking function given
+    without its Lambda: Smith's ``G1 = 1 / (1 + Lambda)`` gives ``1 + Lambda = 1 / G1``, so that
+    the forms of :func:`smith_g2` become ``G1(wi) G1(wo)`` (separable), ``1 / (1 / G1(wi) +
+    1 / G1(wo) - 1)`` (height-correlated, Heitz 2014 eq. 99) and ``B(1 / G1(wi), 1 / G1(wo))``
+    (transmission, eq. 100). A tabulated NDF's ``S(k)`` (Wang et al. 2008, eq. (4)-(5)) is
+    Smith's ``G1`` of that D, so this extends the height-correlated term to it. Side conditions
+    are the caller's (a 0 stays 0)."""
+    zero = g1i * type(g1i)(0.0)
+    one = type(g1i)(1.0)
+    if shadow == SEPARABLE:
+        return g1i * g1o
+    if g1i <= zero or g1o <= zero:
+        return zero
+    a = one / g1i
+    b = one / g1o
+    if transmission and shadow == HEIGHT_CORRELATED_BETA:
+        return wp.exp(log_gamma(a) + log_gamma(b) - log_gamma(a + b))
+    return one / (a + b - one)
+
+
+@wp.func
 def smith_g2_over_g1(wi: Any, wo: Any, m: Any, au: Any, av: Any, dist: int, shadow: int):
     """``G2(wi, wo, m) / G1(wi, m)`` (:func:`smith_g2`): the weight of a direction ``wo``
     scattered by the visible normal ``m`` of ``wi`` (Heitz & d'Eon 2014, eq. 11-12), for

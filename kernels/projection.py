@@ -520,18 +520,18 @@ def microfacet_values_ds(mu_i, mu_o, phi_d, phi_s, eta, alpha_u, alpha_v,
 @wp.kernel
 def _tabulated_ds_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
                          eta: wp.float64, k: wp.float64, tab: wp.array(dtype=wp.float64),
-                         f: wp.array3d(dtype=wp.float64)):
+                         shadow: int, f: wp.array3d(dtype=wp.float64)):
     """f[p, a, b] = BSDF at phi_d = 2 pi a / Nd, phi_s = 2 pi b / Ns."""
     p, a, b = wp.tid()
     two_pi = wp.float64(6.283185307179586)
     phi_d = two_pi * wp.float64(a) / wp.float64(f.shape[1])
     phi_s = two_pi * wp.float64(b) / wp.float64(f.shape[2])
     wi, wo = _pair_directions_ds(mu_i[p], mu_o[p], phi_d, phi_s)
-    f[p, a, b] = tabulated.microfacet_eval_tabulated(wi, wo, eta, k, tab, 0)
+    f[p, a, b] = tabulated.microfacet_eval_tabulated_shadowed(wi, wo, eta, k, tab, 0, shadow)
 
 
 def tabulated_ds_samples(mu_i, mu_o, eta, table: np.ndarray, n_d: int, n_s: int,
-                         device=None) -> np.ndarray:
+                         device=None, shadowing: str = "separable") -> np.ndarray:
     """BSDF of a tabulated-NDF interface (:func:`tabulated.microfacet_eval_tabulated`) for
     ordinate pairs on the uniform azimuth grid ``phi_d = 2 pi a / n_d``, ``phi_s = 2 pi b / n_s``
     (interface frame, geometry of :func:`microfacet_split_ds`).
@@ -544,6 +544,8 @@ def tabulated_ds_samples(mu_i, mu_o, eta, table: np.ndarray, n_d: int, n_s: int,
         Relative index below/above (``eta + i k`` for a conductor).
     table : ndarray of float64
         Packed table (:meth:`layersim.ndf.table.NDFTable.packed`).
+    shadowing : str
+        The Smith term (:func:`physics.g2_from_masking`).
 
     Returns
     -------
@@ -562,7 +564,8 @@ def tabulated_ds_samples(mu_i, mu_o, eta, table: np.ndarray, n_d: int, n_s: int,
                                device=dev),
                       wp.float64(complex(eta).real), wp.float64(complex(eta).imag),
                       wp.array(np.ascontiguousarray(table, dtype=np.float64),
-                               dtype=wp.float64, device=dev)],
+                               dtype=wp.float64, device=dev),
+                      int(physics.SHADOWING_CODES[shadowing])],
               outputs=[f])
     return f.numpy()
 

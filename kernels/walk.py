@@ -123,8 +123,8 @@ class Features:
     film : bool
         Interfaces carrying a thin film (Airy reflectance in place of Fresnel's).
     height_correlated : bool
-        Rough analytic interfaces with a height-correlated Smith term
-        (:func:`.physics.smith_g2`).
+        Rough interfaces with a height-correlated Smith term (:func:`.physics.smith_g2`,
+        :func:`.physics.g2_from_masking`).
     """
 
     smooth: bool = True
@@ -307,13 +307,15 @@ def _boundary_scatter(f: Features):
             cr = bnd_f[o + 4]
             sr = bnd_f[o + 5]
             wl = sampling.to_tangent_frame(wi, cr, sr)
+            shadow = int(0)                     # physics.SEPARABLE
+            if wp.static(f.height_correlated):
+                shadow = bnd_i[BND_I * b + 2]
             if wp.static(f.tabulated):
                 if dist == tabulated.TABULATED:     # alpha_u's slot: the table's offset
-                    wt, wt_weight = tabulated.sample_microfacet_tabulated(wl, eta, k, bnd_f,
-                                                                          int(au), v0, u1, u3)
+                    wt, wt_weight = tabulated.sample_microfacet_tabulated_shadowed(
+                        wl, eta, k, bnd_f, int(au), shadow, v0, u1, u3)
                     return sampling.from_tangent_frame(wt, cr, sr), wt_weight * scale
             if wp.static(f.height_correlated):  # any film rides along (phase 0: none)
-                shadow = bnd_i[BND_I * b + 2]
                 if shadow != physics.SEPARABLE:
                     wh, wh_weight = sampling.sample_microfacet_shadowed(
                         wl, eta, k, bnd_f[o + FILM_ETA], bnd_f[o + FILM_PHASE], au, av, dist,

@@ -25,6 +25,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from ..aniso import plan as aplan
 from ..aniso.plan import COUPLED_RELERR
 from ..energy import check_operator_energy
@@ -176,7 +178,7 @@ class InterfaceKind(LayerKind):
                             "are those of Beckmann and GGX interfaces): set "
                             "energy_compensation = \"none\" on this layer")
         shadow = self._parse_shadow_choice(
-            ctx, raw.get("shadowing", defaults.get("shadowing", "separable")), dist, au, av)
+            ctx, raw.get("shadowing", defaults.get("shadowing", "separable")), au, av)
         iors = self.parse_ior(ctx, raw["ior"])
         films = self._films(ctx, values["film"], defaults.get("wavelengths"), dist, comp)
         if len(iors) == 1:
@@ -213,20 +215,14 @@ class InterfaceKind(LayerKind):
         return [Film(d, n, lam) for lam in wavelengths]
 
     @staticmethod
-    def _parse_shadow_choice(ctx, value, dist: str, au: float, av: float) -> str:
-        """A value of ``shadowing``; the height-correlated term is refused where a table of
-        the separable one stands in for the BSDF: a tabulated NDF (its shadowing is derived
-        from D, Wang et al. 2008) and a near-specular coat (its lobe tables)."""
+    def _parse_shadow_choice(ctx, value, au: float, av: float) -> str:
+        """A value of ``shadowing``; a height-correlated term is refused for a near-specular
+        roughness, whose lobe tables (:mod:`layersim.lobe`) use the separable one."""
         if value not in SHADOWINGS:
             raise ctx.error("shadowing", f"unknown shadowing {value!r}; expected one of "
                                          + ", ".join(SHADOWINGS))
         if value == "separable" or (au == 0.0 and av == 0.0):
             return value
-        if dist == "tabulated":
-            raise ctx.error("shadowing", f"{value!r} is not available for a tabulated "
-                                         "NDF (its shadowing S(k) is derived from D as a "
-                                         "separable product, Wang et al. 2008): use "
-                                         "shadowing = \"separable\" on this layer")
         if min(au, av) <= NEAR_SPECULAR_ALPHA:
             raise ctx.error("shadowing", f"{value!r} is not available for roughness "
                                          f"<= {NEAR_SPECULAR_ALPHA:g} (the near-specular lobe "
@@ -250,6 +246,28 @@ class InterfaceKind(LayerKind):
     def parse_ior(self, ctx, value) -> list:
         """The per-channel indices of the ``ior`` field."""
         raise NotImplementedError
+
+    def raw_ior(self, per_channel):
+        """The ``ior`` field's value of the records (the inverse of :meth:`parse_ior`)."""
+        raise NotImplementedError
+
+    def to_raw(self, per_channel) -> dict:
+        layer = per_channel[0]
+        raw = {"kind": self.name, "ior": self.raw_ior(per_channel)}
+        if layer.ndf is not None:
+            raw["distribution"] = "tabulated"
+            raw["ndf"] = {"theta": np.degrees(layer.ndf.theta).tolist(),
+                          "phi": np.degrees(layer.ndf.phi).tolist(), "D": layer.ndf.D.tolist()}
+        else:
+            raw["roughness"] = (layer.alpha_u if layer.alpha_u == layer.alpha_v
+                                else [layer.alpha_u, layer.alpha_v])
+            raw["distribution"] = layer.distribution
+        raw["shadowing"] = layer.shadowing
+        raw["rotation"] = math.degrees(layer.rotation)
+        raw["energy_compensation"] = layer.energy_compensation
+        if layer.film is not None:
+            raw["film"] = {"thickness": layer.film.thickness, "ior": layer.film.ior}
+        return raw
 
     def describe(self, per_channel) -> str:
         layer = per_channel[0]
@@ -359,7 +377,8 @@ class InterfaceKind(LayerKind):
                   math.cos(layer.rotation), math.sin(layer.rotation), 0.0, 0.0, *film)
         code = walk.CONDUCTOR if layer.opaque else walk.DIELECTRIC
         if layer.ndf is not None:       # alpha_u's slot gets the table's offset in flatten()
-            return WalkBoundary((code, TABULATED, 0), floats, layer.ndf)
+            return WalkBoundary((code, TABULATED, SHADOWING_CODES[layer.shadowing]), floats,
+                                layer.ndf)
         return WalkBoundary((code, DISTRIBUTION_CODES[layer.distribution],
                              SHADOWING_CODES[layer.shadowing]), floats)
 
