@@ -112,6 +112,35 @@ class Scene:
 
     # ---- construction ------------------------------------------------------------------
 
+    def to_dict(self) -> dict:
+        """The scene as a dict with the TOML file's content (``docs/conventions.md``), which
+        :meth:`from_dict` reads back to an equal scene: each layer's table from its kind
+        (:meth:`layersim.layers.LayerKind.to_raw`; every field written explicitly, per-channel
+        values as lists where the channels differ), ``[stack]`` and the ``[discretization]``
+        overrides.
+
+        Raises
+        ------
+        SceneError
+            For a layer that cannot be written back (a measured base: its data come from its
+            file), naming the layer and its kind.
+        """
+        stack = {"name": self.name, "top_ior": self.top_ior}
+        if self.wavelengths is not None:
+            stack["wavelengths"] = list(self.wavelengths)
+        layers = []
+        for i, records in enumerate(zip(*self.stacks)):
+            try:
+                layers.append(kind_of(records[0]).to_raw(records))
+            except SceneError as exc:
+                raise SceneError(str(exc).split(": ", 1)[-1], layer=i,
+                                 kind=records[0].kind, source=self.source) from None
+        out = {"stack": stack, "layer": layers}
+        disc = {k: v for k, v in self.discretization.__dict__.items() if v is not None}
+        if disc:
+            out["discretization"] = disc
+        return out
+
     @classmethod
     def from_pbrt(cls, text: str, name: str = "pbrt") -> "Scene":
         """The scene of the one material of a pbrt-v4 scene text (``coatedconductor``,

@@ -38,6 +38,9 @@ class DiffuseKind(LayerKind):
     def build(self, ctx, values, raw, defaults) -> list:
         return [Diffuse(albedo=a) for a in values["albedo"]]
 
+    def to_raw(self, per_channel) -> dict:
+        return {"kind": self.name, "albedo": self.channel_value(per_channel, lambda x: x.albedo)}
+
     def describe(self, per_channel) -> str:
         return f"diffuse albedo={self.values(per_channel, lambda x: f'{x.albedo:g}')}"
 
