@@ -8,7 +8,8 @@ package's default) is solved too, to show what the height-correlated term change
 set: the directional albedos against pbrt-v4's ``Sample_f`` (in units of the tolerance
 max(3 standard errors, 1e-3)), the relative L2 error and median relative error of ``f`` over
 the direction pairs against pbrt-v4's ``LayeredBxDF::f`` unmodified (``f``) and with the MIS
-fix of pbrt-v4 issue 187 (``f_patched``), and the solve time.
+fix of pbrt-v4 issue 187 (``f_patched``), the solve time and the time of one ``eval``, beside
+pbrt-v4's time per ``Sample_f`` and the noise of its ``f`` values (from the file).
 
 Usage::
 
@@ -67,7 +68,8 @@ def compare(key: str, data: dict, shadowing: str) -> list[str]:
         cells.append(f"{a['theta_o_deg']:>2.0f}: {got:.5f} vs {a['albedo']:.5f} "
                      f"({100 * (got / a['albedo'] - 1):+.2f} %, {units:+.2f} tol)")
     lines = [f"{key} {shadowing:<18} n={bsdf.info['n']} md={bsdf.info['md']} "
-             f"solve {seconds:.1f} s"] + ["    albedo " + c for c in cells]
+             f"solve {seconds:.1f} s, eval {_eval_microseconds(bsdf):.2f} us per f value"]
+    lines += ["    albedo " + c for c in cells]
     if "pairs" in data:
         wo = np.array([q["wo"] for q in data["pairs"]])
         wi = np.array([q["wi"] for q in data["pairs"]])
@@ -85,6 +87,29 @@ def compare(key: str, data: dict, shadowing: str) -> list[str]:
     return lines
 
 
+def _eval_microseconds(bsdf, n: int = 100_000) -> float:
+    """Time of ``bsdf.eval`` per direction pair (us), over ``n`` random pairs above."""
+    rng = np.random.default_rng(0)
+    w = rng.normal(size=(2, n, 3))
+    w[..., 2] = np.abs(w[..., 2])
+    w /= np.linalg.norm(w, axis=-1, keepdims=True)
+    t0 = time.perf_counter()
+    bsdf.eval(w[0], w[1])
+    return 1e6 * (time.perf_counter() - t0) / n
+
+
+def pbrt_costs(data: dict) -> str:
+    """pbrt-v4's side from the reference file: time per Sample_f call (seconds / N) and the
+    median relative standard error of its f values (K evaluations of nSamples walks each)."""
+    per = [a["seconds"] / a["N"] * 1e6 for a in data["albedo_Sample_f_1e7"]]
+    text = f"    pbrt-v4: Sample_f {min(per):.2f}-{max(per):.2f} us per sample"
+    if "pairs" in data:
+        rel = [q["f_patched_stderr"] / q["f_patched"] for q in data["pairs"]]
+        text += (f"; f_patched median relative standard error {100 * np.median(rel):.2f} % "
+                 f"(nSamples = {data['material_params']['nsamples']:g} walks per evaluation)")
+    return text
+
+
 def _layers(data):
     from layersim.pbrtimport import pbrt_to_dict
     return pbrt_to_dict(pbrt_text(data["material_params"]))[0]["layer"]
@@ -99,6 +124,7 @@ def main(argv: list[str]) -> int:
     print(f"# reference: {path.name}: {ref['what'][:120]}...")
     print(f"# layersim.solve(scene, tol={TOL:g}); tol = max(3 standard errors, 1e-3)")
     for key, data in ref["sets"].items():
+        print(pbrt_costs(data))
         for shadowing in ("height-correlated", "separable"):
             print("\n".join(compare(key, data, shadowing)), flush=True)
     return 0

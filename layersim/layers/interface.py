@@ -317,11 +317,13 @@ class InterfaceKind(LayerKind):
                 i, self.name, "project (coupled modes)",
                 f"{layer.distribution} alpha=({layer.alpha_u:g}, {layer.alpha_v:g}){rot}, "
                 f"relative index {_fmt_eta(eta_rel)}; ratio "
-                f"{aplan.anisotropy_ratio(layer):.3g} -> ms = {ms}", width=width, ms=ms))
+                f"{aplan.anisotropy_ratio(layer):.3g} -> ms = {ms}" + shadowing_text(layer),
+                width=width, ms=ms))
         else:
             survey.layers.append(LayerPlan(i, self.name, "project",
                                            f"{layer.distribution} alpha={layer.alpha_u:g}, "
                                            f"relative index {_fmt_eta(eta_rel)}"
+                                           + shadowing_text(layer)
                                            + compensation_text(layer), width=width))
 
     def plan_special(self, scene, i: int, layer, survey) -> bool:
@@ -399,6 +401,13 @@ class InterfaceKind(LayerKind):
         if layer.alpha_u > 1.0:
             raise refuse("roughness", f"{layer.alpha_u:g} is beyond the FGD table (<= 1)")
         return ("interface", complex(layer.ior), layer.alpha_u)
+
+
+def shadowing_text(layer) -> str:
+    """The plan's words for a height-correlated Smith term (empty for the separable one)."""
+    if layer.shadowing == "separable":
+        return ""
+    return f"; {layer.shadowing} Smith term (solver and Monte Carlo)"
 
 
 def compensation_text(layer) -> str:
