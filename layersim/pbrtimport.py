@@ -211,6 +211,9 @@ def pbrt_to_dict(text: str, name: str = "pbrt") -> tuple[dict, list]:
                          field=unknown[0])
     notes = [f"{p}: not needed (the solve is deterministic: no path depth or sample count)"
              for p in ("maxdepth", "nsamples") if p in params]
+    if mtype.startswith("coated"):
+        notes.append("pbrt-v4's layered materials are two-sided; the scene is the stack seen "
+                     "from its coated side")
     layers = _layers(mtype, params, notes)
     stack = {"name": name}
     if any(x.get("distribution") == "ggx" for x in layers):
