@@ -3,8 +3,9 @@
 The four parameter sets of ``shared/refdata/pbrt4_layered.json`` (pbrt-v4's
 ``CoatedConductorBxDF`` / ``CoatedDiffuseBxDF``, built and evaluated outside this project; its
 conventions inside) are imported through ``Scene.from_pbrt`` (GGX, pbrt-v4's height-correlated
-Smith term) and solved to ``tol = 1e-3``; the separable Smith term (Mitsuba 3's and this
-package's default) is solved too, to show what the height-correlated term changes. Printed per
+Smith term) and solved to ``tol = 1e-3``; the Beta-function form in transmission (Heitz 2014,
+eq. 100) and the separable Smith term (Mitsuba 3's and this package's default) are solved too,
+to show what the term changes. Printed per
 set: the directional albedos against pbrt-v4's ``Sample_f`` (in units of the tolerance
 max(3 standard errors, 1e-3)), the relative L2 error and median relative error of ``f`` over
 the direction pairs against pbrt-v4's ``LayeredBxDF::f`` unmodified (``f``) and with the MIS
@@ -67,7 +68,7 @@ def compare(key: str, data: dict, shadowing: str) -> list[str]:
         units = (got - a["albedo"]) / max(3 * a["albedo_stderr"], 1e-3)
         cells.append(f"{a['theta_o_deg']:>2.0f}: {got:.5f} vs {a['albedo']:.5f} "
                      f"({100 * (got / a['albedo'] - 1):+.2f} %, {units:+.2f} tol)")
-    lines = [f"{key} {shadowing:<18} n={bsdf.info['n']} md={bsdf.info['md']} "
+    lines = [f"{key} {shadowing:<22} n={bsdf.info['n']} md={bsdf.info['md']} "
              f"solve {seconds:.1f} s, eval {_eval_microseconds(bsdf):.2f} us per f value"]
     lines += ["    albedo " + c for c in cells]
     if "pairs" in data:
@@ -125,7 +126,7 @@ def main(argv: list[str]) -> int:
     print(f"# layersim.solve(scene, tol={TOL:g}); tol = max(3 standard errors, 1e-3)")
     for key, data in ref["sets"].items():
         print(pbrt_costs(data))
-        for shadowing in ("height-correlated", "separable"):
+        for shadowing in ("height-correlated", "height-correlated-beta", "separable"):
             print("\n".join(compare(key, data, shadowing)), flush=True)
     return 0
 
