@@ -3,7 +3,7 @@
 pbrt-v4's ``coatedconductor`` and ``coateddiffuse`` materials (``LayeredBxDF``, Guo et al. 2018's
 position-free random walk) and its ``conductor``, ``dielectric`` and ``diffuse`` materials map
 onto stacks of this package's layers with the same parameters (Pharr, Jakob, Humphreys,
-"Physically Based Rendering", 4th ed., sec. 9.3-9.5 and 14.3; pbrt-v4's ``materials.cpp``):
+"Physically Based Rendering", 4th ed., sec. 9.2-9.6 and 14.3; pbrt-v4's ``materials.cpp``):
 
 * roughness: ``roughness`` or ``uroughness`` / ``vroughness`` (``interface.`` / ``conductor.``
   prefixed in a coated conductor); with ``remaproughness`` true (pbrt's default) the GGX
