@@ -33,7 +33,7 @@ References
 ----------
 Walter, Marschner, Li, Torrance (2007), "Microfacet models for refraction through rough surfaces",
 eq. 19-21 (BSDF), 25-27 (Beckmann, Smith); Heitz (2014), "Understanding the masking-shadowing
-function", sec. 5 (anisotropic Smith Lambda). Zeltner & Jakob 2018 eq. (18)-(22).
+function", sec. 5 (anisotropic Smith Lambda), sec. 6, eq. 99-100 (height-correlated G2). Zeltner & Jakob 2018 eq. (18)-(22).
 """
 
 from __future__ import annotations
