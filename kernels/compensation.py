@@ -67,9 +67,10 @@ def refracted(wi: wp.vec3d, m: wp.vec3d, ratio: wp.float64):
 
 @wp.func
 def normal_contributions(wi: wp.vec3d, m: wp.vec3d, eta: wp.float64, k: wp.float64,
-                         alpha: wp.float64, dist: int, unit_fresnel: int):
+                         alpha: wp.float64, dist: int, shadow: int, unit_fresnel: int):
     """``(r, t)``: reflected and transmitted energy per unit slope probability carried by the
-    microfacet normal ``m`` (upper hemisphere) for ``wi``: ``f |wo.z| |dwo / dm| / (D m.z)``."""
+    microfacet normal ``m`` (upper hemisphere) for ``wi``: ``f |wo.z| |dwo / dm| / (D m.z)``,
+    ``f`` with the Smith term ``shadow`` (:func:`layersim.kernels.physics.smith_g2`)."""
     zero = wp.float64(0.0)
     one = wp.float64(1.0)
     side = one
@@ -88,7 +89,8 @@ def normal_contributions(wi: wp.vec3d, m: wp.vec3d, eta: wp.float64, k: wp.float
     dens = physics.ndf(m, alpha, alpha, dist) * m[2]
     wo = ms * (wp.float64(2.0) * c) - wi
     if wo[2] * side > zero:
-        f = physics.microfacet_eval(wi, wo, eta, k, alpha, alpha, dist)
+        f = physics.microfacet_eval_shadowed(wi, wo, eta, k, zero, zero, alpha, alpha, dist,
+                                             shadow)
         if unit_fresnel != 0:
             f = f / physics.fresnel_conductor(c, eta, k)
         r = f * wp.abs(wo[2]) * wp.float64(4.0) * wp.abs(wp.dot(wo, ms)) / dens
@@ -97,7 +99,8 @@ def normal_contributions(wi: wp.vec3d, m: wp.vec3d, eta: wp.float64, k: wp.float
         if ok and wt[2] * side < zero:
             co = wp.dot(wt, ms)
             denom = eta_i * c + eta_o * co
-            f = physics.microfacet_eval(wi, wt, eta, k, alpha, alpha, dist)
+            f = physics.microfacet_eval_shadowed(wi, wt, eta, k, zero, zero, alpha, alpha, dist,
+                                                 shadow)
             t = f * wp.abs(wt[2]) * denom * denom / (eta_o * eta_o * wp.abs(co) * dens)
     return r, t
 
@@ -106,7 +109,7 @@ def normal_contributions(wi: wp.vec3d, m: wp.vec3d, eta: wp.float64, k: wp.float
 def albedo_kernel(mu: wp.array(dtype=wp.float64), side: wp.float64,
                   u_nodes: wp.array(dtype=wp.float64), u_weights: wp.array(dtype=wp.float64),
                   n_phi: int, eta: wp.float64, k: wp.float64, alpha: wp.float64, dist: int,
-                  unit_fresnel: int, out_r: wp.array2d(dtype=wp.float64),
+                  shadow: int, unit_fresnel: int, out_r: wp.array2d(dtype=wp.float64),
                   out_t: wp.array2d(dtype=wp.float64)):
     """Partial sums of ``E_R, E_T`` for incident cosine ``mu[j]`` on ``side`` (+1 top, -1
     bottom), one slope radius ``u_nodes[a]`` per thread, ``n_phi`` trapezoid nodes on the
@@ -126,7 +129,7 @@ def albedo_kernel(mu: wp.array(dtype=wp.float64), side: wp.float64,
         if p == 0 or p == n_phi - 1:
             w = wp.float64(0.5)
         m = wp.normalize(wp.vec3d(-rad * wp.cos(phi), -rad * wp.sin(phi), one))
-        r, t = normal_contributions(wi, m, eta, k, alpha, dist, unit_fresnel)
+        r, t = normal_contributions(wi, m, eta, k, alpha, dist, shadow, unit_fresnel)
         sr = sr + w * r
         st = st + w * t
     # trapezoid on [0, pi] of an even function = half of the full period: dphi / pi in all

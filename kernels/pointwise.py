@@ -70,12 +70,38 @@ def _reflection_kernel(wi: wp.array(dtype=wp.vec3d), wo: wp.array(dtype=wp.vec3d
     out[q] = d[q] * s_i[q] * s_o[q] * physics.microfacet_reflection_factor(f, a, b)
 
 
+@wp.kernel
+def _g2_kernel(wi: wp.array(dtype=wp.vec3d), wo: wp.array(dtype=wp.vec3d),
+               m: wp.array(dtype=wp.vec3d), au: wp.float64, av: wp.float64, dist: int,
+               shadow: int, out: wp.array(dtype=wp.float64)):
+    q = wp.tid()
+    out[q] = physics.smith_g2(wi[q], wo[q], m[q], au, av, dist, shadow)
+
+
+@wp.kernel
+def _bsdf_kernel(wi: wp.array(dtype=wp.vec3d), wo: wp.array(dtype=wp.vec3d), eta: wp.float64,
+                 k: wp.float64, au: wp.float64, av: wp.float64, dist: int, shadow: int,
+                 out: wp.array(dtype=wp.float64)):
+    q = wp.tid()
+    zero = wp.float64(0.0)
+    out[q] = physics.microfacet_eval_shadowed(wi[q], wo[q], eta, k, zero, zero, au, av, dist,
+                                              shadow)
+
+
 def _code(distribution: str) -> int:
     try:
         return int(physics.DISTRIBUTION_CODES[distribution])
     except (KeyError, TypeError):
         raise ValueError(f"distribution must be 'ggx' or 'beckmann', not {distribution!r}") \
             from None
+
+
+def _shadow_code(shadowing: str) -> int:
+    try:
+        return int(physics.SHADOWING_CODES[shadowing])
+    except (KeyError, TypeError):
+        raise ValueError("shadowing must be one of " + ", ".join(physics.SHADOWING_CODES)
+                         + f", not {shadowing!r}") from None
 
 
 def _vectors(v, name: str) -> np.ndarray:
@@ -142,6 +168,42 @@ def smith_g1(w, alpha_u: float, alpha_v: float, distribution: str,
     w = _vectors(w, "w")
     return _map(_g1_kernel, [(w.reshape(-1, 3), wp.vec3d)],
                 [float(alpha_u), float(alpha_v), _code(distribution)], w.shape[:-1], device)
+
+
+def smith_g2(wi, wo, m, alpha_u: float, alpha_v: float, distribution: str, shadowing: str,
+             device: str = "cpu") -> np.ndarray:
+    """Smith shadowing-masking ``G2(wi, wo, m)`` of a pair and a microfacet normal
+    (:func:`physics.smith_g2`; Heitz 2014, sec. 6).
+
+    Parameters
+    ----------
+    wi, wo, m : array_like, shape (..., 3)
+        Unit directions and microfacet normals in the tangent frame (broadcast together).
+    alpha_u, alpha_v, distribution, device
+        As :func:`ndf`.
+    shadowing : str
+        ``"separable"``, ``"height-correlated"`` or ``"height-correlated-beta"``.
+
+    Returns
+    -------
+    ndarray, float64, the broadcast shape without the last axis, in [0, 1].
+    """
+    wi, wo, m = np.broadcast_arrays(_vectors(wi, "wi"), _vectors(wo, "wo"), _vectors(m, "m"))
+    return _map(_g2_kernel, [(x.reshape(-1, 3), wp.vec3d) for x in (wi, wo, m)],
+                [float(alpha_u), float(alpha_v), _code(distribution), _shadow_code(shadowing)],
+                wi.shape[:-1], device)
+
+
+def microfacet_bsdf(wi, wo, eta: complex, alpha: float, distribution: str, shadowing: str,
+                    device: str = "cpu") -> np.ndarray:
+    """BSDF ``f(wi, wo)`` (1/sr, no cosine) of an isotropic rough interface without a film
+    (:func:`physics.microfacet_eval_shadowed`): a dielectric where ``eta`` is real, a conductor
+    where ``eta.imag > 0``; the shapes of :func:`smith_g2`."""
+    wi, wo = np.broadcast_arrays(_vectors(wi, "wi"), _vectors(wo, "wo"))
+    eta = complex(eta)
+    return _map(_bsdf_kernel, [(x.reshape(-1, 3), wp.vec3d) for x in (wi, wo)],
+                [eta.real, eta.imag, float(alpha), float(alpha), _code(distribution),
+                 _shadow_code(shadowing)], wi.shape[:-1], device)
 
 
 def ndf_peak(q, distribution: str, device: str = "cpu") -> np.ndarray:

@@ -39,11 +39,13 @@ def _pair_directions(mu_i: wp.float64, mu_o: wp.float64, phi: wp.float64):
 def _microfacet_split_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
                              phi: wp.array2d(dtype=wp.float64), eta: wp.float64,
                              k: wp.float64, ef: wp.float64, ps: wp.float64, au: wp.float64,
-                             av: wp.float64, dist: int, smooth: wp.array2d(dtype=wp.float64),
+                             av: wp.float64, dist: int, shadow: int,
+                             smooth: wp.array2d(dtype=wp.float64),
                              q: wp.array2d(dtype=wp.float64)):
     p, j = wp.tid()
     wi, wo = _pair_directions(mu_i[p], mu_o[p], phi[p, j])
-    s, qq = physics.microfacet_smooth_q_film(wi, wo, eta, k, ef, ps, au, av, dist)
+    s, qq = physics.microfacet_smooth_q_shadowed(wi, wo, eta, k, ef, ps, au, av, dist,
+                                                 shadow)
     smooth[p, j] = s
     q[p, j] = qq
 
@@ -52,10 +54,12 @@ def _microfacet_split_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dt
 def _microfacet_eval_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
                             phi: wp.array2d(dtype=wp.float64), eta: wp.float64,
                             k: wp.float64, ef: wp.float64, ps: wp.float64, au: wp.float64,
-                            av: wp.float64, dist: int, f: wp.array2d(dtype=wp.float64)):
+                            av: wp.float64, dist: int, shadow: int,
+                            f: wp.array2d(dtype=wp.float64)):
     p, j = wp.tid()
     wi, wo = _pair_directions(mu_i[p], mu_o[p], phi[p, j])
-    f[p, j] = physics.microfacet_eval_film(wi, wo, eta, k, ef, ps, au, av, dist)
+    f[p, j] = physics.microfacet_eval_shadowed(wi, wo, eta, k, ef, ps, au, av, dist,
+                                                shadow)
 
 
 def _launch_pairs(kernel, mu_i, mu_o, phi, params, n_out, device=None):
@@ -78,18 +82,20 @@ def _launch_pairs(kernel, mu_i, mu_o, phi, params, n_out, device=None):
 
 
 def _interface_params(eta: complex, au: float, av: float, distribution: str,
-                      film: tuple | None = None):
-    """Kernel parameters ``eta, k, eta_film, phase_scale, alpha_u, alpha_v, dist`` of an
-    interface; ``film`` = (index relative to the medium above, phase scale) or None (phase 0:
-    the bare interface, :func:`physics.fresnel_interface`)."""
+                      film: tuple | None = None, shadowing: str = "separable"):
+    """Kernel parameters ``eta, k, eta_film, phase_scale, alpha_u, alpha_v, dist, shadow`` of
+    an interface; ``film`` = (index relative to the medium above, phase scale) or None (phase 0:
+    the bare interface, :func:`physics.fresnel_interface`); ``shadowing`` the Smith term
+    (:data:`physics.SHADOWING_CODES`, :func:`physics.smith_g2`)."""
     ef, ps = film if film is not None else (0.0, 0.0)
     return [wp.float64(complex(eta).real), wp.float64(complex(eta).imag), wp.float64(ef),
             wp.float64(ps), wp.float64(au), wp.float64(av),
-            int(physics.DISTRIBUTION_CODES[distribution])]
+            int(physics.DISTRIBUTION_CODES[distribution]),
+            int(physics.SHADOWING_CODES[shadowing])]
 
 
 def microfacet_split(mu_i, mu_o, phi, eta, alpha_u, alpha_v, distribution="beckmann",
-                     device=None, film=None):
+                     device=None, film=None, shadowing="separable"):
     """Sample the split microfacet BSDF ``f = smooth * peak(q)`` of an interface.
 
     Parameters
@@ -107,6 +113,10 @@ def microfacet_split(mu_i, mu_o, phi, eta, alpha_u, alpha_v, distribution="beckm
         scale ``4 pi n d / lambda`` (:meth:`layersim.layers.Interface.film_params`); every
         function of this module that takes ``film`` evaluates the filmed BSDF
         (:func:`physics.microfacet_eval_film`).
+    shadowing : str
+        The Smith shadowing-masking term, "separable" or "height-correlated"
+        (:func:`physics.smith_g2`); every function of this module that takes ``shadowing``
+        evaluates the BSDF with it.
 
     Returns
     -------
@@ -114,17 +124,17 @@ def microfacet_split(mu_i, mu_o, phi, eta, alpha_u, alpha_v, distribution="beckm
         Smooth factor (1/sr) and slope-space form of :func:`physics.microfacet_smooth_q`.
     """
     return _launch_pairs(_microfacet_split_kernel, mu_i, mu_o, phi,
-                         _interface_params(eta, alpha_u, alpha_v, distribution, film), 2,
-                         device)
+                         _interface_params(eta, alpha_u, alpha_v, distribution, film,
+                                           shadowing), 2, device)
 
 
 def microfacet_values(mu_i, mu_o, phi, eta, alpha_u, alpha_v, distribution="beckmann",
-                      device=None, film=None):
+                      device=None, film=None, shadowing="separable"):
     """Full microfacet BSDF values f (1/sr) at the same sample layout as
     :func:`microfacet_split`."""
     return _launch_pairs(_microfacet_eval_kernel, mu_i, mu_o, phi,
-                         _interface_params(eta, alpha_u, alpha_v, distribution, film), 1,
-                         device)[0]
+                         _interface_params(eta, alpha_u, alpha_v, distribution, film,
+                                           shadowing), 1, device)[0]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -134,7 +144,7 @@ def microfacet_values(mu_i, mu_o, phi, eta, alpha_u, alpha_v, distribution="beck
 @wp.kernel
 def _uniform_eval_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
                          eta: wp.float64, k: wp.float64, ef: wp.float64, ps: wp.float64,
-                         au: wp.float64, av: wp.float64, dist: int,
+                         au: wp.float64, av: wp.float64, dist: int, shadow: int,
                          f: wp.array2d(dtype=wp.float64)):
     """f[p, j] = BSDF at phi_j = pi j / M, j = 0..M (M + 1 = f.shape[1]): half a period of the
     even azimuthal function."""
@@ -142,7 +152,8 @@ def _uniform_eval_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=
     M = f.shape[1] - 1
     phi = wp.float64(wp.pi) * wp.float64(j) / wp.float64(M)
     wi, wo = _pair_directions(mu_i[p], mu_o[p], phi)
-    f[p, j] = physics.microfacet_eval_film(wi, wo, eta, k, ef, ps, au, av, dist)
+    f[p, j] = physics.microfacet_eval_shadowed(wi, wo, eta, k, ef, ps, au, av, dist,
+                                                shadow)
 
 
 @wp.func
@@ -183,7 +194,7 @@ def _cosine_dct_kernel(f: wp.array(dtype=wp.float64), M: int,
 
 def uniform_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, samples: int,
                           orders: int, device=None, dct_kernel: bool | None = None,
-                          film=None) -> np.ndarray:
+                          film=None, shadowing="separable") -> np.ndarray:
     """Cosine coefficients ``f_0 .. f_{orders-1}`` of the BSDF of ordinate pairs from the
     trapezoidal rule with ``samples`` (even) uniform azimuths per period, exact up to aliasing of
     orders beyond ``samples - orders``. The azimuthal function is even, so only the
@@ -204,7 +215,7 @@ def uniform_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, sampl
     if samples % 2:
         raise ValueError("samples must be even")
     M = samples // 2
-    params = _interface_params(eta, alpha_u, alpha_v, distribution, film)
+    params = _interface_params(eta, alpha_u, alpha_v, distribution, film, shadowing)
     f = wp.empty((P, M + 1), dtype=wp.float64, device=dev)
     wp.launch(_uniform_eval_kernel, dim=(P, M + 1), device=dev,
               inputs=[wp.array(mu_i, dtype=wp.float64, device=dev),
@@ -235,7 +246,7 @@ def uniform_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, sampl
 @wp.kernel
 def _coarse_bound_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
                          n_phi: int, eta: wp.float64, k: wp.float64, ef: wp.float64,
-                         ps: wp.float64, au: wp.float64, av: wp.float64, dist: int,
+                         ps: wp.float64, au: wp.float64, av: wp.float64, dist: int, shadow: int,
                          smax: wp.array(dtype=wp.float64),
                          q0: wp.array(dtype=wp.float64), qpi: wp.array(dtype=wp.float64)):
     """Largest |smooth factor| over ``n_phi`` azimuths pi j / (n_phi - 1), and the slope-space
@@ -245,7 +256,8 @@ def _coarse_bound_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=
     for j in range(n_phi):
         phi = wp.float64(wp.pi) * wp.float64(j) / wp.float64(n_phi - 1)
         wi, wo = _pair_directions(mu_i[p], mu_o[p], phi)
-        s, q = physics.microfacet_smooth_q_film(wi, wo, eta, k, ef, ps, au, av, dist)
+        s, q = physics.microfacet_smooth_q_shadowed(wi, wo, eta, k, ef, ps, au, av, dist,
+                                                    shadow)
         big = wp.max(big, wp.abs(s))
         if j == 0:
             q0[p] = q
@@ -255,7 +267,7 @@ def _coarse_bound_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=
 
 
 def coarse_bound(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, n_phi: int, device=None,
-                 film=None):
+                 film=None, shadowing="separable"):
     """Per pair: ``max |S(phi)|`` over ``n_phi`` uniform azimuths of [0, pi], ``q(0)`` and
     ``q(pi)`` (see :func:`microfacet_split`); arrays of shape (P,). Only these three numbers per
     pair leave the device."""
@@ -268,7 +280,7 @@ def coarse_bound(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, n_phi: int, de
         wp.launch(_coarse_bound_kernel, dim=P, device=dev,
                   inputs=[wp.array(mu_i, dtype=wp.float64, device=dev),
                           host_array(mu_o, wp.float64, dev), int(n_phi),
-                          *_interface_params(eta, alpha_u, alpha_v, distribution, film)],
+                          *_interface_params(eta, alpha_u, alpha_v, distribution, film, shadowing)],
                   outputs=outs)
     return tuple(o.numpy() for o in outs)
 
@@ -277,7 +289,7 @@ def coarse_bound(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, n_phi: int, de
 def _ragged_eval_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
                         half: wp.array(dtype=wp.int32), start: wp.array(dtype=wp.int64),
                         first: int, eta: wp.float64, k: wp.float64, ef: wp.float64,
-                        ps: wp.float64, au: wp.float64, av: wp.float64, dist: int,
+                        ps: wp.float64, au: wp.float64, av: wp.float64, dist: int, shadow: int,
                         f: wp.array(dtype=wp.float64)):
     """f[start[p] + j] = BSDF of pair p = first + row at phi_j = pi j / M_p, j = 0..M_p."""
     row, j = wp.tid()
@@ -285,7 +297,8 @@ def _ragged_eval_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=w
     M = half[p]
     phi = wp.float64(wp.pi) * wp.float64(j) / wp.float64(M)
     wi, wo = _pair_directions(mu_i[p], mu_o[p], phi)
-    f[start[p] + wp.int64(j)] = physics.microfacet_eval_film(wi, wo, eta, k, ef, ps, au, av, dist)
+    f[start[p] + wp.int64(j)] = physics.microfacet_eval_shadowed(wi, wo, eta, k, ef, ps, au,
+                                                                 av, dist, shadow)
 
 
 @wp.kernel
@@ -331,7 +344,7 @@ def _truncate_kernel(c: wp.array2d(dtype=wp.float64), m: int, relerr: wp.float64
 
 def ragged_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, half: np.ndarray,
                          orders: int, m: int, relerr: float, taper: np.ndarray,
-                         factors: np.ndarray, device=None, film=None):
+                         factors: np.ndarray, device=None, film=None, shadowing="separable"):
     """Trapezoidal cosine series of each pair with its own ``2 half[p]`` samples per period
     (``half`` powers of two), ``orders`` coefficients, then cut to ``m`` orders as described in
     :func:`_truncate_kernel` (rows with ``taper`` multiplied by ``factors``, shape (m,)). Pairs
@@ -354,7 +367,7 @@ def ragged_cosine_series(mu_i, mu_o, eta, alpha_u, alpha_v, distribution, half: 
     start = np.zeros(P, np.int64)
     np.cumsum(half[:-1].astype(np.int64) + 1, out=start[1:])
     total = int(start[-1] + half[-1] + 1) if P else 0
-    params = _interface_params(eta, alpha_u, alpha_v, distribution, film)
+    params = _interface_params(eta, alpha_u, alpha_v, distribution, film, shadowing)
     a_mi = host_array(mu_i, wp.float64, dev)
     a_mo = host_array(mu_o, wp.float64, dev)
     a_half = wp.array(half, dtype=wp.int32, device=dev)
@@ -417,12 +430,13 @@ def _microfacet_split_ds_kernel(mu_i: wp.array(dtype=wp.float64),
                                 phi_d: wp.array2d(dtype=wp.float64),
                                 phi_s: wp.array2d(dtype=wp.float64), eta: wp.float64,
                                 k: wp.float64, ef: wp.float64, ps: wp.float64,
-                                au: wp.float64, av: wp.float64, dist: int,
+                                au: wp.float64, av: wp.float64, dist: int, shadow: int,
                                 smooth: wp.array2d(dtype=wp.float64),
                                 q: wp.array2d(dtype=wp.float64)):
     p, j = wp.tid()
     wi, wo = _pair_directions_ds(mu_i[p], mu_o[p], phi_d[p, j], phi_s[p, j])
-    s, qq = physics.microfacet_smooth_q_film(wi, wo, eta, k, ef, ps, au, av, dist)
+    s, qq = physics.microfacet_smooth_q_shadowed(wi, wo, eta, k, ef, ps, au, av, dist,
+                                                 shadow)
     smooth[p, j] = s
     q[p, j] = qq
 
@@ -433,10 +447,12 @@ def _microfacet_eval_ds_kernel(mu_i: wp.array(dtype=wp.float64),
                                phi_d: wp.array2d(dtype=wp.float64),
                                phi_s: wp.array2d(dtype=wp.float64), eta: wp.float64,
                                k: wp.float64, ef: wp.float64, ps: wp.float64, au: wp.float64,
-                               av: wp.float64, dist: int, f: wp.array2d(dtype=wp.float64)):
+                               av: wp.float64, dist: int, shadow: int,
+                               f: wp.array2d(dtype=wp.float64)):
     p, j = wp.tid()
     wi, wo = _pair_directions_ds(mu_i[p], mu_o[p], phi_d[p, j], phi_s[p, j])
-    f[p, j] = physics.microfacet_eval_film(wi, wo, eta, k, ef, ps, au, av, dist)
+    f[p, j] = physics.microfacet_eval_shadowed(wi, wo, eta, k, ef, ps, au, av, dist,
+                                                shadow)
 
 
 def _launch_pairs_ds(kernel, mu_i, mu_o, phi_d, phi_s, params, n_out, device=None):
@@ -459,7 +475,7 @@ def _launch_pairs_ds(kernel, mu_i, mu_o, phi_d, phi_s, params, n_out, device=Non
 
 
 def microfacet_split_ds(mu_i, mu_o, phi_d, phi_s, eta, alpha_u, alpha_v,
-                        distribution="beckmann", device=None, film=None):
+                        distribution="beckmann", device=None, film=None, shadowing="separable"):
     """Split microfacet BSDF ``f = smooth * peak(q)`` of an anisotropic interface, sampled at
     azimuth differences ``phi_d`` and sums ``phi_s`` (radians) in the interface's tangent frame.
 
@@ -482,16 +498,18 @@ def microfacet_split_ds(mu_i, mu_o, phi_d, phi_s, eta, alpha_u, alpha_v,
         ``|h_t|^2 / h_z^2`` (pure geometry).
     """
     return _launch_pairs_ds(_microfacet_split_ds_kernel, mu_i, mu_o, phi_d, phi_s,
-                            _interface_params(eta, alpha_u, alpha_v, distribution, film), 2,
+                            _interface_params(eta, alpha_u, alpha_v, distribution, film,
+                                              shadowing), 2,
                             device)
 
 
 def microfacet_values_ds(mu_i, mu_o, phi_d, phi_s, eta, alpha_u, alpha_v,
-                         distribution="beckmann", device=None, film=None):
+                         distribution="beckmann", device=None, film=None, shadowing="separable"):
     """Full microfacet BSDF values f (1/sr) at the sample layout of
     :func:`microfacet_split_ds` (used as the reference of the projection tests)."""
     return _launch_pairs_ds(_microfacet_eval_ds_kernel, mu_i, mu_o, phi_d, phi_s,
-                            _interface_params(eta, alpha_u, alpha_v, distribution, film), 1,
+                            _interface_params(eta, alpha_u, alpha_v, distribution, film,
+                                              shadowing), 1,
                             device)[0]
 
 
@@ -502,18 +520,18 @@ def microfacet_values_ds(mu_i, mu_o, phi_d, phi_s, eta, alpha_u, alpha_v,
 @wp.kernel
 def _tabulated_ds_kernel(mu_i: wp.array(dtype=wp.float64), mu_o: wp.array(dtype=wp.float64),
                          eta: wp.float64, k: wp.float64, tab: wp.array(dtype=wp.float64),
-                         f: wp.array3d(dtype=wp.float64)):
+                         shadow: int, f: wp.array3d(dtype=wp.float64)):
     """f[p, a, b] = BSDF at phi_d = 2 pi a / Nd, phi_s = 2 pi b / Ns."""
     p, a, b = wp.tid()
     two_pi = wp.float64(6.283185307179586)
     phi_d = two_pi * wp.float64(a) / wp.float64(f.shape[1])
     phi_s = two_pi * wp.float64(b) / wp.float64(f.shape[2])
     wi, wo = _pair_directions_ds(mu_i[p], mu_o[p], phi_d, phi_s)
-    f[p, a, b] = tabulated.microfacet_eval_tabulated(wi, wo, eta, k, tab, 0)
+    f[p, a, b] = tabulated.microfacet_eval_tabulated_shadowed(wi, wo, eta, k, tab, 0, shadow)
 
 
 def tabulated_ds_samples(mu_i, mu_o, eta, table: np.ndarray, n_d: int, n_s: int,
-                         device=None) -> np.ndarray:
+                         device=None, shadowing: str = "separable") -> np.ndarray:
     """BSDF of a tabulated-NDF interface (:func:`tabulated.microfacet_eval_tabulated`) for
     ordinate pairs on the uniform azimuth grid ``phi_d = 2 pi a / n_d``, ``phi_s = 2 pi b / n_s``
     (interface frame, geometry of :func:`microfacet_split_ds`).
@@ -526,6 +544,8 @@ def tabulated_ds_samples(mu_i, mu_o, eta, table: np.ndarray, n_d: int, n_s: int,
         Relative index below/above (``eta + i k`` for a conductor).
     table : ndarray of float64
         Packed table (:meth:`layersim.ndf.table.NDFTable.packed`).
+    shadowing : str
+        The Smith term (:func:`physics.g2_from_masking`).
 
     Returns
     -------
@@ -544,7 +564,8 @@ def tabulated_ds_samples(mu_i, mu_o, eta, table: np.ndarray, n_d: int, n_s: int,
                                device=dev),
                       wp.float64(complex(eta).real), wp.float64(complex(eta).imag),
                       wp.array(np.ascontiguousarray(table, dtype=np.float64),
-                               dtype=wp.float64, device=dev)],
+                               dtype=wp.float64, device=dev),
+                      int(physics.SHADOWING_CODES[shadowing])],
               outputs=[f])
     return f.numpy()
 

@@ -22,7 +22,9 @@ The event (reflection or refraction, chosen with probability F(wi.m) for dielect
 ``f |wo.z| / pdf = G1(wo, m)`` for dielectric reflection and refraction (radiance convention; the
 ``eta_o^2`` of the BTDF cancels the one of the refraction Jacobian), and ``F(wi.m) G1(wo, m)`` for
 conductors. ``G1(wo, m) = 0`` when ``wo`` ends on the wrong side of the macro-surface: the
-single-scattering model loses that energy and the particle is terminated.
+single-scattering model loses that energy and the particle is terminated. With the
+height-correlated term (``physics.smith_g2``) the factor is ``G2(wi, wo, m) / G1(wi, m)``
+(:func:`sample_microfacet_shadowed`).
 :func:`microfacet_pdf` gives the density of the sampled ``wo`` so that tests can check
 ``weight == eval * |wo.z| / pdf`` pointwise.
 
@@ -288,10 +290,19 @@ def vndf_pdf(wi: Any, m: Any, au: Any, av: Any, dist: int):
 @wp.func
 def facet_event(wi: Any, m: Any, eta: Any, k: Any, F: Any, au: Any, av: Any, dist: int,
                 u4: Any):
+    """:func:`facet_event_shadowed` with the separable Smith term."""
+    wo, weight = facet_event_shadowed(wi, m, eta, k, F, au, av, dist, physics.SEPARABLE, u4)
+    return wo, weight
+
+
+@wp.func
+def facet_event_shadowed(wi: Any, m: Any, eta: Any, k: Any, F: Any, au: Any, av: Any,
+                         dist: int, shadow: int, u4: Any):
     """The event on the sampled microfacet ``m`` of :func:`sample_microfacet`, whose Fresnel
     reflectance at ``wi.m`` is ``F``: reflection weighted by ``F`` (conductor, ``k > 0``), or
-    reflection with probability ``F`` and refraction otherwise (dielectric). Returns
-    ``(wo, weight)``."""
+    reflection with probability ``F`` and refraction otherwise (dielectric), weighted by
+    ``G2(wi, wo) / G1(wi)`` of the shadowing ``shadow`` (:func:`physics.smith_g2_over_g1`).
+    Returns ``(wo, weight)``."""
     weight = type(au)(1.0)
     wo = reflect(wi, m)
     if k > au * type(au)(0.0):
@@ -301,7 +312,7 @@ def facet_event(wi: Any, m: Any, eta: Any, k: Any, F: Any, au: Any, av: Any, dis
             wt, ok = refract(wi, m, eta)
             if ok:
                 wo = wt
-    return wo, weight * physics.smith_g1(wo, m, au, av, dist)
+    return wo, weight * physics.smith_g2_over_g1(wi, wo, m, au, av, dist, shadow)
 
 
 @wp.func
@@ -343,6 +354,20 @@ def sample_microfacet_film(wi: Any, eta: Any, k: Any, eta_film: Any, phase_scale
     m = visible_normal(wi, au, av, dist, u1, u2, u3)
     F = physics.fresnel_interface(wp.dot(wi, m), eta, k, eta_film, phase_scale)
     wo, weight = facet_event(wi, m, eta, k, F, au, av, dist, u4)
+    return wo, weight
+
+
+@wp.func
+def sample_microfacet_shadowed(wi: Any, eta: Any, k: Any, eta_film: Any, phase_scale: Any,
+                               au: Any, av: Any, dist: int, shadow: int, u1: Any, u2: Any,
+                               u3: Any, u4: Any):
+    """:func:`sample_microfacet_film` for the shadowing-masking ``shadow``
+    (``physics.microfacet_eval_shadowed``): the same visible normal and event, weighted by
+    ``G2(wi, wo) / G1(wi)``; ``phase_scale = 0``: no film. The density is
+    :func:`microfacet_pdf_film`'s, which has only ``G1(wi)``."""
+    m = visible_normal(wi, au, av, dist, u1, u2, u3)
+    F = physics.fresnel_interface(wp.dot(wi, m), eta, k, eta_film, phase_scale)
+    wo, weight = facet_event_shadowed(wi, m, eta, k, F, au, av, dist, shadow, u4)
     return wo, weight
 
 

@@ -11,7 +11,8 @@ that :mod:`layersim.kernels.opencl_codegen` translates.
 
 BSDF (Wang et al. 2008, eq. (1)-(5), with Walter et al. 2007 for refraction): the microfacet
 model of :mod:`.physics` with ``D`` from the table and ``G = S(wi) S(wo)``, each factor with the
-side condition ``chi+((w.m) / (w.n))``.
+side condition ``chi+((w.m) / (w.n))``; or, for a height-correlated term, ``G`` from the two
+``S`` by :func:`.physics.g2_from_masking` (``S`` is Smith's ``G1`` of the table's D).
 
 Sampling: a normal ``m`` is drawn from the table's cells (marginal in theta, conditional in phi;
 uniform in ``sin^2 theta`` and ``phi`` inside the cell), with density ``p(m)`` per steradian close
@@ -140,16 +141,25 @@ def masking(w: Any, m: Any, tab: Any, off: int):
 
 @wp.func
 def microfacet_eval_tabulated(wi: Any, wo: Any, eta: Any, k: Any, tab: Any, off: int):
-    """Microfacet BSDF ``f(wi, wo)`` (1/sr, no cosine) with the tabulated NDF at ``off``:
-    dielectric when ``k == 0`` (both sides, radiance convention), conductor when ``k > 0``.
-    Directions in the interface's tangent frame, as :func:`physics.microfacet_eval`."""
+    """:func:`microfacet_eval_tabulated_shadowed` with the separable term."""
+    return microfacet_eval_tabulated_shadowed(wi, wo, eta, k, tab, off, physics.SEPARABLE)
+
+
+@wp.func
+def microfacet_eval_tabulated_shadowed(wi: Any, wo: Any, eta: Any, k: Any, tab: Any, off: int,
+                                       shadow: int):
+    """Microfacet BSDF ``f(wi, wo)`` (1/sr, no cosine) with the tabulated NDF at ``off`` and the
+    Smith term ``shadow`` (:func:`physics.g2_from_masking`): dielectric when ``k == 0`` (both
+    sides, radiance convention), conductor when ``k > 0``. Directions in the interface's
+    tangent frame, as :func:`physics.microfacet_eval`."""
     zero = eta * type(eta)(0.0)
     h, eta_i, eta_o = physics.half_vector(wi, wo, eta, k)
     hlen2 = wp.dot(h, h)
     if hlen2 <= zero or h[2] <= zero:
         return zero
     m = h / wp.sqrt(hlen2)
-    g = masking(wi, m, tab, off) * masking(wo, m, tab, off)
+    g = physics.g2_from_masking(masking(wi, m, tab, off), masking(wo, m, tab, off),
+                                wi[2] * wo[2] < zero, shadow)
     if g <= zero:
         return zero
     theta, phi = angles(m)
@@ -234,8 +244,17 @@ def normal_pdf(tab: Any, off: int, m: Any):
 @wp.func
 def sample_microfacet_tabulated(wi: Any, eta: Any, k: Any, tab: Any, off: int, u1: Any,
                                 u2: Any, u3: Any):
-    """Sample ``wo`` for :func:`microfacet_eval_tabulated` (``wi`` in the tangent frame, either
-    side for a dielectric): ``u1, u2`` draw the normal, ``u3`` the event. Returns
+    """:func:`sample_microfacet_tabulated_shadowed` with the separable term."""
+    wo, weight = sample_microfacet_tabulated_shadowed(wi, eta, k, tab, off, physics.SEPARABLE,
+                                                      u1, u2, u3)
+    return wo, weight
+
+
+@wp.func
+def sample_microfacet_tabulated_shadowed(wi: Any, eta: Any, k: Any, tab: Any, off: int,
+                                         shadow: int, u1: Any, u2: Any, u3: Any):
+    """Sample ``wo`` for :func:`microfacet_eval_tabulated_shadowed` (``wi`` in the tangent
+    frame, either side for a dielectric): ``u1, u2`` draw the normal, ``u3`` the event. Returns
     ``(wo, weight)`` with ``weight = f |wo.z| / pdf`` (0 where the single-scattering model
     loses the particle: a normal facing away from ``wi``, or ``wo`` masked)."""
     zero = eta * type(eta)(0.0)
@@ -254,7 +273,8 @@ def sample_microfacet_tabulated(wi: Any, eta: Any, k: Any, tab: Any, off: int, u
                 wo = wt
     theta, phi = angles(m)
     d = ndf_lookup(tab, off, theta, phi)
-    g = masking(wi, m, tab, off) * masking(wo, m, tab, off)
+    g = physics.g2_from_masking(masking(wi, m, tab, off), masking(wo, m, tab, off),
+                                wi[2] * wo[2] < zero, shadow)
     return wo, weight * g * d * wp.abs(ci) / (wp.abs(wi[2]) * pm)
 
 

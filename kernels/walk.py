@@ -9,9 +9,10 @@ arrays described below, launches, and reduces the integer tallies.
 Stack model
 -----------
 The stack is a column of ``S`` slabs between ``S + 1`` boundaries, top to bottom: boundary ``b`` is
-the top of slab ``b``, boundary ``S`` the bottom of the stack. Boundary records (``bnd_i``: 2 ints,
+the top of slab ``b``, boundary ``S`` the bottom of the stack. Boundary records (``bnd_i``: 3 ints,
 ``bnd_f``: :data:`BND_F` floats each) hold the kind (:data:`NULL` index-matched pass-through,
 :data:`DIELECTRIC`, :data:`CONDUCTOR`, :data:`DIFFUSE`, :data:`MEASURED`), the distribution code,
+the shadowing code (:data:`.physics.SHADOWING_CODES`),
 the relative index ``eta`` and ``k``, ``alpha_u``, ``alpha_v``, ``cos``/``sin`` of the
 tangent-frame rotation, the Lambertian albedo, the offset of the energy-compensation tables, and
 the thin film of a filmed interface (its index relative to the medium above and its phase scale
@@ -67,8 +68,8 @@ DIELECTRIC = wp.constant(1)
 CONDUCTOR = wp.constant(2)
 DIFFUSE = wp.constant(3)
 MEASURED = wp.constant(4)
-#: ints per boundary record: kind, distribution
-BND_I = wp.constant(2)
+#: ints per boundary record: kind, distribution, shadowing (:func:`.physics.smith_g2`)
+BND_I = wp.constant(3)
 #: floats per boundary record: eta, k, alpha_u, alpha_v, cos(rot), sin(rot), albedo, offset of
 #: the boundary's energy-compensation tables in ``bnd_f`` (0: none; :mod:`.compensation`), the
 #: film's relative index and phase scale (0: no film; :func:`.physics.fresnel_interface`)
@@ -121,6 +122,9 @@ class Features:
         Slabs with ``tau > 0`` (flights and Henyey-Greenstein scattering).
     film : bool
         Interfaces carrying a thin film (Airy reflectance in place of Fresnel's).
+    height_correlated : bool
+        Rough interfaces with a height-correlated Smith term (:func:`.physics.smith_g2`,
+        :func:`.physics.g2_from_masking`).
     """
 
     smooth: bool = True
@@ -132,6 +136,7 @@ class Features:
     measured: bool = True
     media: bool = True
     film: bool = True
+    height_correlated: bool = True
 
     @classmethod
     def every(cls) -> "Features":
@@ -160,7 +165,7 @@ def features_of(bnd_i: np.ndarray, bnd_f: np.ndarray, slab_f: np.ndarray,
                 n_slabs: int) -> Features:
     """The :class:`Features` the records of a flattened stack use (host side)."""
     records = np.asarray(bnd_i).reshape(-1, int(BND_I))
-    kinds, dists = records[:, 0], records[:, 1]
+    kinds, dists, shadows = records[:, 0], records[:, 1], records[:, 2]
     rec = np.asarray(bnd_f)[:(n_slabs + 1) * int(BND_F)].reshape(-1, int(BND_F))
     microfacet = ((kinds == DIELECTRIC) | (kinds == CONDUCTOR))
     smooth = microfacet & (rec[:, 2] == 0.0) & (dists != tabulated.TABULATED)
@@ -175,7 +180,8 @@ def features_of(bnd_i: np.ndarray, bnd_f: np.ndarray, slab_f: np.ndarray,
         diffuse=bool((kinds == DIFFUSE).any()),
         measured=bool((kinds == MEASURED).any()),
         media=bool(n_slabs > 0 and (slabs[:, 0] > 0).any()),
-        film=bool((microfacet & (rec[:, FILM_PHASE] > 0)).any()))
+        film=bool((microfacet & (rec[:, FILM_PHASE] > 0)).any()),
+        height_correlated=bool((rough & (shadows != physics.SEPARABLE)).any()))
 
 @wp.func
 def find_bin(x: wp.float32, edges: wp.array(dtype=wp.float32), n_edges: int):
@@ -301,11 +307,20 @@ def _boundary_scatter(f: Features):
             cr = bnd_f[o + 4]
             sr = bnd_f[o + 5]
             wl = sampling.to_tangent_frame(wi, cr, sr)
+            shadow = int(0)                     # physics.SEPARABLE
+            if wp.static(f.height_correlated):
+                shadow = bnd_i[BND_I * b + 2]
             if wp.static(f.tabulated):
                 if dist == tabulated.TABULATED:     # alpha_u's slot: the table's offset
-                    wt, wt_weight = tabulated.sample_microfacet_tabulated(wl, eta, k, bnd_f,
-                                                                          int(au), v0, u1, u3)
+                    wt, wt_weight = tabulated.sample_microfacet_tabulated_shadowed(
+                        wl, eta, k, bnd_f, int(au), shadow, v0, u1, u3)
                     return sampling.from_tangent_frame(wt, cr, sr), wt_weight * scale
+            if wp.static(f.height_correlated):  # any film rides along (phase 0: none)
+                if shadow != physics.SEPARABLE:
+                    wh, wh_weight = sampling.sample_microfacet_shadowed(
+                        wl, eta, k, bnd_f[o + FILM_ETA], bnd_f[o + FILM_PHASE], au, av, dist,
+                        shadow, v0, u1, u2, u3)
+                    return sampling.from_tangent_frame(wh, cr, sr), wh_weight * scale
             if wp.static(f.film):
                 if bnd_f[o + FILM_PHASE] > wp.float32(0.0):
                     wg, wg_weight = sampling.sample_microfacet_film(

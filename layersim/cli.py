@@ -188,6 +188,22 @@ def cmd_plan(args) -> int:
     return 0
 
 
+def cmd_import_pbrt(args) -> int:
+    from .pbrtimport import pbrt_to_dict
+    from .tomlwrite import dumps
+    path = Path(args.file)
+    data, notes = pbrt_to_dict(path.read_text(encoding="utf-8"), path.stem)
+    scene = Scene.from_dict(data, source=str(path))       # refuse before writing anything
+    out = Path(args.output or path.with_suffix(".toml").name)
+    out.write_text(dumps(data, f"imported from {path.name} by layersim import-pbrt"),
+                   encoding="utf-8")
+    print(scene.describe())
+    for note in notes:
+        print(f"note: {note}")
+    print(f"wrote {out}")
+    return 0
+
+
 def _albedo_table(bsdf, angles) -> str:
     rows = []
     th = np.radians(angles)
@@ -690,6 +706,13 @@ reported) or with --partial.""",
   layersim compare gold.npz examples/coated_gold.toml --plot z.png
   layersim compare gold.npz coated_gold.lsim
   layersim compare gold.npz gold_seed1.npz""",
+    "import-pbrt": """examples:
+  layersim import-pbrt coated.pbrt -o coated.toml
+  layersim solve coated.toml
+
+FILE holds one pbrt-v4 Material or MakeNamedMaterial (coatedconductor, coateddiffuse, conductor,
+dielectric, diffuse) with numeric parameters; the scene is GGX with pbrt-v4's height-correlated
+Smith term (docs/pbrt.md).""",
     "subtract": """examples:
   layersim solve stack.toml                                # stack.lsim
   layersim solve lacquer.toml --like stack.lsim            # lacquer.lsim, same discretisation
@@ -729,6 +752,11 @@ def build_parser() -> argparse.ArgumentParser:
     sp = _subparser(sub, "plan", "print the discretisation plan of a scene (no heavy work)")
     sp.add_argument("scene", help="scene file (TOML)")
     sp.set_defaults(func=cmd_plan)
+    sp = _subparser(sub, "import-pbrt", "write the scene of a pbrt-v4 material as TOML")
+    sp.add_argument("file", help="pbrt-v4 scene text with one material")
+    sp.add_argument("-o", "--output", help="scene file to write (default: FILE_STEM.toml in "
+                                           "the current directory)")
+    sp.set_defaults(func=cmd_import_pbrt)
     sp = _subparser(sub, "solve", "solve a scene with the adding equations", [quiet])
     sp.add_argument("scene", help="scene file (TOML)")
     sp.add_argument("-o", "--output", help="where to save the solved BSDF (default: "

@@ -32,8 +32,8 @@ from typing import Any, Mapping
 import numpy as np
 
 from .errors import SceneError
-from .layers import (COMPENSATIONS, DISTRIBUTIONS, Conductor, Dielectric, Diffuse, Layer,
-                     Measured, Medium, kind_named, kind_of, names)
+from .layers import (COMPENSATIONS, DISTRIBUTIONS, SHADOWINGS, Conductor, Dielectric, Diffuse,
+                     Layer, Measured, Medium, kind_named, kind_of, names)
 from .layers.fields import MAX_IOR as _MAX_IOR
 from .layers.fields import Ctx as _Ctx
 from .layers.fields import real_value as _real
@@ -111,6 +111,50 @@ class Scene:
     wavelengths: tuple[float, ...] | None = None
 
     # ---- construction ------------------------------------------------------------------
+
+    def to_dict(self) -> dict:
+        """The scene as a dict with the TOML file's content (``docs/conventions.md``), which
+        :meth:`from_dict` reads back to an equal scene: each layer's table from its kind
+        (:meth:`layersim.layers.LayerKind.to_raw`; every field written explicitly, per-channel
+        values as lists where the channels differ), ``[stack]`` and the ``[discretization]``
+        overrides.
+
+        Raises
+        ------
+        SceneError
+            For a layer that cannot be written back (a measured base: its data come from its
+            file), naming the layer and its kind.
+        """
+        stack = {"name": self.name, "top_ior": self.top_ior}
+        if self.wavelengths is not None:
+            stack["wavelengths"] = list(self.wavelengths)
+        layers = []
+        for i, records in enumerate(zip(*self.stacks)):
+            try:
+                layers.append(kind_of(records[0]).to_raw(records))
+            except SceneError as exc:
+                raise SceneError(str(exc).split(": ", 1)[-1], layer=i,
+                                 kind=records[0].kind, source=self.source) from None
+        out = {"stack": stack, "layer": layers}
+        disc = {k: v for k, v in self.discretization.__dict__.items() if v is not None}
+        if disc:
+            out["discretization"] = disc
+        return out
+
+    @classmethod
+    def from_pbrt(cls, text: str, name: str = "pbrt") -> "Scene":
+        """The scene of the one material of a pbrt-v4 scene text (``coatedconductor``,
+        ``coateddiffuse``, ``conductor``, ``dielectric``, ``diffuse``; GGX with pbrt-v4's
+        height-correlated Smith term): :func:`layersim.pbrtimport.pbrt_to_dict`, whose notes
+        say what was not needed.
+
+        Raises
+        ------
+        SceneError
+            An unsupported material, parameter or named spectrum (the parameter is named).
+        """
+        from .pbrtimport import pbrt_to_dict
+        return cls.from_dict(pbrt_to_dict(text, name)[0])
 
     @classmethod
     def from_toml(cls, path: str | Path) -> "Scene":
@@ -241,7 +285,7 @@ def as_scene(value, caller: str = "solve()") -> Scene:
 # --------------------------------------------------------------------------------------------
 
 _TOP_FIELDS = {"layer", "stack", "discretization"}
-_STACK_FIELDS = {"top_ior", "name", "energy_compensation", "wavelengths"}
+_STACK_FIELDS = {"top_ior", "name", "energy_compensation", "wavelengths", "shadowing"}
 #: Vacuum wavelengths (nm) a scene may give its channels.
 WAVELENGTH_RANGE = (100.0, 20_000.0)
 _DISC_FIELDS = {"n", "md", "ms", "quadrature", "tol", "theta_full"}
@@ -291,7 +335,7 @@ def _parse_stack(stack: Any, source: str | None, default_name: str) -> tuple:
     unknown = set(stack) - _STACK_FIELDS
     if unknown:
         raise SceneError(f"unknown field '{sorted(unknown)[0]}' in [stack] (allowed: top_ior, "
-                         "name, energy_compensation, wavelengths)", source=source)
+                         "name, energy_compensation, wavelengths, shadowing)", source=source)
     ctx = _Ctx(source)
     top_ior = _real(ctx, "stack.top_ior", stack.get("top_ior", 1.0), lo=0.0, hi=_MAX_IOR,
                     lo_open=True)
@@ -302,8 +346,13 @@ def _parse_stack(stack: Any, source: str | None, default_name: str) -> tuple:
     if compensation not in COMPENSATIONS:
         raise SceneError(f"[stack] energy_compensation: unknown compensation {compensation!r}; "
                          "expected one of " + ", ".join(COMPENSATIONS), source=source)
+    shadowing = stack.get("shadowing", "separable")
+    if shadowing not in SHADOWINGS:
+        raise SceneError(f"[stack] shadowing: unknown shadowing {shadowing!r}; expected one of "
+                         + ", ".join(SHADOWINGS), source=source)
     wavelengths = _parse_wavelengths(ctx, stack.get("wavelengths"))
-    return top_ior, name, {"energy_compensation": compensation, "wavelengths": wavelengths}
+    return top_ior, name, {"energy_compensation": compensation, "wavelengths": wavelengths,
+                           "shadowing": shadowing}
 
 
 def _parse_layers(raw_layers: Any, source: str | None, defaults: Mapping[str, Any]) -> tuple:

@@ -36,7 +36,7 @@ class StackArrays:
 
     Attributes
     ----------
-    bnd_i : ndarray of int32, shape (2 * (n_slabs + 1),)
+    bnd_i : ndarray of int32, shape (3 * (n_slabs + 1),)
         Per boundary: kind code (``walk.NULL`` ...), distribution code.
     bnd_f : ndarray of float32, shape (10 * (n_slabs + 1) + tables,)
         Per boundary (:data:`layersim.kernels.walk.BND_F` floats): eta, k (relative to the
@@ -69,7 +69,7 @@ class StackArrays:
 
 
 #: The record of a null boundary: an index-matched pass-through.
-NULL_BOUNDARY = WalkBoundary((walk.NULL, 0), (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0))
+NULL_BOUNDARY = WalkBoundary((walk.NULL, 0, 0), (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0))
 
 
 def _boundary(scene: Scene, i: int | None) -> WalkBoundary:

@@ -184,7 +184,7 @@ def test_stack_layout():
         {"kind": "conductor", "ior": [0.2, 3.0], "roughness": 0.1, "distribution": "ggx"}],
         "stack": {"top_ior": 1.1}})
     st = flatten(s)
-    kinds = st.bnd_i[0::2].tolist()
+    kinds = st.bnd_i[0::3].tolist()
     assert kinds == [walk.NULL, walk.DIELECTRIC, walk.DIELECTRIC, walk.NULL, walk.NULL,
                      walk.CONDUCTOR]
     assert st.n_slabs == 5 and st.opaque
@@ -196,7 +196,7 @@ def test_stack_layout():
     assert f[1, 4:6] == pytest.approx([0, 1], abs=1e-7)          # rotated 90 degrees
     assert f[2, 0] == pytest.approx(1.2 / 1.5)
     assert f[5, :2] == pytest.approx([0.2 / 1.2, 3.0 / 1.2])
-    assert st.bnd_i[1::2].tolist()[5] == 1                         # ggx
+    assert st.bnd_i[1::3].tolist()[5] == 1                         # ggx
 
 
 # ------------------------------------------------------------------------------------------------

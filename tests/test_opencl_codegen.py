@@ -38,6 +38,11 @@ def _dist(r, n):
     return r.integers(0, 2, n)
 
 
+def _shadow(r, n):
+    """Codes of physics.SHADOWING_CODES: separable, height-correlated, its Beta form."""
+    return r.integers(0, 3, n)
+
+
 def _words(r, n):
     return r.integers(0, 2 ** 32, n, dtype=np.uint64).astype(np.uint32)
 
@@ -73,6 +78,14 @@ CASES = [
      lambda r, n: [_unit(r, n), _unit(r, n), r.uniform(1.1, 2.0, n), np.zeros(n),
                    r.uniform(1.0, 2.5, n), r.uniform(0.0, 40.0, n), _alpha(r, n),
                    _alpha(r, n), _dist(r, n)]),
+    ("log_gamma", physics.log_gamma, "T", lambda r, n: [r.uniform(1.0, 30.0, n)]),
+    ("smith_g2", physics.smith_g2, "VVVTTii",
+     lambda r, n: [_unit(r, n), _unit(r, n), _unit(r, n, True), _alpha(r, n), _alpha(r, n),
+                   _dist(r, n), _shadow(r, n)]),
+    ("microfacet_eval_shadowed (dielectric)", physics.microfacet_eval_shadowed, "VVTTTTTTii",
+     lambda r, n: [_unit(r, n), _unit(r, n), r.uniform(1.1, 2.0, n), np.zeros(n),
+                   np.zeros(n), np.zeros(n), _alpha(r, n), _alpha(r, n), _dist(r, n),
+                   _shadow(r, n)]),
     ("lambert_eval", physics.lambert_eval, "VVT",
      lambda r, n: [_unit(r, n), _unit(r, n), r.uniform(0, 1, n)]),
     ("hg_eval", physics.hg_eval, "TT",
@@ -100,6 +113,10 @@ CASES = [
      lambda r, n: [_unit(r, n, True), r.uniform(0.1, 2.0, n), r.uniform(1, 4, n),
                    r.uniform(1.0, 2.5, n), r.uniform(0.0, 40.0, n), _alpha(r, n),
                    _alpha(r, n), _dist(r, n), _u(r, n), _u(r, n), _u(r, n), _u(r, n)]),
+    ("sample_microfacet_shadowed", sampling.sample_microfacet_shadowed, "VTTTTTTiiTTTT",
+     lambda r, n: [_unit(r, n), r.uniform(1.1, 2.0, n), np.zeros(n), np.zeros(n),
+                   np.zeros(n), _alpha(r, n), _alpha(r, n), _dist(r, n), _shadow(r, n),
+                   _u(r, n), _u(r, n), _u(r, n), _u(r, n)]),
     ("microfacet_pdf", sampling.microfacet_pdf, "VVTTTTi",
      lambda r, n: [_unit(r, n), _unit(r, n), r.uniform(1.1, 2.0, n), np.zeros(n),
                    _alpha(r, n), _alpha(r, n), _dist(r, n)]),

@@ -31,6 +31,11 @@ SCENES = {
                                 "film": {"thickness": 400.0, "ior": 1.4}}],
                      "stack": {"wavelengths": [550.0]}},
                     {"beckmann", "film"}),
+    "height-correlated ggx coat": (
+        {"stack": {"shadowing": "height-correlated-beta"},
+         "layer": [{"kind": "dielectric", "ior": 1.5, "roughness": 0.3, "distribution": "ggx"},
+                   {"kind": "conductor", "ior": GOLD, "roughness": 0.2, "distribution": "ggx"}]},
+        {"ggx", "height_correlated"}),
     "clear gap between two interfaces": (
         {"layer": [{"kind": "dielectric", "ior": 1.5, "roughness": 0.2},
                    {"kind": "dielectric", "ior": 1.0, "roughness": 0.2}]},
@@ -59,7 +64,7 @@ def test_every_path_is_the_union_and_the_default():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["coated gold", "hg slab", "ggx coat over hg over diffuse",
-                                  "filmed gold"])
+                                  "filmed gold", "height-correlated ggx coat"])
 def test_a_kernel_without_the_unused_paths_walks_the_same_paths(name, monkeypatch):
     """Same seed, same particles: the specialised kernel and the one with every path agree to
     float32 rounding (0.02 standard errors in every bin), and report what was left out."""
@@ -87,8 +92,10 @@ def test_the_opencl_translation_leaves_the_same_paths_out():
     assert "sample_microfacet" in src and "sample_hg" in src and len(src) < 0.7 * len(every)
 
 
-def test_the_opencl_walk_runs_the_specialised_kernel(cl_device):
-    data, _ = SCENES["ggx coat over hg over diffuse"]
+@pytest.mark.parametrize("name", ["ggx coat over hg over diffuse",
+                                  "height-correlated ggx coat"])
+def test_the_opencl_walk_runs_the_specialised_kernel(cl_device, name):
+    data, _ = SCENES[name]
     scene = layersim.Scene.from_dict(data)
     a = mc.simulate(scene, WI, 20_000, MU, PHI, backend="opencl", seed=2)
     b = mc.simulate(scene, WI, 20_000, MU, PHI, backend="warp-cpu", seed=2)

@@ -178,16 +178,20 @@ CONDUCTOR = {"multiple-scattering": multiple_scattering_conductor,
              "layerlab": layerlab_conductor}
 
 
-def lobes_for(mode: str, eta: complex, alpha: float, dist: str) -> Lobes | None:
+def lobes_for(mode: str, eta: complex, alpha: float, dist: str,
+              shadowing: str = "separable") -> Lobes | None:
     """The compensation term ``mode`` of an isotropic rough interface of relative index ``eta``
-    (complex: conductor), roughness ``alpha`` and distribution ``dist``; None for ``"none"``."""
+    (complex: conductor), roughness ``alpha``, distribution ``dist`` and Smith term
+    ``shadowing``; None for ``"none"``."""
     if mode == "none":
         return None
     eta = complex(eta)
     if eta.imag > 0:
-        e1 = tables.albedos(eta.real, eta.imag, alpha, dist, unit_fresnel=True).r_top
+        e1 = tables.albedos(eta.real, eta.imag, alpha, dist, unit_fresnel=True,
+                            shadowing=shadowing).r_top
         return CONDUCTOR[mode](e1, tables.fresnel_average(eta.real, eta.imag))
-    return DIELECTRIC[mode](tables.albedos(eta.real, 0.0, alpha, dist), eta.real)
+    return DIELECTRIC[mode](tables.albedos(eta.real, 0.0, alpha, dist, shadowing=shadowing),
+                            eta.real)
 
 
 def layer_lobes(layer, eta_above: float) -> Lobes | None:
@@ -198,4 +202,4 @@ def layer_lobes(layer, eta_above: float) -> Lobes | None:
     if getattr(layer, "energy_compensation", "none") == "none" or layer.smooth:
         return None
     return lobes_for(layer.energy_compensation, complex(layer.ior) / eta_above, layer.alpha,
-                     layer.distribution)
+                     layer.distribution, layer.shadowing)

@@ -24,7 +24,7 @@ import numpy as np
 
 from .. import tablecache
 from ..kernels import compensation as kcomp
-from ..kernels.physics import DISTRIBUTION_CODES
+from ..kernels.physics import DISTRIBUTION_CODES, SHADOWING_CODES
 from ..kernels.runtime import ensure_init
 
 import warp as wp
@@ -79,7 +79,8 @@ class Albedos:
     t_bottom: np.ndarray
 
 
-def _compute(eta: float, k: float, alpha: float, dist: str, unit_fresnel: bool) -> Albedos:
+def _compute(eta: float, k: float, alpha: float, dist: str, unit_fresnel: bool,
+             shadowing: str) -> Albedos:
     ensure_init()
     dev = wp.get_device("cpu")
     mu = np.maximum(nodes(), MU_HORIZON)
@@ -97,7 +98,8 @@ def _compute(eta: float, k: float, alpha: float, dist: str, unit_fresnel: bool) 
                           wp.array(un, dtype=wp.float64, device=dev),
                           wp.array(uw, dtype=wp.float64, device=dev), N_PHI,
                           wp.float64(eta), wp.float64(k), wp.float64(alpha),
-                          int(DISTRIBUTION_CODES[dist]), int(unit_fresnel)],
+                          int(DISTRIBUTION_CODES[dist]), int(SHADOWING_CODES[shadowing]),
+                          int(unit_fresnel)],
                   outputs=[r, t])
         out += [r.numpy().sum(axis=1), t.numpy().sum(axis=1)]
     return Albedos(*out)
@@ -110,20 +112,23 @@ def _cache_path(key: str):
 
 @functools.lru_cache(maxsize=256)
 def albedos(eta: float, k: float, alpha: float, dist: str,
-            unit_fresnel: bool = False) -> Albedos:
+            unit_fresnel: bool = False, shadowing: str = "separable") -> Albedos:
     """Albedo tables of an isotropic rough interface of relative index ``eta + i k`` (``k >
-    0``: conductor), roughness ``alpha`` and distribution ``dist``; with ``unit_fresnel`` the
-    conductor's Fresnel factor is 1. Read from the disk cache when present, else computed
-    (about a second on one CPU core) and stored there."""
+    0``: conductor), roughness ``alpha``, distribution ``dist`` and Smith term ``shadowing``
+    (:func:`layersim.kernels.physics.smith_g2`); with ``unit_fresnel`` the conductor's Fresnel
+    factor is 1. Read from the disk cache when present, else computed (about a second on one
+    CPU core) and stored there."""
+    # the separable term keeps the key it had before the shadowing choice (its cached tables)
     key = (f"v{VERSION} n{NODES} u{N_U} p{N_PHI} h{MU_HORIZON!r} eta{eta!r} k{k!r} "
-           f"a{alpha!r} {dist} unit{int(unit_fresnel)}")
+           f"a{alpha!r} {dist} unit{int(unit_fresnel)}"
+           + ("" if shadowing == "separable" else f" {shadowing}"))
     path = _cache_path(key)
     fields = ("r_top", "t_top", "r_bottom", "t_bottom")
     stored = tablecache.read(path)
     # a file of another key (or of missing fields) is recomputed and replaced
     if stored is not None and str(stored.get("key")) == key and all(f in stored for f in fields):
         return Albedos(*(stored[f] for f in fields))
-    tab = _compute(eta, k, alpha, dist, unit_fresnel)
+    tab = _compute(eta, k, alpha, dist, unit_fresnel, shadowing)
     tablecache.write(path, key=key, **{f: getattr(tab, f) for f in fields})
     return tab
 

@@ -121,21 +121,21 @@ def _qs_for(ms: int) -> int:
     return max(QS_MIN, 1 << math.ceil(math.log2(4 * ms + 4)))
 
 
-def _coarse(mu_i, mu_o, eta, au, av, dist, qs, film=None):
+def _coarse(mu_i, mu_o, eta, au, av, dist, qs, film=None, shadowing="separable"):
     """Peak parameters at every phi_s sample and a bound of the BSDF per pair, evaluated
     for :data:`COARSE_ELEMENTS` pair samples at a time (``film``: the interface's thin film,
-    :meth:`layersim.layers.Interface.film_params`, as in every function of this module that
-    takes it)."""
+    :meth:`layersim.layers.Interface.film_params`, and ``shadowing``, its Smith term, as in
+    every function of this module that takes them)."""
     step = max(1, COARSE_ELEMENTS // ((qs // 2 + 1) * N_COARSE_D))
     if mu_i.size <= step:
-        return _coarse_chunk(mu_i, mu_o, eta, au, av, dist, qs, film)
+        return _coarse_chunk(mu_i, mu_o, eta, au, av, dist, qs, film, shadowing)
     parts = [_coarse_chunk(mu_i[at:at + step], mu_o[at:at + step], eta, au, av, dist, qs,
-                           film)
+                           film, shadowing)
              for at in range(0, mu_i.size, step)]
     return tuple(np.concatenate(x) for x in zip(*parts))
 
 
-def _coarse_chunk(mu_i, mu_o, eta, au, av, dist, qs, film=None):
+def _coarse_chunk(mu_i, mu_o, eta, au, av, dist, qs, film=None, shadowing="separable"):
     """:func:`_coarse` of one chunk of pairs."""
     P = mu_i.size
     ns = qs // 2 + 1
@@ -152,7 +152,8 @@ def _coarse_chunk(mu_i, mu_o, eta, au, av, dist, qs, film=None):
     cd = np.linspace(0.0, 2.0 * np.pi, N_COARSE_D, endpoint=False)
     pd = np.broadcast_to(np.tile(cd, ns), (P, N_COARSE_D * ns))
     ps = np.broadcast_to(np.repeat(phi_s, N_COARSE_D), (P, N_COARSE_D * ns))
-    s, _ = kproj.microfacet_split_ds(mu_i, mu_o, pd, ps, eta, au, av, dist, film=film)
+    s, _ = kproj.microfacet_split_ds(mu_i, mu_o, pd, ps, eta, au, av, dist, film=film,
+                                     shadowing=shadowing)
     smax = np.abs(s).max(axis=1)
     bound = 10.0 * fourier.peak_values(q0.min(axis=1), dist) * smax
     return theta0, q0, qpi, bound
@@ -186,7 +187,7 @@ def series_lengths(grid: Grid, layer, eta_above: float, ms: int, relerr: float):
         :func:`layersim.ingredients.microfacet.series_lengths` returns it.
     """
     eta = complex(layer.ior) / eta_above
-    film = layer.film_params(eta_above)
+    film, shadowing = layer.film_params(eta_above), layer.shadowing
     names = ("Rt",) if layer.opaque else ("Rt", "Rb", "Ttb", "Tbt")
     fw = grid.flux_weight
     lengths, mu_min = [], []
@@ -194,7 +195,7 @@ def series_lengths(grid: Grid, layer, eta_above: float, ms: int, relerr: float):
     for name in names:
         mu_i, mu_o, o, i = block_pairs(grid, name, triangle=False)
         _, q0, qpi, bound = _coarse(mu_i, mu_o, eta, layer.alpha_u, layer.alpha_v,
-                                    layer.distribution, qs, film)
+                                    layer.distribution, qs, film, shadowing)
         sig = bound * 2.0 * np.pi * np.maximum(fw[i], fw[o]) > ENERGY_DROP
         n = fourier.peak_length(q0[sig].ravel(), qpi[sig].ravel(), layer.distribution, relerr)
         lengths.append(n.reshape(-1, q0.shape[1]).max(axis=1) + L_FIT
@@ -226,7 +227,7 @@ def _tau_params(mu_i, mu_o, eta, dist):
 
 
 def _fit_smooth(mu_i, mu_o, theta_c, width, tau_ab, q_pars, phi_s, eta, au, av, dist, L,
-                q_nodes, film=None):
+                q_nodes, film=None, shadowing="separable"):
     """Chebyshev fit (on the support ``theta_c +- width``) of the preconditioned smooth factor
     ``smooth / (1 + tau)^2`` at every phi_s sample: coefficients (P, L, ns), residual (P, ns)."""
     theta0, q0, qpi = q_pars
@@ -235,7 +236,8 @@ def _fit_smooth(mu_i, mu_o, theta_c, width, tau_ab, q_pars, phi_s, eta, au, av, 
     Q = t.shape[1]
     pd = np.tile(theta_c[:, None] + t, (1, ns))            # columns: phi_s sample major
     ps = np.broadcast_to(np.repeat(phi_s, Q)[None, :], (P, ns * Q))
-    s, _ = kproj.microfacet_split_ds(mu_i, mu_o, pd, ps, eta, au, av, dist, film=film)
+    s, _ = kproj.microfacet_split_ds(mu_i, mu_o, pd, ps, eta, au, av, dist, film=film,
+                                     shadowing=shadowing)
     s = s.reshape(P, ns, Q)
     tau = tau_ab[0][:, None] + tau_ab[1][:, None] * np.cos(theta_c[:, None] + t)
     factor = (1.0 + np.maximum(tau, 0.0)) ** 2
@@ -252,7 +254,8 @@ def _fit_smooth(mu_i, mu_o, theta_c, width, tau_ab, q_pars, phi_s, eta, au, av, 
     return series.fit_restricted(x, wt, s.transpose(0, 2, 1), rel, L)
 
 
-def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, geometry, relerr, film=None):
+def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, geometry, relerr, film=None,
+                   shadowing="separable"):
     """Coefficients ``F[p, d, ms + s] = f_{d,s}`` (d >= 0, |s| <= ms) of a batch of pairs
     (series length in ``d`` at ``relerr``), the pairs whose phi_s sampling aliases, the dropped
     |s| > ms fraction and the total L2."""
@@ -261,14 +264,14 @@ def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, geometry, relerr, 
     phi_s = np.arange(ns) * (2.0 * np.pi / qs)
     tau_ab = _tau_params(mu_i, mu_o, eta, dist)
     coef, resid = _fit_smooth(mu_i, mu_o, theta_c, width, tau_ab, (theta0, q0, qpi), phi_s,
-                              eta, au, av, dist, L_FIT, Q_IN, film)
+                              eta, au, av, dist, L_FIT, Q_IN, film, shadowing)
     hard = np.any(resid > FIT_RESIDUAL, axis=1)
     if hard.any():
         redo = np.flatnonzero(hard)
         c2, r2 = _fit_smooth(mu_i[redo], mu_o[redo], theta_c[redo], width[redo],
                              (tau_ab[0][redo], tau_ab[1][redo]),
                              (theta0[redo], q0[redo], qpi[redo]), phi_s, eta, au, av, dist,
-                             L_REFIT, Q_REFIT, film)
+                             L_REFIT, Q_REFIT, film, shadowing)
         wide = np.zeros((P, L_REFIT, ns))
         wide[:, :L_FIT] = coef
         wide[redo] = c2
@@ -287,7 +290,7 @@ def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, geometry, relerr, 
             geo = (theta0[sel], q0[sel], qpi[sel], theta_c[sel], width[sel])
             prod[sel] = _product_series(mu_i[sel], mu_o[sel], geo, phi_s, eta, au, av, dist, K,
                                         None if direct else coef[sel],
-                                        (tau_ab[0][sel], tau_ab[1][sel]), film)
+                                        (tau_ab[0][sel], tau_ab[1][sel]), film, shadowing)
     # phi_s transform with the mirror symmetry F(-phi_s)_d = conj(F(phi_s)_d)
     s_all = np.arange(-(qs // 2), qs // 2 + 1)
     wj = np.full(ns, 2.0)
@@ -312,7 +315,7 @@ def _project_pairs(mu_i, mu_o, eta, au, av, dist, ms, md, qs, geometry, relerr, 
 
 
 def _product_series(mu_i, mu_o, geometry, phi_s, eta, au, av, dist, K, coef, tau_ab,
-                    film=None):
+                    film=None, shadowing="separable"):
     """One-sided series in ``phi_d`` (P, ns, K) of ``smooth * peak`` at every phi_s sample,
     formed in sample space: exact peak samples times the smooth factor (the Chebyshev fit
     ``coef`` times the prefactor, or, when ``coef`` is None, the kernel's smooth factor sampled
@@ -349,7 +352,7 @@ def _product_series(mu_i, mu_o, geometry, phi_s, eta, au, av, dist, K, coef, tau
         pd = np.tile(theta_c[:, None] + t[None, :], (1, ns))
         ps = np.broadcast_to(np.repeat(phi_s, n_w)[None, :], (P, ns * n_w))
         smooth, _ = kproj.microfacet_split_ds(mu_i, mu_o, pd, ps, eta, au, av, dist,
-                                              film=film)
+                                              film=film, shadowing=shadowing)
         smooth = smooth.reshape(P, ns, n_w) * inside[:, None, :]
     trig = (np.cos(t)[None, :], np.sin(t)[None, :])       # the same azimuths for all pairs
     buf = np.zeros((P, N))
@@ -413,7 +416,8 @@ def _truncate(F, md, stats, peak_len, relerr):
 
 def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: float, av: float,
                    dist: str, stats: AnisoProjectionStats, triangle: bool = False,
-                   relerr: float = RELERR, convert=None, out=None, film=None):
+                   relerr: float = RELERR, convert=None, out=None, film=None,
+                   shadowing="separable"):
     """Project the pairs of block ``name`` (one triangle of them with ``triangle``).
 
     Returns
@@ -437,7 +441,8 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
     todo = np.arange(mu_i.size)
     first = True
     while todo.size:
-        theta0, q0, qpi, bound = _coarse(mu_i[todo], mu_o[todo], eta, au, av, dist, qs, film)
+        theta0, q0, qpi, bound = _coarse(mu_i[todo], mu_o[todo], eta, au, av, dist, qs, film,
+                                         shadowing)
         if first:
             energy = bound * 2.0 * np.pi * np.maximum(fw[i[todo]], fw[o[todo]])
             keep = energy > ENERGY_DROP
@@ -467,7 +472,7 @@ def _project_block(grid: Grid, name: str, md: int, ms: int, eta: complex, au: fl
         def work(sel, qs=qs):
             geo = (theta0[sel], q0[sel], qpi[sel], theta_c[sel], width[sel])
             return _project_pairs(mu_i[todo[sel]], mu_o[todo[sel]], eta, au, av, dist, ms, md,
-                                  qs, geo, relerr, film)
+                                  qs, geo, relerr, film, shadowing)
 
         # groups of `threads` batches on the pool (numpy and Warp release the GIL)
         for sel, (F, alias, dropped, tot, plen, nrefit) in (
@@ -581,7 +586,7 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
     t0 = time.perf_counter()
     eta = complex(layer.ior) / eta_above
     au, av, dist = layer.alpha_u, layer.alpha_v, layer.distribution
-    film = layer.film_params(eta_above)
+    film, shadowing = layer.film_params(eta_above), layer.shadowing
     opaque = layer.opaque
     names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
     N = basis.n_slots(md) * grid.h
@@ -596,7 +601,7 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
         parts = _project_block(grid, name, md, ms, eta, au, av, dist, stats, triangle=triangle,
                                relerr=relerr, convert=lambda o, i, F: _entries(grid, md, ms,
                                                                                o, i, F),
-                               out=workspace.spool(), film=film)
+                               out=workspace.spool(), film=film, shadowing=shadowing)
         return from_parts(parts, (N, N))
 
     def done(*names):

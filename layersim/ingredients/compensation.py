@@ -36,8 +36,9 @@ def _discrete_lobes(op: IsoOperator, layer, eta: complex):
         return DIELECTRIC[mode](tables.Albedos(alb["Rt"], alb["Ttb"], alb["Rb"], alb["Tbt"]),
                                 eta.real, integral)
     mu, args = op.grid.mu, (eta.real, eta.imag, layer.alpha, layer.distribution)
-    e1 = (tables.interpolate(tables.albedos(*args, unit_fresnel=True).r_top, mu) + alb["Rt"]
-          - tables.interpolate(tables.albedos(*args).r_top, mu))
+    sh = layer.shadowing
+    e1 = (tables.interpolate(tables.albedos(*args, unit_fresnel=True, shadowing=sh).r_top, mu)
+          + alb["Rt"] - tables.interpolate(tables.albedos(*args, shadowing=sh).r_top, mu))
     return CONDUCTOR[mode](e1, tables.fresnel_average(eta.real, eta.imag), integral)
 
 

@@ -131,7 +131,7 @@ def block_pairs(grid: Grid, name: str, triangle: bool):
 
 
 def significant_pairs(grid: Grid, name: str, triangle: bool, eta: complex, alpha: float,
-                      dist: str, device=None, film=None):
+                      dist: str, device=None, film=None, shadowing="separable"):
     """The pairs of a block (see :func:`block_pairs`) and which of them can carry more than
     :data:`ENERGY_DROP` of a beam's energy, from a coarse bound on the device (``film``: the
     interface's, :func:`interface_setup`).
@@ -147,7 +147,7 @@ def significant_pairs(grid: Grid, name: str, triangle: bool, eta: complex, alpha
     mu_i, mu_o, o, i = block_pairs(grid, name, triangle)
     fw = grid.flux_weight
     smax, q0, qpi = kproj.coarse_bound(mu_i, mu_o, eta, alpha, alpha, dist, N_COARSE,
-                                       device=device, film=film)
+                                       device=device, film=film, shadowing=shadowing)
     # Bound on f over phi: peak <= peak(q0); S bounded by its coarse maximum (x10 margin).
     bound = 10.0 * fourier.peak_values(q0, dist) * smax
     energy = bound * 2.0 * np.pi * np.maximum(fw[i], fw[o])
@@ -182,7 +182,7 @@ def series_lengths(grid: Grid, layer, eta_above: float, relerr: float = RELERR):
         which sets how wide the lobe is in azimuth).
     """
     eta = complex(layer.ior) / eta_above
-    film = layer.film_params(eta_above)
+    film, shadowing = layer.film_params(eta_above), layer.shadowing
     names = ("Rt",) if layer.opaque else ("Rt", "Rb", "Ttb", "Tbt")
     dist = layer.distribution
     fw = grid.flux_weight
@@ -191,7 +191,7 @@ def series_lengths(grid: Grid, layer, eta_above: float, relerr: float = RELERR):
         mu_i, mu_o, o, i = block_pairs(grid, name, triangle=False)
         phi = np.broadcast_to(np.linspace(0.0, np.pi, N_PREPASS), (mu_i.size, N_PREPASS))
         s, q = kproj.microfacet_split(mu_i, mu_o, phi, eta, layer.alpha, layer.alpha, dist,
-                                      film=film)
+                                      film=film, shadowing=shadowing)
         q0, qpi = q[:, 0], q[:, -1]
         bound = 10.0 * fourier.peak_values(q0, dist) * np.abs(s).max(axis=1)
         sig = bound * 2.0 * np.pi * np.maximum(fw[i], fw[o]) > ENERGY_DROP
@@ -203,17 +203,18 @@ def series_lengths(grid: Grid, layer, eta_above: float, relerr: float = RELERR):
 
 def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, dist: str,
                    stats: ProjectionStats, triangle: bool = False, method=None,
-                   batch: int = BATCH, device=None, film=None):
+                   batch: int = BATCH, device=None, film=None, shadowing="separable"):
     """Project the significant pairs of one block, in batches of similar series length.
 
-    ``method(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, film=film) -> (o, i,
-    series)`` computes the series of a batch (default: the semi-analytic :func:`pair_series`)
-    of at most ``batch`` pairs; ``device`` runs the coarse sampling that bounds each pair's
-    energy; ``film`` is the interface's (:func:`interface_setup`).
+    ``method(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, film=film,
+    shadowing=shadowing) -> (o, i, series)`` computes the series of a batch (default: the
+    semi-analytic :func:`pair_series`) of at most ``batch`` pairs; ``device`` runs the coarse
+    sampling that bounds each pair's energy; ``film`` and ``shadowing`` are the interface's
+    (:func:`interface_setup`).
     """
     method = method or project_pairs
     mu_i, mu_o, o, i, q0, qpi, keep = significant_pairs(grid, name, triangle, eta, alpha, dist,
-                                                        device, film)
+                                                        device, film, shadowing)
     stats.pairs += mu_i.size
     chunks = []
     if keep.size == 0:
@@ -228,7 +229,7 @@ def _project_block(grid: Grid, name: str, m: int, eta: complex, alpha: float, di
         K = int(min(kest[start:start + batch].max(), m + L_HARD))
         t0 = time.perf_counter()
         out = method(mu_i[sel], mu_o[sel], o[sel], i[sel], q0[sel], qpi[sel], K, m,
-                     eta, alpha, dist, part, film=film)
+                     eta, alpha, dist, part, film=film, shadowing=shadowing)
         part.series_seconds += time.perf_counter() - t0
         return out, part
 
@@ -268,7 +269,8 @@ def _prefactor_poly(q0, qpi, alpha):
     return np.stack([u * u + 0.5 * v * v, -2.0 * u * v, 0.5 * v * v], axis=1)
 
 
-def _fit(mu_i, mu_o, q0, qpi, eta, alpha, dist, L, q_in, q_out, precondition, film=None):
+def _fit(mu_i, mu_o, q0, qpi, eta, alpha, dist, L, q_in, q_out, precondition, film=None,
+         shadowing="separable"):
     """Fit the smooth factor of each pair with at most ``L`` cosine terms (fewer on narrow
     supports, see :func:`fit_terms`). Returns coefficients (P, L) (zero-padded) and the
     relative weighted residuals (P,)."""
@@ -277,7 +279,8 @@ def _fit(mu_i, mu_o, q0, qpi, eta, alpha, dist, L, q_in, q_out, precondition, fi
     else:
         phi_max = fourier.peak_support(q0, qpi, dist, SUPPORT_TOLERANCE)
     phi, w = fourier.fit_nodes(phi_max, q_in, q_out)
-    s, q = kproj.microfacet_split(mu_i, mu_o, phi, eta, alpha, alpha, dist, film=film)
+    s, q = kproj.microfacet_split(mu_i, mu_o, phi, eta, alpha, alpha, dist, film=film,
+                                  shadowing=shadowing)
     weight = fourier.peak_values(q, dist)
     if precondition:
         factor = (1.0 + alpha * alpha * q) ** 2
@@ -298,7 +301,7 @@ def _fit(mu_i, mu_o, q0, qpi, eta, alpha, dist, L, q_in, q_out, precondition, fi
 
 def pair_series(mu_i, mu_o, eta: complex, alpha: float, dist: str, m: int, q0=None, qpi=None,
                 K: int | None = None, taper: bool = True, stats: ProjectionStats | None = None,
-                film=None):
+                film=None, shadowing="separable"):
     """Cosine series ``f_0 .. f_{m-1}`` (1/sr) of the BSDF of an isotropic interface for
     ordinate pairs.
 
@@ -319,6 +322,8 @@ def pair_series(mu_i, mu_o, eta: complex, alpha: float, dist: str, m: int, q0=No
         whose series needs more than ``m`` orders (:func:`needs_taper`).
     film : (float, float), optional
         The interface's thin film (relative index, phase scale; :func:`interface_setup`).
+    shadowing : str
+        The Smith shadowing term, "separable" or "height-correlated" (:func:`interface_setup`).
 
     Returns
     -------
@@ -330,7 +335,7 @@ def pair_series(mu_i, mu_o, eta: complex, alpha: float, dist: str, m: int, q0=No
     mu_i, mu_o = np.asarray(mu_i, float), np.asarray(mu_o, float)
     if q0 is None:
         _, q = kproj.microfacet_split(mu_i, mu_o, np.tile([0.0, np.pi], (mu_i.size, 1)), eta,
-                                      alpha, alpha, dist, film=film)
+                                      alpha, alpha, dist, film=film, shadowing=shadowing)
         q0, qpi = q[:, 0], q[:, 1]
     if K is None:
         K = int(min(fourier.peak_length(q0, qpi, dist, RELERR).max(initial=1), m + L_HARD))
@@ -340,7 +345,7 @@ def pair_series(mu_i, mu_o, eta: complex, alpha: float, dist: str, m: int, q0=No
     # large coefficients at grazing angles would only add cancellation.)
     precondition = dist == "ggx" and mu_i[0] * mu_o[0] < 0
     coef, resid, phi_max = _fit(mu_i, mu_o, q0, qpi, eta, alpha, dist, L_FIT, Q_IN, Q_OUT,
-                                precondition, film)
+                                precondition, film, shadowing)
     peak = fourier.peak_series(q0, qpi, dist, max(K, 1))
     if precondition:
         peak = fourier.cos_product(peak, _prefactor_poly(q0, qpi, alpha))
@@ -350,7 +355,8 @@ def pair_series(mu_i, mu_o, eta: complex, alpha: float, dist: str, m: int, q0=No
     hard = np.flatnonzero((resid > FIT_RESIDUAL) & (phi_max >= REFIT_MIN_SUPPORT))
     if hard.size:
         coef_h, resid_h, _ = _fit(mu_i[hard], mu_o[hard], q0[hard], qpi[hard], eta, alpha,
-                                  dist, L_HARD, Q_IN_HARD, Q_OUT_HARD, precondition, film)
+                                  dist, L_HARD, Q_IN_HARD, Q_OUT_HARD, precondition, film,
+                                      shadowing)
         better = resid_h < resid[hard]
         rows = hard[better]
         series[rows] = fourier.cos_product(peak[rows], coef_h[better])
@@ -388,25 +394,26 @@ def apply_taper(series: np.ndarray, rows: np.ndarray, stats: ProjectionStats) ->
         stats.tapered += int(np.count_nonzero(rows))
 
 
-def project_pairs(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, film=None):
+def project_pairs(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, film=None,
+                  shadowing="separable"):
     """The default ``method`` of :func:`interface_operator`: :func:`pair_series` of a batch,
     returned as a chunk ``(o, i, series)``."""
     series, _ = pair_series(mu_i, mu_o, eta, alpha, dist, m, q0, qpi, K, stats=stats,
-                            film=film)
+                            film=film, shadowing=shadowing)
     return o, i, series
 
 
 def interface_setup(layer, eta_above: float):
     """What every isotropic interface projection needs: relative index ``eta`` (complex),
-    distribution, roughness, whether it is opaque, the blocks it has, and its thin film
+    distribution, roughness, whether it is opaque, the blocks it has, its thin film
     (relative index and phase scale, :meth:`layersim.layers.Interface.film_params`, or
-    None)."""
+    None) and its Smith shadowing term (:func:`layersim.kernels.physics.smith_g2`)."""
     if layer.anisotropic or layer.smooth:
         raise ValueError("interface_operator projects isotropic rough interfaces only")
     opaque = layer.opaque
     names = ("Rt",) if opaque else ("Rt", "Rb", "Ttb", "Tbt")
     return (complex(layer.ior) / eta_above, layer.distribution, layer.alpha, opaque, names,
-            layer.film_params(eta_above))
+            layer.film_params(eta_above), layer.shadowing)
 
 
 def film_orders(film, alpha: float) -> int:
@@ -457,7 +464,7 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
     """
     stats = stats if stats is not None else ProjectionStats()
     t0 = time.perf_counter()
-    eta, dist, alpha, opaque, names, film = interface_setup(layer, eta_above)
+    eta, dist, alpha, opaque, names, film, shadowing = interface_setup(layer, eta_above)
     series = {}
     # Blocks are independent: project them concurrently (Warp CPU launches, FFTs and LAPACK
     # release the GIL), one worker per thread of layersim.config (threads) up to the number of
@@ -465,7 +472,8 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
     def project(name, triangle):
         own = ProjectionStats()       # one per block: no counters shared between threads
         chunks = _project_block(grid, name, m, eta, alpha, dist, own, triangle=triangle,
-                                method=method, batch=batch, device=device, film=film)
+                                method=method, batch=batch, device=device, film=film,
+                                    shadowing=shadowing)
         return chunks, own
 
     if reciprocity:

@@ -63,7 +63,7 @@ def _half_period_needed(q0, qpi, dist: str, m: int, min_samples: int, film=None,
 
 
 def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, device,
-                   max_samples, min_samples=16, film=None):
+                   max_samples, min_samples=16, film=None, shadowing="separable"):
     length, half = _half_period_needed(q0, qpi, dist, m, min_samples, film, alpha)
     # even sample counts whose half (the DCT length) is FFT-friendly, not powers of two: less
     # oversampling for the same aliasing bound
@@ -78,12 +78,12 @@ def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, 
         out = np.zeros((mu_i.size, m))
         out[aliased] = microfacet.project_pairs(
             mu_i[aliased], mu_o[aliased], o[aliased], i[aliased], q0[aliased], qpi[aliased],
-            K, m, eta, alpha, dist, stats, film=film)[2]
+            K, m, eta, alpha, dist, stats, film=film, shadowing=shadowing)[2]
         if rest.size:
             out[rest] = _numeric_batch(mu_i[rest], mu_o[rest], o[rest], i[rest], q0[rest],
                                        qpi[rest], K, m, eta, alpha, dist, stats, device=device,
                                        max_samples=max_samples, min_samples=min_samples,
-                                       film=film)[2]
+                                       film=film, shadowing=shadowing)[2]
         return o, i, out
     # a few orders past m decide truncation exactly as the semi-analytic path does (the series
     # decays monotonically beyond its peak: a significant coefficient at or past m means the
@@ -94,7 +94,7 @@ def _numeric_batch(mu_i, mu_o, o, i, q0, qpi, K, m, eta, alpha, dist, stats, *, 
         rows = np.flatnonzero(N == n)
         series[rows] = kproj.uniform_cosine_series(mu_i[rows], mu_o[rows], eta, alpha, alpha,
                                                    dist, int(n), extra, device=device,
-                                                   film=film)
+                                                   film=film, shadowing=shadowing)
     mag = np.abs(series)
     above = mag >= microfacet.RELERR * np.maximum(mag[:, :1], 1e-300)
     cut = above[:, m:].any(axis=1)
@@ -143,12 +143,13 @@ def numeric_interface_operator(grid: Grid, m: int, layer, eta_above: float,
 
 def _device_block(grid: Grid, name: str, triangle: bool, m: int, eta: complex, alpha: float,
                   dist: str, stats: ProjectionStats, device, max_samples: int,
-                  min_samples: int, film=None) -> list:
+                  min_samples: int, film=None, shadowing="separable") -> list:
     """Series of the significant pairs of one block: ``[(o, i, coef)]`` with ``coef`` a Warp
     array on ``device`` (sampled pairs) or a host array (pairs too peaked to sample, projected
     semi-analytically as in :func:`_numeric_batch`)."""
     mu_i, mu_o, o, i, q0, qpi, keep = microfacet.significant_pairs(grid, name, triangle, eta,
-                                                                   alpha, dist, device, film)
+                                                                   alpha, dist, device, film,
+                                                                       shadowing)
     stats.pairs += mu_i.size
     stats.projected += keep.size
     t0 = time.perf_counter()
@@ -165,7 +166,7 @@ def _device_block(grid: Grid, name: str, triangle: bool, m: int, eta: complex, a
                     m + microfacet.L_HARD))
         parts.append(microfacet.project_pairs(mu_i[sel], mu_o[sel], o[sel], i[sel], q0[sel],
                                                qpi[sel], K, m, eta, alpha, dist, stats,
-                                               film=film))
+                                               film=film, shadowing=shadowing))
     rest = np.flatnonzero(~aliased)
     if rest.size:
         rest = rest[np.argsort(half[rest], kind="stable")]
@@ -177,7 +178,7 @@ def _device_block(grid: Grid, name: str, triangle: bool, m: int, eta: complex, a
                                                half[rest], m + EXTRA_ORDERS, m,
                                                microfacet.RELERR, taper,
                                                fourier.taper_factors(m), device=device,
-                                               film=film)
+                                               film=film, shadowing=shadowing)
         stats.truncated += int(cut.numpy().sum())
         parts.append((o[sel], i[sel], coef))
     stats.series_seconds += time.perf_counter() - t0
@@ -195,7 +196,7 @@ def device_interface_operator(grid: Grid, m: int, layer, eta_above: float,
     CPU); it pays off on GPUs. The scratch block takes ``8 m h^2`` bytes of device memory."""
     stats = stats if stats is not None else ProjectionStats()
     t0 = time.perf_counter()
-    eta, dist, alpha, opaque, names, film = microfacet.interface_setup(layer, eta_above)
+    eta, dist, alpha, opaque, names, film, shadowing = microfacet.interface_setup(layer, eta_above)
     h = grid.h
     asm = BlockAssembler(m, h, grid.flux_weight, device=device)
     blocks, ttb = {}, None
@@ -210,7 +211,7 @@ def device_interface_operator(grid: Grid, m: int, layer, eta_above: float,
             # reflection blocks are symmetric: one triangle, mirrored off the diagonal
             triangle = reciprocity and name != "Ttb"
             parts = _device_block(grid, name, triangle, m, eta, alpha, dist, stats, device,
-                                  max_samples, min_samples, film)
+                                  max_samples, min_samples, film, shadowing)
             for o, i, coef in parts:
                 asm.scatter(coef, o, i, mirror=triangle)
             if name == "Ttb":

@@ -49,7 +49,7 @@ def sample_counts(md: int, ms: int) -> tuple[int, int]:
 
 
 def pair_coefficients(mu_i, mu_o, eta: complex, table: np.ndarray, md: int, ms: int,
-                      relerr: float, device=None):
+                      relerr: float, device=None, shadowing: str = "separable"):
     """Coefficients ``C[p, md - 1 + d, ms + s] = f_{d,s}`` (|d| < md, |s| <= ms; complex) of
     ordinate pairs, and the number of pairs cut at ``md``.
 
@@ -61,9 +61,12 @@ def pair_coefficients(mu_i, mu_o, eta: complex, table: np.ndarray, md: int, ms: 
         Relative index below/above.
     table : ndarray
         Packed NDF table (:meth:`layersim.ndf.table.NDFTable.packed`).
+    shadowing : str
+        The Smith term (:func:`layersim.kernels.physics.g2_from_masking`).
     """
     n_d, n_s = sample_counts(md, ms)
-    f = kproj.tabulated_ds_samples(mu_i, mu_o, eta, table, n_d, n_s, device=device)
+    f = kproj.tabulated_ds_samples(mu_i, mu_o, eta, table, n_d, n_s, device=device,
+                                   shadowing=shadowing)
     c = np.fft.fft2(f, axes=(1, 2)) / (n_d * n_s)     # coefficient of exp(+i (d phi_d + s phi_s))
     del f
     d = np.arange(-(md - 1), md)
@@ -120,7 +123,8 @@ def projector(layer, eta_above: float, device=None):
         step = max(1, BATCH_SAMPLES // (n_d * n_s))
         for a in range(0, mu_i.size, step):
             sl = slice(a, a + step)
-            C, cut = pair_coefficients(mu_i[sl], mu_o[sl], eta, table, md, ms, relerr, device)
+            C, cut = pair_coefficients(mu_i[sl], mu_o[sl], eta, table, md, ms, relerr, device,
+                                       layer.shadowing)
             stats.truncated += cut
             out.append(_entries(grid, md, ms, o[sl], i[sl], C))
         stats.qs_max = max(stats.qs_max, n_s)

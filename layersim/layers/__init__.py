@@ -17,7 +17,7 @@ change (``tests/test_layer_kinds.py`` adds one from a test module).
 from .base import Layer, LayerKind, LayerPlan, OperatorJob, Survey, WalkBoundary
 from .fields import Ctx, Field
 from .registry import KINDS, kind_named, kind_of, names, register
-from .interface import COMPENSATIONS, DISTRIBUTIONS, Interface
+from .interface import COMPENSATIONS, DISTRIBUTIONS, SHADOWINGS, Interface
 from .dielectric import Dielectric
 from .conductor import Conductor
 from .medium import Medium
@@ -27,4 +27,4 @@ from .measured import Measured
 __all__ = ["Layer", "LayerKind", "LayerPlan", "OperatorJob", "Survey", "WalkBoundary", "Ctx",
            "Field", "KINDS", "kind_named", "kind_of", "names", "register", "Interface",
            "Dielectric", "Conductor", "Medium", "Diffuse", "Measured", "DISTRIBUTIONS",
-           "COMPENSATIONS"]
+           "COMPENSATIONS", "SHADOWINGS"]

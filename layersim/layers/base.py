@@ -160,9 +160,9 @@ class OperatorJob:
 
 @dataclass(frozen=True)
 class WalkBoundary:
-    """A boundary record of the random walk (:mod:`layersim.kernels.walk`): two ints (kind code,
-    distribution code), :data:`~layersim.kernels.walk.BND_F` floats, and a table packed after
-    the records (an object with ``packed(dtype)``, or None)."""
+    """A boundary record of the random walk (:mod:`layersim.kernels.walk`): three ints (kind
+    code, distribution code, shadowing code), :data:`~layersim.kernels.walk.BND_F` floats,
+    and a table packed after the records (an object with ``packed(dtype)``, or None)."""
 
     ints: tuple
     floats: tuple
@@ -203,6 +203,19 @@ class LayerKind:
     def describe(self, per_channel: tuple) -> str:
         """One line for the CLI and reports (``per_channel``: the layer's records)."""
         return self.name
+
+    def to_raw(self, per_channel: tuple) -> dict:
+        """The ``[[layer]]`` table (scene-file values) that parses back to ``per_channel``
+        (the layer's records, one per channel); refused by default, naming the kind."""
+        raise SceneError(f"a {self.name} layer cannot be written back as a scene table",
+                         kind=self.name)
+
+    @staticmethod
+    def channel_value(per_channel: tuple, get):
+        """``get(record)`` of the channels as a scene file writes it: one value when every
+        channel has it, else the list of the channels' values."""
+        vals = [get(x) for x in per_channel]
+        return vals[0] if all(v == vals[0] for v in vals) else vals
 
     @staticmethod
     def values(per_channel: tuple, text) -> str:

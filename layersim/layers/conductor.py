@@ -42,6 +42,9 @@ class ConductorKind(InterfaceKind):
             return [conductor_ior(ctx, f"ior[{c}]", v) for c, v in enumerate(value)]
         return [conductor_ior(ctx, "ior", value)]
 
+    def raw_ior(self, per_channel):
+        return self.channel_value(per_channel, lambda x: [x.ior.real, x.ior.imag])
+
     def describe_ior(self, per_channel) -> str:
         return self.values(per_channel, lambda x: f"{x.ior.real:g}+{x.ior.imag:g}i")
 

@@ -41,6 +41,9 @@ class DielectricKind(InterfaceKind):
         return per_channel(ctx, "ior", value, lambda c, f, v: complex(
             real(lo=0.0, hi=MAX_IOR, lo_open=True)(c, f, v)))
 
+    def raw_ior(self, per_channel):
+        return self.channel_value(per_channel, lambda x: complex(x.ior).real)
+
     def describe_ior(self, per_channel) -> str:
         return self.values(per_channel, lambda x: f"{x.ior.real:g}")
 

@@ -38,6 +38,9 @@ class DiffuseKind(LayerKind):
     def build(self, ctx, values, raw, defaults) -> list:
         return [Diffuse(albedo=a) for a in values["albedo"]]
 
+    def to_raw(self, per_channel) -> dict:
+        return {"kind": self.name, "albedo": self.channel_value(per_channel, lambda x: x.albedo)}
+
     def describe(self, per_channel) -> str:
         return f"diffuse albedo={self.values(per_channel, lambda x: f'{x.albedo:g}')}"
 
@@ -49,7 +52,7 @@ class DiffuseKind(LayerKind):
 
     def walk_boundary(self, scene, i) -> WalkBoundary:
         floats = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, scene.layers[i].albedo, 0.0, 0.0, 0.0]
-        return WalkBoundary((walk.DIFFUSE, 0), tuple(floats))
+        return WalkBoundary((walk.DIFFUSE, 0, 0), tuple(floats))
 
 
 register(DiffuseKind())

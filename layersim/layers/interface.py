@@ -1,6 +1,6 @@
 """What dielectric and conductor interfaces share: the record (index, roughness, distribution,
-rotation, energy compensation, NDF table, thin film), its fields, and how a rough interface is
-planned, projected and walked.
+shadowing, rotation, energy compensation, NDF table, thin film), its fields, and how a rough
+interface is planned, projected and walked.
 
 A rough interface is projected onto the Fourier basis (numerically or semi-analytically,
 :mod:`layersim.ingredients.numeric`, :mod:`layersim.ingredients.microfacet`; with coupled modes
@@ -13,6 +13,10 @@ An interface may carry a thin dielectric film (``film = { thickness, ior }``): i
 reflectance replaces the Fresnel reflectance of the interface (and of every microfacet) at the
 channel's wavelength (``[stack] wavelengths``), in the solver and the walk alike
 (:func:`layersim.kernels.physics.fresnel_interface`; Belcour & Barla 2017).
+
+The Smith shadowing-masking term is separable (``G1(wi) G1(wo)``, the default) or
+height-correlated (``shadowing = "height-correlated"``, as pbrt-v4 uses;
+:func:`layersim.kernels.physics.smith_g2`), in the projection and the walk alike.
 """
 
 from __future__ import annotations
@@ -20,6 +24,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
 
 from ..aniso import plan as aplan
 from ..aniso.plan import COUPLED_RELERR
@@ -30,19 +36,23 @@ from ..ingredients.compensation import compensate
 from ..ingredients.microfacet import interface_operator
 from ..ingredients.numeric import numeric_interface_operator
 from ..kernels import walk
-from ..kernels.physics import DISTRIBUTION_CODES
+from ..kernels.physics import DISTRIBUTION_CODES, SHADOWING_CODES
 from ..kernels.tabulated import TABULATED
+from ..lobe import NEAR_SPECULAR_ALPHA
 from . import tabulated
 from .base import Layer, LayerKind, LayerPlan, WalkBoundary
 from .fields import Field, choice, film, real, roughness
 
-__all__ = ["Interface", "InterfaceKind", "Film", "DISTRIBUTIONS", "COMPENSATIONS"]
+__all__ = ["Interface", "InterfaceKind", "Film", "DISTRIBUTIONS", "COMPENSATIONS", "SHADOWINGS"]
 
 #: Microfacet normal distributions understood by the solver and the random walk.
 DISTRIBUTIONS = ("beckmann", "ggx", "tabulated")
 #: Energy-loss compensation terms of rough interfaces (``energy_compensation``, in [stack] or
 #: per layer; :mod:`layersim.compensation`).
 COMPENSATIONS = ("none", "layerlab", "multiple-scattering")
+#: Smith shadowing-masking terms of rough interfaces (``shadowing``, in [stack] or per layer;
+#: :func:`layersim.kernels.physics.smith_g2`).
+SHADOWINGS = ("separable", "height-correlated", "height-correlated-beta")
 
 
 @dataclass(frozen=True)
@@ -77,6 +87,9 @@ class Interface(Layer):
     alpha_u: float = 0.0
     alpha_v: float = 0.0
     distribution: str = "beckmann"
+    shadowing: str = "separable"
+    """Smith shadowing-masking term (:data:`SHADOWINGS`): ``G1(wi) G1(wo)`` or a
+    height-correlated ``G2`` (:func:`layersim.kernels.physics.smith_g2`)."""
     rotation: float = 0.0
     """Rotation of the tangent frame (radians) about the normal: alpha_u acts along
     ``(cos rotation, sin rotation, 0)``."""
@@ -131,6 +144,10 @@ class InterfaceKind(LayerKind):
               parse=roughness, default=0.0, fit=True),
         Field("distribution", "microfacet normal distribution",
               parse=choice(DISTRIBUTIONS, "distribution"), default="beckmann"),
+        Field("shadowing", "Smith shadowing-masking term of a rough interface: \"separable\" "
+                           "G1(wi) G1(wo), \"height-correlated\" 1 / (1 + Lambda(wi) + "
+                           "Lambda(wo)) (pbrt-v4's) or \"height-correlated-beta\" (the Beta "
+                           "function in transmission) (default: [stack] shadowing)"),
         Field("ndf", "the NDF table of distribution = \"tabulated\": an .npz path or an inline "
                      "{theta, phi, D} table"),
         Field("rotation", "rotation of the tangent frame about the normal", unit="degrees",
@@ -160,6 +177,8 @@ class InterfaceKind(LayerKind):
                             f"{comp!r} is not available for a tabulated NDF (its albedo tables "
                             "are those of Beckmann and GGX interfaces): set "
                             "energy_compensation = \"none\" on this layer")
+        shadow = self._parse_shadow_choice(
+            ctx, raw.get("shadowing", defaults.get("shadowing", "separable")), au, av)
         iors = self.parse_ior(ctx, raw["ior"])
         films = self._films(ctx, values["film"], defaults.get("wavelengths"), dist, comp)
         if len(iors) == 1:
@@ -170,8 +189,8 @@ class InterfaceKind(LayerKind):
             raise ctx.error("ior", f"gives {len(iors)} per-channel values but [stack] "
                                    f"wavelengths has {len(films)}: give one value per "
                                    "wavelength")
-        return [self.record(ior=e, alpha_u=au, alpha_v=av, distribution=dist, rotation=rot,
-                            energy_compensation=comp, ndf=table, film=f)
+        return [self.record(ior=e, alpha_u=au, alpha_v=av, distribution=dist, shadowing=shadow,
+                            rotation=rot, energy_compensation=comp, ndf=table, film=f)
                 for e, f in zip(iors, films)]
 
     @staticmethod
@@ -196,6 +215,21 @@ class InterfaceKind(LayerKind):
         return [Film(d, n, lam) for lam in wavelengths]
 
     @staticmethod
+    def _parse_shadow_choice(ctx, value, au: float, av: float) -> str:
+        """A value of ``shadowing``; a height-correlated term is refused for a near-specular
+        roughness, whose lobe tables (:mod:`layersim.lobe`) use the separable one."""
+        if value not in SHADOWINGS:
+            raise ctx.error("shadowing", f"unknown shadowing {value!r}; expected one of "
+                                         + ", ".join(SHADOWINGS))
+        if value == "separable" or (au == 0.0 and av == 0.0):
+            return value
+        if min(au, av) <= NEAR_SPECULAR_ALPHA:
+            raise ctx.error("shadowing", f"{value!r} is not available for roughness "
+                                         f"<= {NEAR_SPECULAR_ALPHA:g} (the near-specular lobe "
+                                         "tables use the separable term)")
+        return value
+
+    @staticmethod
     def _compensation(ctx, value, au: float, av: float) -> str:
         """A value of ``energy_compensation``; anisotropic roughness is refused (the albedo
         tables are those of isotropic interfaces)."""
@@ -213,6 +247,28 @@ class InterfaceKind(LayerKind):
         """The per-channel indices of the ``ior`` field."""
         raise NotImplementedError
 
+    def raw_ior(self, per_channel):
+        """The ``ior`` field's value of the records (the inverse of :meth:`parse_ior`)."""
+        raise NotImplementedError
+
+    def to_raw(self, per_channel) -> dict:
+        layer = per_channel[0]
+        raw = {"kind": self.name, "ior": self.raw_ior(per_channel)}
+        if layer.ndf is not None:
+            raw["distribution"] = "tabulated"
+            raw["ndf"] = {"theta": np.degrees(layer.ndf.theta).tolist(),
+                          "phi": np.degrees(layer.ndf.phi).tolist(), "D": layer.ndf.D.tolist()}
+        else:
+            raw["roughness"] = (layer.alpha_u if layer.alpha_u == layer.alpha_v
+                                else [layer.alpha_u, layer.alpha_v])
+            raw["distribution"] = layer.distribution
+        raw["shadowing"] = layer.shadowing
+        raw["rotation"] = math.degrees(layer.rotation)
+        raw["energy_compensation"] = layer.energy_compensation
+        if layer.film is not None:
+            raw["film"] = {"thickness": layer.film.thickness, "ior": layer.film.ior}
+        return raw
+
     def describe(self, per_channel) -> str:
         layer = per_channel[0]
         rough = ("smooth" if layer.smooth else
@@ -227,6 +283,8 @@ class InterfaceKind(LayerKind):
             extra += f", energy compensation {layer.energy_compensation}"
         if layer.film is not None:
             extra += ", " + film_text(per_channel)
+        if layer.shadowing != "separable" and not layer.smooth:
+            extra += f", {layer.shadowing} shadowing"
         return f"{layer.kind} ior={self.describe_ior(per_channel)}, {rough}{extra}"
 
     def describe_ior(self, per_channel) -> str:
@@ -259,11 +317,13 @@ class InterfaceKind(LayerKind):
                 i, self.name, "project (coupled modes)",
                 f"{layer.distribution} alpha=({layer.alpha_u:g}, {layer.alpha_v:g}){rot}, "
                 f"relative index {_fmt_eta(eta_rel)}; ratio "
-                f"{aplan.anisotropy_ratio(layer):.3g} -> ms = {ms}", width=width, ms=ms))
+                f"{aplan.anisotropy_ratio(layer):.3g} -> ms = {ms}" + shadowing_text(layer),
+                width=width, ms=ms))
         else:
             survey.layers.append(LayerPlan(i, self.name, "project",
                                            f"{layer.distribution} alpha={layer.alpha_u:g}, "
                                            f"relative index {_fmt_eta(eta_rel)}"
+                                           + shadowing_text(layer)
                                            + compensation_text(layer), width=width))
 
     def plan_special(self, scene, i: int, layer, survey) -> bool:
@@ -319,8 +379,10 @@ class InterfaceKind(LayerKind):
                   math.cos(layer.rotation), math.sin(layer.rotation), 0.0, 0.0, *film)
         code = walk.CONDUCTOR if layer.opaque else walk.DIELECTRIC
         if layer.ndf is not None:       # alpha_u's slot gets the table's offset in flatten()
-            return WalkBoundary((code, TABULATED), floats, layer.ndf)
-        return WalkBoundary((code, DISTRIBUTION_CODES[layer.distribution]), floats)
+            return WalkBoundary((code, TABULATED, SHADOWING_CODES[layer.shadowing]), floats,
+                                layer.ndf)
+        return WalkBoundary((code, DISTRIBUTION_CODES[layer.distribution],
+                             SHADOWING_CODES[layer.shadowing]), floats)
 
     # ---- statistical model -----------------------------------------------------------------
 
@@ -328,6 +390,9 @@ class InterfaceKind(LayerKind):
         if layer.film is not None:
             raise refuse("film", "a thin film is not represented (the model's atoms have bare "
                                  "Fresnel terms)")
+        if layer.shadowing != "separable":
+            raise refuse("shadowing", f"'{layer.shadowing}' is not represented (the FGD table "
+                                      "is that of the separable Smith term)")
         if layer.distribution != "ggx":
             raise refuse("distribution", f"'{layer.distribution}' is not represented; use "
                                          "distribution = \"ggx\"")
@@ -336,6 +401,13 @@ class InterfaceKind(LayerKind):
         if layer.alpha_u > 1.0:
             raise refuse("roughness", f"{layer.alpha_u:g} is beyond the FGD table (<= 1)")
         return ("interface", complex(layer.ior), layer.alpha_u)
+
+
+def shadowing_text(layer) -> str:
+    """The plan's words for a height-correlated Smith term (empty for the separable one)."""
+    if layer.shadowing == "separable":
+        return ""
+    return f"; {layer.shadowing} Smith term (solver and Monte Carlo)"
 
 
 def compensation_text(layer) -> str:

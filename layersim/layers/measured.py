@@ -112,7 +112,7 @@ class MeasuredKind(LayerKind):
     def walk_boundary(self, scene, i) -> WalkBoundary:
         layer = scene.layers[i]
         floats = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        return WalkBoundary((walk.MEASURED, 0), floats, _Channel(layer.data, layer.channel))
+        return WalkBoundary((walk.MEASURED, 0, 0), floats, _Channel(layer.data, layer.channel))
 
 
 register(MeasuredKind())

@@ -59,6 +59,11 @@ class MediumKind(LayerKind):
         return [Medium(albedo=albedos[c % len(albedos)], g=gs[c % len(gs)],
                        tau=taus[c % len(taus)]) for c in range(channels)]
 
+    def to_raw(self, per_channel) -> dict:
+        cv = self.channel_value
+        return {"kind": self.name, "tau": cv(per_channel, lambda x: x.tau),
+                "albedo": cv(per_channel, lambda x: x.albedo), "g": cv(per_channel, lambda x: x.g)}
+
     def describe(self, per_channel) -> str:
         v = self.values
         return (f"medium tau={v(per_channel, lambda x: f'{x.tau:g}')}, "
