@@ -106,7 +106,7 @@ def scalar_costs(bsdfs, calls=2000):
     return rows
 
 
-def cost_report(variant, fn):
+def cost_report(variant, fn, what):
     mi.set_variant(variant)
     lsm.register()
     bsdf, path = stack([{"kind": "conductor", "ior": GOLD, "roughness": 0.3}], name="gold")
@@ -114,11 +114,11 @@ def cost_report(variant, fn):
     ref = mi.load_dict({"type": "roughconductor", "distribution": "beckmann", "alpha": 0.3,
                         "eta": GOLD[0], "k": GOLD[1]})
     print(f"\n{variant}: rough gold (Beckmann 0.3), plug-in at the planner's n = "
-          f"{bsdf.grid.n}, md = {bsdf.operators[0].m}; {fn.__doc__.split(' (')[0]}")
-    print(f"  {'BSDF':16s} {'eval':>12s} {'pdf':>12s} {'sample':>12s}   (microseconds per ray)")
+          f"{bsdf.grid.n}, md = {bsdf.operators[0].m}; {what}")
+    print(f"  {'BSDF':16s} {'eval':>12s} {'pdf':>12s} {'sample':>12s}   (nanoseconds per ray)")
     rows = fn([("layersim", ours), ("roughconductor", ref)])
     for name, c in rows:
-        print(f"  {name:16s} " + " ".join(f"{c[k] * 1e6:12.3f}" for k in ("eval", "pdf", "sample")))
+        print(f"  {name:16s} " + " ".join(f"{c[k] * 1e9:12.1f}" for k in ("eval", "pdf", "sample")))
     ratio = {k: rows[0][1][k] / rows[1][1][k] for k in ("eval", "pdf", "sample")}
     print("  ratio            " + " ".join(f"{ratio[k]:12.0f}" for k in ("eval", "pdf", "sample")))
 
@@ -200,8 +200,9 @@ def furnace_report():
 def main():
     print(f"mitsuba {mi.__version__}, drjit {dr.__version__}; DRJIT_LIBLLVM_PATH="
           f"{os.environ.get('DRJIT_LIBLLVM_PATH')}")
-    cost_report("llvm_ad_rgb", wavefront_costs)
-    cost_report("scalar_rgb", scalar_costs)
+    cost_report("llvm_ad_rgb", wavefront_costs, "one wavefront of 2^16 rays per call, median "
+                "of 5 calls")
+    cost_report("scalar_rgb", scalar_costs, "one ray per call, 2000 calls")
     mi.set_variant("llvm_ad_rgb")
     lsm.register()
     accuracy_report()
