@@ -1,24 +1,9 @@
 """Helpers of tests/test_mitsuba_plugin.py: the Mitsuba variant under test and batched calls
 that work in scalar variants (one ray per call) and JIT variants (one wavefront) alike."""
 
-import glob
-import os
-
 import numpy as np
 
-
-def find_libllvm() -> str | None:
-    """A libLLVM >= 16 for Dr.Jit's LLVM backend, where the system has one (Debian's
-    libllvm19 names it libLLVM-19.so); None if there is none."""
-    if os.environ.get("DRJIT_LIBLLVM_PATH"):
-        return os.environ["DRJIT_LIBLLVM_PATH"]
-    for pattern in ("/usr/lib/x86_64-linux-gnu/libLLVM-1[6-9]*.so*",
-                    "/usr/lib/x86_64-linux-gnu/libLLVM-2[0-9]*.so*",
-                    "/usr/lib/llvm-1[6-9]/lib/libLLVM*.so*"):
-        found = sorted(glob.glob(pattern))
-        if found:
-            return found[-1]
-    return None
+from layersim.mitsuba.llvm import find_libllvm  # noqa: F401  (re-exported for the tests)
 
 
 def set_variant(mi, preferred=("llvm_ad_rgb", "scalar_rgb")) -> str:
@@ -26,6 +11,7 @@ def set_variant(mi, preferred=("llvm_ad_rgb", "scalar_rgb")) -> str:
     for v in preferred:
         try:
             mi.set_variant(v)
+            mi.Float(0.0)                      # starts the backend: raises without LLVM
             return v
         except Exception:                      # LLVM missing: Dr.Jit raises on first use
             continue

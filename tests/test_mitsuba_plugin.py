@@ -216,9 +216,9 @@ def test_opaque_stack_from_below_is_black(variant, tmp_path_factory):
 
 
 def test_spectral_variant_grey_and_rgb(variant, tmp_path_factory):
-    """scalar_spectral: a one-channel stack is a flat spectrum equal to its value, a grey
+    """scalar_spectral: a one-channel stack is a flat spectrum equal to its value, and a grey
     three-channel stack upsamples to the same flat spectrum (Mitsuba's RGB model is exact for
-    grey), and an RGB stack's spectrum lies within its channels' range."""
+    grey)."""
     grey1, _ = solved(tmp_path_factory, [{"kind": "conductor", "ior": GOLD, "roughness": 0.3}],
                       30, "g1")
     path1 = tmp_path_factory.mktemp("spec") / "g1.lsim"
@@ -235,6 +235,33 @@ def test_spectral_variant_grey_and_rgb(variant, tmp_path_factory):
             b = mi.load_dict({"type": "layersim", "filename": str(path)})
             value, _ = eval_pdf(mi, b, wi, wo)
             np.testing.assert_allclose(value[0], expected, rtol=2e-3)
+    finally:
+        mi.set_variant(variant)
+        lsm.register()
+
+
+def test_mono_and_spectral_jit_variants(variant, tmp_path_factory):
+    """llvm_ad_mono takes the luminance of an RGB stack on whole wavefronts; llvm_ad_spectral
+    refuses an RGB stack by name (Mitsuba's RGB-to-spectrum fetch is scalar only)."""
+    if variant.startswith("scalar"):
+        pytest.skip("JIT variants need LLVM >= 16")
+    bsdf, _ = solved(tmp_path_factory, [{"kind": "conductor", "roughness": 0.3,
+                                         "ior": [GOLD, [0.42, 2.35], [1.37, 1.92]]}], 40, "rgb3")
+    path = next(tmp_path_factory.getbasetemp().glob("lsim*/rgb3.lsim"))
+    wo = grid(1, 6, 8)[:40]
+    wi = np.repeat(incident(35)[None], len(wo), 0)
+    rgb = bsdf.eval(wi, wo) * wo[:, 2:3]
+    try:
+        mi.set_variant("llvm_ad_mono")
+        lsm.register()
+        b = mi.load_dict({"type": "layersim", "filename": str(path)})
+        value, _ = eval_pdf(mi, b, wi, wo)
+        np.testing.assert_allclose(value[:, 0], rgb @ [0.212671, 0.715160, 0.072169],
+                                   rtol=2e-5, atol=1e-7)
+        mi.set_variant("llvm_ad_spectral")
+        lsm.register()
+        with pytest.raises(Exception, match="three-channel.*rgb variant or scalar_spectral"):
+            mi.load_dict({"type": "layersim", "filename": str(path)})
     finally:
         mi.set_variant(variant)
         lsm.register()
@@ -313,3 +340,18 @@ def test_sample_and_pdf_agree_chi2(variant, tmp_path_factory, monkeypatch, case)
     chi2 = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
                          sample_dim=3, sample_count=200_000, res=101, ires=4)
     assert chi2.run(), chi2.messages
+
+
+@pytest.mark.slow
+def test_docs_example_runs(variant, tmp_path, monkeypatch):
+    """The Python example of docs/renderers.md runs as written (it sets scalar_rgb)."""
+    import re
+    from pathlib import Path
+    text = (Path(__file__).resolve().parents[1] / "docs" / "renderers.md").read_text()
+    block = re.findall(r"^```python\n(.*?)^```", text, flags=re.S | re.M)[0]
+    monkeypatch.chdir(tmp_path)
+    try:
+        exec(compile(block, "docs/renderers.md", "exec"), {"__name__": "__docs__"})
+    finally:
+        mi.set_variant(variant)
+        lsm.register()

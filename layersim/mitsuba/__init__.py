@@ -11,16 +11,19 @@ Mitsuba delta components, Mitsuba's local shading frame, ``eval`` with the cosin
 ``|cos theta_o|``, and the ``TransportMode`` factor ``(eta_wi / eta_wo)^2`` in radiance mode
 (:mod:`layersim.mitsuba.wavefront` states the conventions).
 
-Variants (Mitsuba 3.9.1):
+Variants (tested with Mitsuba 3.9.1, tests/test_mitsuba_plugin.py):
 
-* ``scalar_rgb``, ``scalar_mono``: work; one ray per call (Mitsuba's scalar model), about
-  1-2 ms of Python and Warp per call.
+* ``scalar_rgb``: works; one ray per call (Mitsuba's scalar model), about a millisecond of
+  Python and Warp per call (benchmarks/features/mitsuba_plugin.txt).
 * ``scalar_spectral``: works; one-channel stacks are flat spectra, three-channel (RGB) stacks
-  are upsampled with Mitsuba's RGB-to-spectrum model (:mod:`layersim.mitsuba.drjit_io`), an
-  approximation of the stack's own spectral response (solve it per wavelength for that).
-* ``llvm_ad_rgb`` (and the other ``llvm_ad_*`` / ``cuda_ad_*`` non-polarized variants): work
-  on whole wavefronts, converted to numpy once per call (LLVM >= 16 needed:
-  ``DRJIT_LIBLLVM_PATH``). Calls must be evaluated, not recorded: integrators that trace
+  are upsampled with Mitsuba's RGB-to-spectrum model (:mod:`layersim.mitsuba.drjit_io`), exact
+  for grey and an approximation of the stack's own spectral response otherwise (solve it per
+  wavelength for that).
+* ``llvm_ad_rgb`` and ``llvm_ad_mono`` (the luminance) are tested; ``llvm_ad_spectral``
+  takes one-channel stacks and refuses RGB ones (:func:`layersim.mitsuba.plugin.
+  refuse_rgb_in_jit_spectral`); the ``cuda_ad_*`` variants take the same code path, untested.
+  Whole wavefronts are converted to numpy once per call. LLVM >= 16 is needed
+  (``DRJIT_LIBLLVM_PATH``). Calls must be evaluated, not recorded: integrators that trace
   symbolic loops or virtual calls need ``dr.set_flag(dr.JitFlag.SymbolicLoops, False)`` and
   ``dr.set_flag(dr.JitFlag.SymbolicCalls, False)``. No gradients flow through the plug-in.
 * ``*_polarized`` variants are refused by :func:`register` (layersim solves intensities, not

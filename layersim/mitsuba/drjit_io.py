@@ -9,8 +9,8 @@ the variant's types from numpy results.
 Spectra: the plug-in computes one value per channel of the solved stack (1 or 3). ``rgb``
 variants take three channels (a one-channel stack is grey); ``mono`` variants take the
 luminance (Rec. 709, as Mitsuba reduces RGB inputs there); ``spectral`` variants take a
-one-channel stack as a flat spectrum and a three-channel one through Mitsuba's RGB-to-spectrum
-model (Jakob & Hanika 2019, ``mi.srgb_model_fetch`` / ``srgb_model_eval``) applied to the RGB
+one-channel stack as a flat spectrum and (``scalar_spectral`` only: the model's lookup takes one
+scalar colour) a three-channel one through Mitsuba's RGB-to-spectrum model (Jakob & Hanika 2019, ``mi.srgb_model_fetch`` / ``srgb_model_eval``) applied to the RGB
 value divided by its largest channel and scaled back, which keeps values above 1 (BSDF values
 are not reflectances) and is exact for grey.
 """

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..bsdf import BSDF
+from ..errors import LayersimError
 from . import drjit_io as io
 from . import wavefront as wf
 
@@ -44,6 +45,17 @@ def delta_sides(bsdf, probes: int = 16) -> tuple[bool, bool]:
     refl = np.where(up, energy["top"], energy["bottom"])
     trans = np.where(up, energy["bottom"], energy["top"])
     return bool(np.any(refl > 0)), bool(np.any(trans > 0))
+
+
+def refuse_rgb_in_jit_spectral(variant: str, bsdf, filename: str) -> None:
+    """Refuse a three-channel stack in a JIT spectral variant: Mitsuba's RGB-to-spectrum model
+    (``mi.srgb_model_fetch``) takes one scalar colour per call from Python, which would be a
+    Python loop per ray; scalar_spectral calls it once per ray as Mitsuba does."""
+    if "spectral" in variant and not variant.startswith("scalar") and bsdf.channels == 3:
+        raise LayersimError(
+            f"layersim BSDF {filename}: a three-channel (RGB) stack in the JIT spectral "
+            f"variant {variant!r} is not supported (Mitsuba's RGB-to-spectrum model is "
+            "callable only per ray from Python); use an rgb variant or scalar_spectral")
 
 
 def component_flags(mi, bsdf) -> list:
@@ -92,6 +104,7 @@ def _make_class(mi):
             resolved = str(mi.file_resolver().resolve(name))
             self.filename = resolved if os.path.exists(resolved) else name
             self.stack = load_stack(self.filename)
+            refuse_rgb_in_jit_spectral(mi.variant(), self.stack, self.filename)
             flags = component_flags(mi, self.stack)
             self.component_flags = flags        # m_components reads back as plain ints
             self.m_components = flags
