@@ -49,6 +49,8 @@ STUDIES = {
                  "benchmarks/accuracy/accuracy.txt"),
     "plan_estimates": ("cpu", "benchmarks/speed/plan_estimates.py",
                        "benchmarks/speed/plan_estimates.txt"),
+    "mitsuba_plugin": ("cpu", "benchmarks/features/mitsuba_plugin.py",
+                       "benchmarks/features/mitsuba_plugin.txt"),
     "eval_positivity": ("cpu", "benchmarks/features/eval_positivity.py",
                         "benchmarks/features/eval_positivity.txt"),
     "gpu_tabulated_vs_analytic": ("gpu", "benchmarks/features/gpu_tabulated_vs_analytic.py 1e8 "

@@ -21,6 +21,8 @@
                                      scenes x angles x channels, on a cluster or several GPUs
     layersim compare RESULT SOURCE [--plot PNG]
                                      a result file against a solve or another result file
+    layersim render SRC [-o F.png] [--spp N] [--resolution W,H]
+                                     render a sphere of the material with Mitsuba 3
 
 SRC is a scene (``.toml``, solved on the fly), a saved BSDF (``.lsim`` from ``solve -o``) or a
 ``.bsdf`` file.
@@ -713,6 +715,13 @@ reported) or with --partial.""",
 FILE holds one pbrt-v4 Material or MakeNamedMaterial (coatedconductor, coateddiffuse, conductor,
 dielectric, diffuse) with numeric parameters; the scene is GGX with pbrt-v4's height-correlated
 Smith term (docs/pbrt.md).""",
+    "render": """examples:
+  layersim render examples/rgb_coated_gold.toml -o gold.png
+  layersim render coated_gold.lsim -o sphere.png --spp 64 --resolution 256,256
+
+A unit sphere under a generated sky (gradient and sun) and a point light, rendered with the
+layersim plug-in of Mitsuba 3 (pip install mitsuba): llvm_ad_rgb where LLVM >= 16 is found,
+else scalar_rgb (much slower). See docs/renderers.md.""",
     "subtract": """examples:
   layersim solve stack.toml                                # stack.lsim
   layersim solve lacquer.toml --like stack.lsim            # lacquer.lsim, same discretisation
@@ -873,6 +882,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_subtract)
     _add_fit_ndf(sub)
     _add_mc(sub, quiet)
+    _add_render(sub, src_help, quiet)
     return p
 
 
@@ -927,6 +937,47 @@ def cmd_compare(args) -> int:
     from . import mc_commands
     image = _image(args.plot, "--plot") if args.plot else None
     return mc_commands.run_compare(args, lambda path: _load(path, args), image)
+
+
+def _add_render(sub, src_help: str, quiet) -> None:
+    sp = _subparser(sub, "render", "render a sphere of the material with Mitsuba 3 (the "
+                                   "layersim plug-in)", [quiet])
+    sp.add_argument("source", help=src_help.replace(" or .bsdf file", ""))
+    sp.add_argument("-o", "--output", help="PNG file (default: SOURCE_STEM_render.png)")
+    sp.add_argument("--spp", type=int, default=16, help="samples per pixel (default 16)")
+    sp.add_argument("--resolution", default="128,128", metavar="W,H",
+                    help="image width and height in pixels (default 128,128)")
+    sp.set_defaults(func=cmd_render)
+
+
+#: Largest --spp and image side that ``layersim render`` takes.
+RENDER_MAX_SPP, RENDER_MAX_SIDE = 4096, 4096
+
+
+def cmd_render(args) -> int:
+    if not 1 <= args.spp <= RENDER_MAX_SPP:
+        raise ValueError(f"--spp {args.spp}: samples per pixel must be in 1..{RENDER_MAX_SPP}")
+    size = _vector(args.resolution, "--resolution", "W,H")
+    if np.any(size != np.round(size)) or not np.all((1 <= size) & (size <= RENDER_MAX_SIDE)):
+        raise ValueError(f"--resolution {args.resolution}: width and height must be whole "
+                         f"numbers in 1..{RENDER_MAX_SIDE}")
+    out = _output(args.output or Path(args.source).stem + "_render.png", "-o")
+    if out.suffix.lower() != ".png":
+        raise ValueError(f"-o {out}: the image is written as PNG; give a .png name")
+    try:
+        import mitsuba  # noqa: F401
+    except ImportError as exc:
+        raise LayersimError(f"render needs Mitsuba 3 ({exc}): pip install mitsuba") from None
+    from .mitsuba.render import render
+    bsdf = _load(args.source, args)
+    if not isinstance(bsdf, BSDF):
+        raise ValueError(f"{args.source}: a .bsdf table cannot be rendered; give the scene "
+                         "or the saved BSDF (.lsim)")
+    with tempfile.TemporaryDirectory() as tmp:
+        lsim = bsdf.save(Path(tmp) / "stack.lsim")
+        variant = render(lsim, out, (int(size[0]), int(size[1])), args.spp)
+    print(f"wrote {out} ({int(size[0])} x {int(size[1])}, {args.spp} spp, Mitsuba {variant})")
+    return 0
 
 
 def _add_fit_ndf(sub) -> None:
