@@ -113,7 +113,7 @@ class Operator(ABC):
     ----------
     representation : str
         ``"isotropic"`` or ``"anisotropic"``; the key of :func:`representation_class` and of the
-        per-representation registries of :mod:`layersim.solved.bsdf` and :mod:`layersim.subtract`;
+        per-representation registries of :mod:`layersim.solved.bsdf` and :mod:`layersim.stacking.subtract`;
         stored in operator files (absent means isotropic).
     grid : Grid
         The discrete ordinates (``h = grid.h`` per hemisphere).
