@@ -59,9 +59,9 @@ KERNEL_NEW = "from ..operators.operator import Grid\nfrom ..scene import Scene\n
 MOVED_OLD = "from .deltas import add_deltas\nfrom ..operators.operator import BLOCKS\n" \
             "from .isobsdf import IsoEvaluator\nfrom . import interpolation\n" \
             "from .errors import SceneError\n"
-MOVED_NEW = "from ..stacking.deltas import add_deltas\nfrom ..operators.operator import BLOCKS\n" \
-            "from .isobsdf import IsoEvaluator\nfrom ..operators import interpolation\n" \
-            "from ..errors import SceneError\n"
+MOVED_NEW = "from ..operators.deltas import add_deltas\n" \
+            "from ..operators.operator import BLOCKS\nfrom .isobsdf import IsoEvaluator\n" \
+            "from ..operators import interpolation\nfrom ..errors import SceneError\n"
 CASES = [(TOP_OLD, ("layersim",), TOP_NEW), (KERNEL_OLD, ("layersim.kernels",), KERNEL_NEW),
          (MOVED_OLD, ("layersim", "layersim.solved"), MOVED_NEW)]
 

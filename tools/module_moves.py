@@ -35,7 +35,7 @@ MOVES = {
     "layersim.energy": "layersim.operators.energy",
     "layersim.interpolation": "layersim.operators.interpolation",
     "layersim.adding": "layersim.stacking.adding",
-    "layersim.deltas": "layersim.stacking.deltas",
+    "layersim.deltas": "layersim.operators.deltas",
     "layersim.subtract": "layersim.stacking.subtract",
     "layersim.determined": "layersim.stacking.determined",
     "layersim.bsdf": "layersim.solved.bsdf",

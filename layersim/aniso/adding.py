@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import scipy.sparse as sps
 
-from ..stacking.deltas import add_deltas
+from ..operators.deltas import add_deltas
 from ..stacking.adding import check_pair
 from ..errors import OperatorError
 from ..operators.operator import DROP_TOLERANCE, Grid
@@ -117,7 +117,7 @@ class _Pair:
     eta_top: float
     eta_bottom: float | None
     opaque: bool
-    delta: dict             # the deltas of the stack (layersim.stacking.deltas)
+    delta: dict             # the deltas of the stack (layersim.operators.deltas)
 
     @classmethod
     def of(cls, top: AnisoOperator, bottom: AnisoOperator) -> "_Pair":

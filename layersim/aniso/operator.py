@@ -50,7 +50,7 @@ class AnisoOperator(Operator):
     eta_top, eta_bottom : float
         Absolute indices of the media above and below (``eta_bottom`` None when opaque).
     delta : dict, optional
-        The delta part of each block per node, ``{block: (h,)}`` (:mod:`layersim.stacking.deltas`).
+        The delta part of each block per node, ``{block: (h,)}`` (:mod:`layersim.operators.deltas`).
     ms : int, optional
         Largest mode coupling present (computed from the blocks when omitted).
     """

@@ -31,7 +31,7 @@ blocks are ``None`` ("left out") and adding skips them.
 A delta in direction (the unscattered transmission through media, the mirror reflection of a
 smooth interface) sits on the diagonal of its block with the same value in every order. It stays
 in the blocks (the adding equations need it), and is also recorded in ``delta[name]`` (per node,
-any of the four blocks; :mod:`layersim.stacking.deltas`), so that the BSDF can evaluate the smooth part
+any of the four blocks; :mod:`layersim.operators.deltas`), so that the BSDF can evaluate the smooth part
 without it and report it separately.
 
 Orders at or beyond ``m`` are exactly zero. Blocks are scipy CSR matrices (a list, or an
@@ -128,7 +128,7 @@ class Operator(ABC):
         Absolute indices of the media above and below (``eta_bottom`` None when opaque).
     delta : dict
         The delta (specular or straight-through) part of each block per node, ``{block: (h,)}``
-        (:mod:`layersim.stacking.deltas`): the unscattered transmission of media, smooth interfaces.
+        (:mod:`layersim.operators.deltas`): the unscattered transmission of media, smooth interfaces.
 
     Smooth dielectric boundaries and near-specular lobes applied where a stack is evaluated
     are the BSDF's (:attr:`layersim.solved.bsdf.BSDF.boundary`, :attr:`~layersim.solved.bsdf.BSDF.lobes`),

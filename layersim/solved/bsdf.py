@@ -23,7 +23,7 @@ reflection (docs/method.md, "Non-negative evaluation", measured by
 ``bin_energies`` interpolate the incident elevation
 linearly instead: a convex combination of the energies at the ordinates, so that they are never
 negative and never exceed 1 where the ordinates do not. Delta parts (the unscattered
-transmission through media, the mirror reflection of smooth interfaces; :mod:`layersim.stacking.deltas`)
+transmission through media, the mirror reflection of smooth interfaces; :mod:`layersim.operators.deltas`)
 are not part of ``eval``; ``albedo`` and ``bin_energies`` include them and :meth:`BSDF.specular`
 reports them. Smooth dielectric boundaries are applied by :mod:`layersim.solved.boundary`.
 """

@@ -12,14 +12,14 @@ evaluator takes validated, flattened directions ``(Q, 3)`` in the public convent
   incident node;
 * ``albedo(wi)``: ``(R, T)``, each ``(Q,)``;
 * ``bins(wi, mu_edges, phi_edges, exits=None, deltas=True, taps=None)``: bin energies;
-* ``specular(wi)``: the delta parts (:func:`layersim.stacking.deltas.specular`).
+* ``specular(wi)``: the delta parts (:func:`layersim.operators.deltas.specular`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..stacking.deltas import specular
+from ..operators.deltas import specular
 
 
 class Evaluator:
@@ -47,5 +47,5 @@ class Evaluator:
         return self._table
 
     def specular(self, wi: np.ndarray) -> dict:
-        """The delta parts for beams from ``wi`` (Q, 3) (:func:`layersim.stacking.deltas.specular`)."""
+        """The delta parts for beams from ``wi`` (Q, 3) (:func:`layersim.operators.deltas.specular`)."""
         return specular(self.op, wi)

@@ -40,7 +40,7 @@ import scipy.sparse.linalg as spla
 from threadpoolctl import threadpool_limits
 
 from ..config import settings
-from .deltas import add_deltas
+from ..operators.deltas import add_deltas
 from ..errors import OperatorError
 from ..operators.operator import IsoOperator, OrderStack, prune_order
 

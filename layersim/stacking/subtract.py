@@ -202,7 +202,7 @@ def subtract(stack, known, side: str = "top", eps: float | None = None,
 def _subtract_op(stack, known, side, eps, noise):
     if any(name in op.delta for op in (stack, known) for name in ("Rt", "Rb")):
         # the recovered layer's mirror delta would need the delta algebra inverted
-        # (layersim.stacking.deltas); without it the delta would be smeared into the smooth part
+        # (layersim.operators.deltas); without it the delta would be smeared into the smooth part
         raise OperatorError("cannot subtract operators with a mirror (specular) reflection "
                             "delta (a smooth interface, roughness 0); give it a roughness > 0")
     if stack.grid != known.grid:

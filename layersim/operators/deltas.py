@@ -44,7 +44,7 @@ def specular(op, wi: np.ndarray) -> dict:
     leaves through each side in the mirror (same side: ``wo = (-x, -y, z)``) or straight-through
     (other side: ``wo = -wi``) direction, interpolated linearly in the incident elevation between
     the ordinates (as :meth:`layersim.solved.bsdf.BSDF.albedo`)."""
-    from ..operators.interpolation import hat_weights
+    from .interpolation import hat_weights
     mu = wi[:, 2]
     idx, w = hat_weights(op.grid.mu, np.abs(mu))
     mirror = wi * np.array([-1.0, -1.0, 1.0])
