@@ -446,8 +446,8 @@ def add(top, bottom, threads: int | None = None):
     Both must be solved on the same discretisation (see ``solve(..., like=...)``) and
     ``top`` must be transmissive, ending in the medium that ``bottom`` starts in. Accepts
     :class:`BSDF` objects (per channel; a 1-channel operand is shared by all channels of the
-    other) or two :class:`~layersim.operators.operator.Operator` objects (an isotropic one is converted
-    when the other is coupled), and returns the same type.
+    other) or two :class:`~layersim.operators.operator.Operator` objects (an isotropic one is
+    converted when the other is coupled), and returns the same type.
     """
     if isinstance(top, Operator) and isinstance(bottom, Operator):
         return _ADDERS[common_representation(top, bottom)](top, bottom, threads)

@@ -7,7 +7,8 @@ import pytest
 import scipy.stats
 
 import layersim
-from layersim.operators.interpolation import bin_quadrature as _bin_quadrature  # piecewise-cubic-exact
+# piecewise-cubic-exact
+from layersim.operators.interpolation import bin_quadrature as _bin_quadrature
 from layersim.solved.channels import LUMINANCE
 from layersim.operators.operator import Grid, IsoOperator
 

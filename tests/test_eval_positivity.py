@@ -1,12 +1,13 @@
 """BSDF.eval is never negative.
 
-Lobes cut in azimuth are tapered with the Jackson kernel (:func:`layersim.operators.fourier.taper_factors`),
-a non-negative kernel, so that the series at the ordinates stay non-negative; ``eval`` returns the
-positive part of the cubic spline interpolant between them, which may undershoot only slightly on
-the steep flank of a narrow lobe. The tests check the kernel, the series at the ordinates of every
-projection path (with Lanczos sigma factors as the taper, the counter-example that gives them
-their power), and scan random direction pairs of the bench scenes and the example car paint
-and lacquered wood. ``benchmarks/features/eval_positivity.py`` measures the same with either taper, and
+Lobes cut in azimuth are tapered with the Jackson kernel
+(:func:`layersim.operators.fourier.taper_factors`), a non-negative kernel, so that the series at the
+ordinates stay non-negative; ``eval`` returns the positive part of the cubic spline interpolant
+between them, which may undershoot only slightly on the steep flank of a narrow lobe. The tests
+check the kernel, the series at the ordinates of every projection path (with Lanczos sigma factors
+as the taper, the counter-example that gives them their power), and scan random direction pairs of
+the bench scenes and the example car paint and lacquered wood.
+``benchmarks/features/eval_positivity.py`` measures the same with either taper, and
 covers the anisotropic bench scenes, whose solves and evaluations at the default plans take
 minutes on two cores.
 """

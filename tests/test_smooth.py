@@ -1,5 +1,6 @@
 """Exact smooth interfaces (roughness 0): deltas in the adding equations, smooth conductors,
-smooth dielectric boundaries on the Snell-matched grid (layersim.operators.deltas, layersim.solved.boundary)."""
+smooth dielectric boundaries on the Snell-matched grid (layersim.operators.deltas,
+layersim.solved.boundary)."""
 
 import numpy as np
 import pytest
@@ -210,7 +211,8 @@ def test_smooth_coating_over_anisotropic_gold_albedo_agrees_with_monte_carlo():
 
 def test_smooth_coating_over_smooth_gold_closed_form():
     """All deltas: R = F + (1 - F)^2 R_g / (1 - F R_g) with R_g the gold Fresnel reflectance
-    at the refracted angle (layersim.operators.deltas with the boundary), 3e-5 to 80 deg, 2e-4 to 89."""
+    at the refracted angle (layersim.operators.deltas with the boundary), 3e-5 to 80 deg, 2e-4 to
+    89."""
     scene = layersim.Scene.from_dict({"layer": [
         {"kind": "dielectric", "ior": 1.5, "roughness": 0},
         {"kind": "conductor", "ior": GOLD, "roughness": 0}]})

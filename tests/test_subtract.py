@@ -144,7 +144,7 @@ def test_subtract_on_solved_bsdfs_and_the_cli(tmp_path, capsys):
     assert "side='top'" in capsys.readouterr().err
 
 
-# --- what the stack determines (layersim.stacking.determined) -------------------------------------------
+# --- what the stack determines (layersim.stacking.determined) --------------------------------
 
 def _solve(layers, top_ior=1.0, like=None, disc=None):
     d = {"layer": layers, "stack": {"top_ior": top_ior}}

@@ -31,8 +31,8 @@ Four sections (all float64, fixed seeds):
     model above 5 % of its maximum), for both tapers.
 
 The 'before' reconstruction is made by substituting the sigma factors for
-``layersim.operators.fourier.taper_factors`` during its solve, the only difference between the two solves;
-linear interpolation (section ``sources``) by substituting
+``layersim.operators.fourier.taper_factors`` during its solve, the only difference between the two
+solves; linear interpolation (section ``sources``) by substituting
 :func:`layersim.operators.interpolation.hat_weights` for the spline weights of ``eval``.
 
 Usage: python benchmarks/features/eval_positivity.py [--pairs N] [--grazing N] [--sections S,...]

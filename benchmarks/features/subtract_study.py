@@ -11,8 +11,8 @@ and blocks,
 - ``err reach``: over the directions reached through the known layer (``mu >= mu_reached``).
 
 With noise, every stored operator entry of the stack is multiplied by ``1 + level N(0, 1)``
-(:func:`layersim.stacking.subtract.with_noise`, seed 3) and eps is chosen automatically; ``best`` is the
-smallest ``err reach`` (same directions) over eps on a half-decade grid refined by quarter
+(:func:`layersim.stacking.subtract.with_noise`, seed 3) and eps is chosen automatically; ``best`` is
+the smallest ``err reach`` (same directions) over eps on a half-decade grid refined by quarter
 decades around its best, and ``ratio`` the automatic error over it. ``neg det`` is the depth of
 negative lobes over the determined directions (Fejer means of the low orders, relative to the
 peak; 0 for the true layers, and 0 where no direction is declared).

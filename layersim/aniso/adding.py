@@ -14,8 +14,8 @@ transmission only, never by the bottom's reflection, which is the largest operat
 coated anisotropic base (and ``Tbt1`` is block diagonal when the coating is isotropic).
 ``A'`` is banded by Fourier order and solved with :func:`~layersim.aniso.banded.banded_solve`
 (block LU, pruned block substitution, sparse right-hand sides); results are pruned at
-:data:`layersim.operators.operator.DROP_TOLERANCE` relative to each block's largest entry, and, with the
-``relerr`` of :func:`layersim.solve` (:data:`layersim.aniso.plan.COUPLED_RELERR`), per ordinate
+:data:`layersim.operators.operator.DROP_TOLERANCE` relative to each block's largest entry, and, with
+the ``relerr`` of :func:`layersim.solve` (:data:`layersim.aniso.plan.COUPLED_RELERR`), per ordinate
 pair as the projected layers are, intermediates included.
 
 Memory: the blocks of the step are held by a

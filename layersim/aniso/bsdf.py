@@ -3,10 +3,10 @@
 :class:`layersim.solved.bsdf.BSDF` evaluates a channel whose operator is an
 :class:`~layersim.aniso.operator.AnisoOperator` with an :class:`AnisoEvaluator` (the registry
 :data:`layersim.solved.bsdf.EVALUATORS`). Conventions are those of
-:mod:`layersim.solved.bsdf` (one place converts public directions to the solver's): ``mu_in = wi.z``,
-``mu_out = -wo.z``, and the *propagation* azimuths ``phi_i = atan2(-wi.y, -wi.x)``,
-``phi_o = atan2(wo.y, wo.x)`` in the stack frame, ``phi_d = phi_o - phi_i``,
-``phi_s = phi_o + phi_i``.
+:mod:`layersim.solved.bsdf` (one place converts public directions to the solver's):
+``mu_in = wi.z``, ``mu_out = -wo.z``, and the *propagation* azimuths
+``phi_i = atan2(-wi.y, -wi.x)``, ``phi_o = atan2(wo.y, wo.x)`` in the stack frame,
+``phi_d = phi_o - phi_i``, ``phi_s = phi_o + phi_i``.
 
 * ``eval``: cubic spline interpolation of the coefficients between ordinates (as for isotropic
   stacks) and the 2-D series of Zeltner & Jakob 2018 eq. (7)
@@ -29,7 +29,7 @@ import numpy as np
 
 from ..solved.evaluator import Evaluator
 from ..operators.interpolation import (bin_quadrature, block_taps, closed_bin, hat_weights,
-                             side_energies, spline_weights)
+                                       side_energies, spline_weights)
 from ..kernels import fourier_eval2d
 from ..operators.operator import BLOCKS
 from . import basis

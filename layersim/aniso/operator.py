@@ -21,8 +21,8 @@ import numpy as np
 import scipy.sparse as sps
 
 from ..errors import FileFormatError, OperatorError
-from ..operators.operator import (BLOCKS, DROP_TOLERANCE, Grid, IsoOperator, Operator, header_arrays,
-                        read_blocks, read_delta, register, write_blocks)
+from ..operators.operator import (BLOCKS, DROP_TOLERANCE, Grid, IsoOperator, Operator,
+                                  header_arrays, read_blocks, read_delta, register, write_blocks)
 from ..outofcore import memory
 from ..outofcore.assemble import select_entries
 from ..outofcore.parking import Parked
@@ -415,8 +415,8 @@ def as_aniso(op, md: int | None = None) -> AnisoOperator:
 
 def prune(mat, tolerance: float = DROP_TOLERANCE):
     """Drop entries below ``tolerance`` times the largest magnitude of ``mat``
-    (:func:`layersim.outofcore.sums.prune`, with :data:`layersim.operators.operator.DROP_TOLERANCE` by
-    default)."""
+    (:func:`layersim.outofcore.sums.prune`, with :data:`layersim.operators.operator.DROP_TOLERANCE`
+    by default)."""
     return prune_below(mat, tolerance)
 
 

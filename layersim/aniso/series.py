@@ -54,8 +54,8 @@ def peak_series_shifted(q0, qpi, shift, dist: str, K: int) -> np.ndarray:
     """One-sided complex series (``n = 0..K-1``) of ``peak(q(t - shift))`` where
     ``q(t') = (q0 + qpi)/2 - (qpi - q0)/2 cos(t')`` peaks at ``t' = 0``.
 
-    The cosine coefficients ``c_n`` come from :func:`layersim.operators.fourier.peak_series` (FFT length
-    following the full series length, GGX in closed form); ``cos(n (t - shift))`` contributes
+    The cosine coefficients ``c_n`` come from :func:`layersim.operators.fourier.peak_series` (FFT
+    length following the full series length, GGX in closed form); ``cos(n (t - shift))`` contributes
     ``c_n / 2 exp(-i n shift)`` to frequency ``n``. Shape (P, K).
     """
     c = fourier.peak_series(q0, qpi, dist, K)

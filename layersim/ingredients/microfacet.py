@@ -2,11 +2,12 @@
 
 For every ordinate pair (mu_i, mu_o) of every block, the BSDF is split by the kernels into
 ``f(phi) = S(phi) * peak(q(phi))`` (see :mod:`layersim.kernels.physics`); the cosine series of
-the peak factor is exact (:func:`layersim.operators.fourier.peak_series`), the smooth factor ``S`` is fitted
-with a short cosine series on the support of the peak (:func:`layersim.operators.fourier.fit_restricted`),
-and the two are multiplied in coefficient space (Jakob's layerlab tutorial sec. 5.2; Zeltner &
-Jakob 2018 sec. 4.1; Jakob et al. 2014). Pairs are processed in batches grouped by series
-length, so the work is proportional to the number of coefficients kept.
+the peak factor is exact (:func:`layersim.operators.fourier.peak_series`), the smooth factor ``S``
+is fitted with a short cosine series on the support of the peak
+(:func:`layersim.operators.fourier.fit_restricted`), and the two are multiplied in coefficient space
+(Jakob's layerlab tutorial sec. 5.2; Zeltner & Jakob 2018 sec. 4.1; Jakob et al. 2014). Pairs are
+processed in batches grouped by series length, so the work is proportional to the number of
+coefficients kept.
 
 Accuracy (``tests/test_projection.py``, against composite Gauss-Legendre quadrature graded around
 the peak, including every grazing pair of a 64-ordinate grid): away from total internal

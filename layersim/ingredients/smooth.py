@@ -10,8 +10,8 @@ with the same value in every Fourier order, on any grid: the Fresnel reflectance
 * A smooth **dielectric boundary** (the top interface of a stack, or the bottom one of a
   transmissive stack) refracts ``mu`` to its Snell image, which is diagonal only on a grid whose
   nodes are matched across the interface. The solver keeps the refraction out of the blocks: on
-  the Snell-matched grid of :func:`layersim.operators.quadrature.snell_matched` the stack is solved in the
-  directions just inside the boundary, with the boundary's internal reflection
+  the Snell-matched grid of :func:`layersim.operators.quadrature.snell_matched` the stack is solved
+  in the directions just inside the boundary, with the boundary's internal reflection
   (:func:`boundary_reflector`: diagonal ``F``, 1 under total internal reflection, and unit
   transmission that hands the radiance arriving at the boundary on); the BSDF then applies the
   Fresnel transmission and the change of solid angle (:mod:`layersim.solved.boundary`).

@@ -17,7 +17,7 @@ from __future__ import annotations
 from ..errors import InfeasibleError
 from ..ingredients.smooth import smooth_conductor_operator
 from ..solved.lobe import (NEAR_SPECULAR_ALPHA, NEAR_SPECULAR_BASE_ALPHA, NEAR_SPECULAR_WIDE_MAX,
-                    NearSpecularLobe, near_specular_conductor_error, near_specular_error)
+                           NearSpecularLobe, near_specular_conductor_error, near_specular_error)
 from . import smooth
 from .base import LayerPlan
 
@@ -82,8 +82,8 @@ def plan_conductor(scene, i: int, layer, survey) -> bool:
     ``bin_energies`` use its exact microfacet lobe, and the mirror only stands for it when the
     BSDF is added to other layers. Under other layers its lobe (about ``2 alpha`` wide) must be
     blurred by a rough interface above it (:func:`_blurred_below`) and both its roughnesses be
-    at most :data:`~layersim.solved.lobe.NEAR_SPECULAR_BASE_ALPHA`; behind a smooth or near-specular coat
-    the lobe is seen directly, and near the coat's critical angle part of it is trapped, which
+    at most :data:`~layersim.solved.lobe.NEAR_SPECULAR_BASE_ALPHA`; behind a smooth or near-specular
+    coat the lobe is seen directly, and near the coat's critical angle part of it is trapped, which
     a mirror does not reproduce (``benchmarks/features/near_specular.txt``)."""
     lo, hi = min(layer.alpha_u, layer.alpha_v), max(layer.alpha_u, layer.alpha_v)
     if lo > NEAR_SPECULAR_ALPHA or layer.film is not None:

@@ -81,8 +81,8 @@ ENERGY_REFUSE = 1e-2
 def check_operator_energy(op, i: int, layer, n: int) -> list[str]:
     """Refuse the operator of layer ``i`` if it grossly over-counts energy (its lobes are
     narrower than the spacing of ``n`` ordinates); remove small excesses where the
-    representation can (:meth:`~layersim.operators.operator.Operator.limit_energy`), and return notes
-    saying what was done or left (they go into the BSDF's ``info["notes"]``).
+    representation can (:meth:`~layersim.operators.operator.Operator.limit_energy`), and return
+    notes saying what was done or left (they go into the BSDF's ``info["notes"]``).
 
     Raises
     ------

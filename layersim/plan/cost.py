@@ -252,8 +252,8 @@ def adding_chain(ings: list, md: int, h: int) -> list:
     :func:`layersim.solver.solve` does: per step, the orders that go dense (their operands'
     nonzeros, the top's ``Rb``, ``Ttb``, ``Tbt`` and the bottom's blocks, at least
     :func:`layersim.stacking.adding.sparse_density` of the entries; every order below
-    :data:`~layersim.stacking.adding.SPARSE_MIN_H` ordinates), the nonzeros of the others, and the size
-    of the stack. A stack's blocks hold, per order, the nonzeros of both operands (products
+    :data:`~layersim.stacking.adding.SPARSE_MIN_H` ordinates), the nonzeros of the others, and the
+    size of the stack. A stack's blocks hold, per order, the nonzeros of both operands (products
     spread them; at most ``h^2``)."""
     if not ings:
         return []

@@ -1,8 +1,8 @@
 """Smooth dielectric boundaries of a stack, applied where the BSDF is evaluated.
 
 A stack whose top (or bottom) interface is smooth is solved on the Snell-matched grid
-(:func:`layersim.operators.quadrature.snell_matched`) in the directions just inside that boundary, with
-the boundary's internal reflection in the blocks (:func:`layersim.ingredients.smooth.
+(:func:`layersim.operators.quadrature.snell_matched`) in the directions just inside that boundary,
+with the boundary's internal reflection in the blocks (:func:`layersim.ingredients.smooth.
 boundary_reflector`); the BSDF's ``boundary[side]`` records the index outside. Refraction maps an
 outside cosine ``x`` to ``mu = sqrt(1 - (1 - x^2) / eta^2)`` (``eta`` = inside / outside) and
 keeps the azimuth; the grid's nodes in the escape cone are exactly the images of a quadrature in
@@ -99,9 +99,11 @@ class BoundaryEvaluator:
     inner : evaluator
         The evaluator of ``op`` (:data:`layersim.solved.bsdf.EVALUATORS`).
     boundary : dict
-        ``{"top" | "bottom": index of the medium outside}`` (:attr:`layersim.solved.bsdf.BSDF.boundary`).
+        ``{"top" | "bottom": index of the medium outside}``
+        (:attr:`layersim.solved.bsdf.BSDF.boundary`).
     lobes : dict
-        ``{"top": parameters of a NearSpecularLobe}`` or empty (:attr:`layersim.solved.bsdf.BSDF.lobes`).
+        ``{"top": parameters of a NearSpecularLobe}`` or empty
+        (:attr:`layersim.solved.bsdf.BSDF.lobes`).
     """
 
     def __init__(self, op, inner, boundary: dict, lobes: dict):

@@ -1,8 +1,8 @@
 """The solved BSDF of a stack: evaluation, energy fractions and bin energies.
 
 Directions follow ``docs/conventions.md``: unit vectors ``(..., 3)`` in the local frame, both
-pointing away from the surface. This module is the one place where they are converted to the solver's
-discrete-ordinates convention::
+pointing away from the surface. This module is the one place where they are converted to the
+solver's discrete-ordinates convention::
 
     mu_in = wi.z,   mu_out = -wo.z,   dphi = phi(wo) - phi(wi) - pi
 
@@ -23,9 +23,10 @@ reflection (docs/method.md, "Non-negative evaluation", measured by
 ``bin_energies`` interpolate the incident elevation
 linearly instead: a convex combination of the energies at the ordinates, so that they are never
 negative and never exceed 1 where the ordinates do not. Delta parts (the unscattered
-transmission through media, the mirror reflection of smooth interfaces; :mod:`layersim.operators.deltas`)
-are not part of ``eval``; ``albedo`` and ``bin_energies`` include them and :meth:`BSDF.specular`
-reports them. Smooth dielectric boundaries are applied by :mod:`layersim.solved.boundary`.
+transmission through media, the mirror reflection of smooth interfaces;
+:mod:`layersim.operators.deltas`) are not part of ``eval``; ``albedo`` and ``bin_energies`` include
+them and :meth:`BSDF.specular` reports them. Smooth dielectric boundaries are applied by
+:mod:`layersim.solved.boundary`.
 """
 
 from __future__ import annotations
@@ -260,7 +261,8 @@ class BSDF:
     def interpolant(self, wi, wo) -> np.ndarray:
         """The spline interpolant of the solved series that :meth:`eval` takes the positive
         part of (1/sr; same arguments and shape). Between ordinates it can undershoot zero
-        slightly (module docstring); ``benchmarks/features/eval_positivity.py`` measures by how much."""
+        slightly (module docstring); ``benchmarks/features/eval_positivity.py`` measures by how
+        much."""
         wi, wo, shape = direction_pairs(wi, wo)
         return self._per_channel(lambda c: self.evaluator(c).eval(wi, wo).reshape(shape))
 

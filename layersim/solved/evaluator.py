@@ -1,8 +1,8 @@
 """The interface of a BSDF channel's evaluator, whatever the operator's representation.
 
 :class:`layersim.solved.bsdf.BSDF` picks one evaluator per channel by the operator's representation
-(:data:`layersim.solved.bsdf.EVALUATORS`: :class:`layersim.solved.isobsdf.IsoEvaluator` for cosine series,
-:class:`layersim.aniso.bsdf.AnisoEvaluator` for coupled modes) and wraps it in
+(:data:`layersim.solved.bsdf.EVALUATORS`: :class:`layersim.solved.isobsdf.IsoEvaluator` for cosine
+series, :class:`layersim.aniso.bsdf.AnisoEvaluator` for coupled modes) and wraps it in
 :class:`layersim.solved.boundary.BoundaryEvaluator` outside a smooth dielectric boundary. Every
 evaluator takes validated, flattened directions ``(Q, 3)`` in the public convention
 (docs/conventions.md) and answers:

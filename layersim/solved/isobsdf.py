@@ -23,7 +23,7 @@ import numpy as np
 from .evaluator import Evaluator
 from .directions import azimuth
 from ..operators.interpolation import (bin_quadrature, block_taps, closed_bin, hat_weights,
-                            side_energies, spline_weights)
+                                       side_energies, spline_weights)
 from ..kernels import fourier_eval
 from ..operators.operator import BLOCKS, order_weight
 
@@ -96,8 +96,8 @@ class IsoEvaluator(Evaluator):
     def node_energy(self, name: str, weight: np.ndarray | None = None,
                     wi: np.ndarray | None = None) -> np.ndarray:
         """Energy fraction per incident node through block ``name`` (order 0 + delta), each
-        outgoing node counted with ``weight`` (h,) (default 1; :mod:`layersim.solved.boundary` passes
-        the transmittance of a smooth boundary); the same for every incident azimuth, so
+        outgoing node counted with ``weight`` (h,) (default 1; :mod:`layersim.solved.boundary`
+        passes the transmittance of a smooth boundary); the same for every incident azimuth, so
         ``wi`` is not used. Shape (h,)."""
         op = self.op
         fw = op.grid.flux_weight
@@ -119,9 +119,9 @@ class IsoEvaluator(Evaluator):
         ``exits`` (optional, per side ``"top"`` / ``"bottom"``) replaces the elevation
         integral of a side by an object with ``points(edges) -> (mu, weight, bin)`` (points in
         the operator's cosines, weights including ``mu dmu``) and ``weight(mu)``, the fraction
-        of the radiance at ``mu`` that leaves (:class:`layersim.solved.boundary.Exit`). ``deltas=False``
-        leaves the delta parts out; ``taps`` (two arrays of 4) replaces the linear interpolation
-        weights of the incident elevation."""
+        of the radiance at ``mu`` that leaves (:class:`layersim.solved.boundary.Exit`).
+        ``deltas=False`` leaves the delta parts out; ``taps`` (two arrays of 4) replaces the linear
+        interpolation weights of the incident elevation."""
         op = self.op
         grid = op.grid
         mu_in = wi[2]

@@ -21,8 +21,9 @@ and hemispherical slices for one incident direction.
 Both accept anything with ``eval(wi, wo)``, ``channels`` and ``opaque`` (a
 :class:`layersim.BSDF` or a :class:`layersim.bsdffile.FourierTable`); Fourier orders need a
 ``BSDF``; for an anisotropic one they are those of its rotational average
-(:meth:`~layersim.aniso.operator.AnisoOperator.rotational_average`, the ``s = 0`` terms). RGB shows the luminance in the block plot and colour images in the slices.
-Figures are drawn with matplotlib's object API and the Agg canvas: no global backend is changed.
+(:meth:`~layersim.aniso.operator.AnisoOperator.rotational_average`, the ``s = 0`` terms). RGB shows
+the luminance in the block plot and colour images in the slices. Figures are drawn with matplotlib's
+object API and the Agg canvas: no global backend is changed.
 """
 
 from __future__ import annotations
