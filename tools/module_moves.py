@@ -216,6 +216,8 @@ def _rewrite_from(match: re.Match, packages: tuple, modules: dict, where: str, w
 
 
 def _rewrite_dotted(match: re.Match) -> str:
+    """The new name of one dotted mention ``layersim.X``; a shadowed name (:data:`SHADOWED`) only
+    where it means the module."""
     old = f"layersim.{match['name']}"
     before = match.string[max(0, match.start() - 12):match.start()]
     if old in SHADOWED and not match["after"] and not _MODULE_BEFORE.search(before):
