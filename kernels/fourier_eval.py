@@ -1,8 +1,8 @@
 """Kernel that evaluates tabulated Fourier BSDFs: each query sums the cosine series of up to 16
 neighbouring ordinate pairs (spline weights prepared by the host).
 
-Series layout (shared with :class:`layersim.bsdf.BSDF` and the ``.bsdf`` export): pair ``p`` owns
-``coef[offsets[p]:offsets[p + 1]]`` = ``f_0, f_1, ...`` of its cosine series.
+Series layout (shared with :class:`layersim.solved.bsdf.BSDF` and the ``.bsdf`` export): pair ``p``
+owns ``coef[offsets[p]:offsets[p + 1]]`` = ``f_0, f_1, ...`` of its cosine series.
 """
 
 from __future__ import annotations

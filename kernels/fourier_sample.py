@@ -12,13 +12,12 @@ Elevation (one query = one incident direction)
     interpolates the zeroth-order coefficient at every outgoing node, ``G_a = sum_b w_b
     f_0(a, b)``, and integrates the marginal ``q(mu) = mu * C(mu)`` exactly, ``C`` being the cubic
     Hermite spline through the ``G_a`` with the derivative estimates of
-    :func:`layersim.bsdf.spline_weights` (constant beyond the outermost nodes, as ``eval``). In an
-    *exact* interval (the four node values involved are >= 0 and the cubic stays >= 0), ``q`` is
-    the cosine-weighted azimuthal integral of ``eval`` (up to the factor ``2 pi``), so ``sample``
-    importance-samples the interpolated BSDF perfectly. Otherwise (undershoot next to a sharp
-    edge of a lobe) the interval uses the linear interpolant of its two end values clamped to
-    ``>= 0``: the sampling density is never negative, and the density kernel applies the same
-    rule.
+    :func:`layersim.solved.bsdf.spline_weights` (constant beyond the outermost nodes, as ``eval``).
+    In an *exact* interval (the four node values involved are >= 0 and the cubic stays >= 0),
+    ``q`` is the cosine-weighted azimuthal integral of ``eval`` (up to the factor ``2 pi``), so
+    ``sample`` importance-samples the interpolated BSDF perfectly. Otherwise (undershoot next to a
+    sharp edge of a lobe) the interval uses the linear interpolant of its two end values clamped to
+    ``>= 0``: the sampling density is never negative, and the density kernel applies the same rule.
     Reflection versus transmission is chosen in proportion to the two sides' integrals.
 
 Azimuth (one query = one interpolated series, 16 pairs with spline weights)
@@ -29,7 +28,7 @@ Azimuth (one query = one interpolated series, 16 pairs with spline weights)
     by undershoot and ``2 pi g_0`` would not normalise it). A series that dips below zero somewhere
     in an exact interval (ringing of a truncated series, cubic undershoot of very narrow lobes)
     makes the integral locally decrease, and the sampled azimuths then follow ``g`` only up to the
-    negative mass (documented in :mod:`layersim.sampling`).
+    negative mass (documented in :mod:`layersim.solved.sampling`).
 
 All arithmetic is float64. Layout of the series table: see :mod:`.fourier_eval`.
 """
@@ -466,7 +465,8 @@ def side_masses(mu, c0, taps, tw, base_r, base_t, device=None):
     c0 : float64 (P,)
         Zeroth-order coefficient of every pair of the series table (0 for empty pairs).
     taps, tw : (Q, 4) int64 / float64
-        Incident spline taps and weights (:func:`layersim.bsdf.spline_weights` of ``|mu_i|``).
+        Incident spline taps and weights (:func:`layersim.solved.bsdf.spline_weights` of
+        ``|mu_i|``).
     base_r, base_t : int64 (Q,)
         First pair of the reflection / transmission block for the query (``-1``: left out).
 

@@ -1,5 +1,5 @@
 """Host access to the rough-interface physics of :mod:`layersim.kernels.physics` at given
-directions and microfacet normals, for the near-specular interfaces of :mod:`layersim.lobe`
+directions and microfacet normals, for the near-specular interfaces of :mod:`layersim.solved.lobe`
 (the direct reflection lobe, its energy and the transmitted energy come from the same functions
 as the Monte Carlo walk's microfacet events). ``k > 0`` selects a conductor (complex relative
 index ``eta + i k``), which reflects with the conductor Fresnel term and transmits nothing."""

@@ -1,4 +1,4 @@
-"""Measured isotropic BRDFs in the MERL layout (:mod:`layersim.merl`) as Warp functions: the
+"""Measured isotropic BRDFs in the MERL layout (:mod:`layersim.layers.merl`) as Warp functions: the
 trilinear lookup shared by the projection and the random walk, and its sampling.
 
 ``tab[off + (i * 90 + j) * 180 + k]`` holds one channel's BRDF (1/sr) at the sample
@@ -20,13 +20,13 @@ from . import sampling
 
 wp.set_module_options({"enable_backward": False})
 
-# samples in theta_h, theta_d, phi_d (layersim.merl.DIMS) are written as literals below
+# samples in theta_h, theta_d, phi_d (layersim.layers.merl.DIMS) are written as literals below
 
 
 @wp.func
 def half_diff(wi: Any, wo: Any):
     """Rusinkiewicz's ``(theta_h, theta_d, phi_d)`` of a pair above the surface (``phi_d``
-    folded to [0, pi) by reciprocity), as :func:`layersim.merl.half_diff`."""
+    folded to [0, pi) by reciprocity), as :func:`layersim.layers.merl.half_diff`."""
     h = wp.normalize(wi + wo)
     th = wp.atan2(wp.sqrt(h[0] * h[0] + h[1] * h[1]), h[2])
     ph = wp.atan2(h[1], h[0])

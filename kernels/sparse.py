@@ -1,11 +1,11 @@
 """Operator assembly on the device: per-pair cosine series -> per-order blocks -> stacked CSR.
 
 The numeric projection on a GPU (``layersim.ingredients.numeric``) leaves its series on the
-device; these kernels turn them into the CSR arrays of :class:`layersim.operator.OrderStack`
-without a round trip through the host, so that only the nonzeros come back. They follow
-``layersim.operator._orders_to_csr`` exactly: ``B_l[o, i] = c_l f_l(o <- i) w_i |mu_i|`` with
-``c_0 = 2 pi``, ``c_l = pi``, entries below ``tol`` times the largest of their order dropped,
-columns in increasing order within each row.
+device; these kernels turn them into the CSR arrays of
+:class:`layersim.operators.operator.OrderStack` without a round trip through the host, so that only
+the nonzeros come back. They follow ``layersim.operators.operator._orders_to_csr`` exactly:
+``B_l[o, i] = c_l f_l(o <- i) w_i |mu_i|`` with ``c_0 = 2 pi``, ``c_l = pi``, entries below ``tol``
+times the largest of their order dropped, columns in increasing order within each row.
 """
 
 from __future__ import annotations

@@ -13,13 +13,13 @@ Public entry points (see docs/conventions.md)::
 from .errors import LayersimError, SceneError, InfeasibleError, OperatorError, FileFormatError
 from .scene import Scene, Dielectric, Conductor, Medium, Diffuse, Measured, Discretization
 from .plan import Plan, make_plan
-from .operator import IsoOperator, Operator
+from .operators.operator import IsoOperator, Operator
 from .aniso import AnisoOperator
-from .bsdf import BSDF
+from .solved.bsdf import BSDF
 from . import bsdffile
 from .bsdffile import FourierTable, export
 from .solver import solve, add
-from .subtract import subtract
+from .stacking.subtract import subtract
 
 __version__ = "0.1.0"
 

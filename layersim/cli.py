@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bsdf import BSDF
+from .solved.bsdf import BSDF
 from .bsdffile import FourierTable, export, read
 from .config import settings
 from .errors import FileFormatError, InfeasibleError, LayersimError
@@ -53,8 +53,8 @@ from .outofcore import memory
 from .plan import make_plan
 from .scene import Scene
 from .solver import solve
-from . import determined
-from .subtract import subtract
+from .stacking import determined
+from .stacking.subtract import subtract
 
 EXIT_INPUT = 2
 #: Incident angles (degrees) of the albedo tables that solve, info and subtract print.
@@ -555,7 +555,7 @@ def cmd_plot(args) -> int:
             if args.order >= md:
                 raise ValueError(f"--order {args.order}: {args.source} has Fourier orders "
                                  f"0 to {md - 1} (md = {md})")
-        from . import plot   # imported when used: matplotlib is slow to import
+        from .solved import plot   # imported when used: matplotlib is slow to import
         plot.plot_blocks(bsdf, out, order=args.order, phi_d=math.radians(args.phi_d),
                          title=name, percentile=args.percentile)
     else:
@@ -570,7 +570,7 @@ def cmd_plot(args) -> int:
         if getattr(bsdf, "opaque", False) and wi[2] < 0:
             raise ValueError(f"{args.source} is opaque from below: --wi THETA > 90 lights it "
                              "from below, where no light enters; give THETA < 90")
-        from . import plot   # imported when used: matplotlib is slow to import
+        from .solved import plot   # imported when used: matplotlib is slow to import
         plot.plot_slices(bsdf, wi, out, log=args.log, title=name)
     print(f"wrote {out}")
     return 0

@@ -43,7 +43,7 @@ __all__ = [
     "Scene", "QUADRATURES", "DISTRIBUTIONS", "COMPENSATIONS", "as_scene",
 ]
 
-#: Quadrature rules on mu in [-1, 1] (see :mod:`layersim.quadrature`).
+#: Quadrature rules on mu in [-1, 1] (see :mod:`layersim.operators.quadrature`).
 QUADRATURES = ("gauss-lobatto", "gauss-legendre", "simpson38")
 
 _MAX_N = 4096             # ordinates
@@ -64,7 +64,7 @@ class Discretization:
     difference (cosine orders 0..md-1, or complex modes -(md-1)..md-1); ms : coupling half-width
     in the azimuth sum (modes -ms..ms; 0 for isotropic stacks); quadrature : one of
     :data:`QUADRATURES`; tol : relative error of bin energies that :func:`layersim.solve`
-    solves to (:mod:`layersim.accuracy`; not with ``n`` or ``md``); theta_full : elevation
+    solves to (:mod:`layersim.plan.accuracy`; not with ``n`` or ``md``); theta_full : elevation
     (degrees, 80 by default) within which ordinate pairs keep every Fourier order their lobes
     need (:mod:`layersim.plan.orders`; closer to 90 keeps grazing peaks sharp at more orders).
     """

@@ -11,17 +11,18 @@ from dataclasses import replace
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from . import accuracy, adding
+from .plan import accuracy
+from .stacking import adding
 from .aniso import adding as aniso_adding
 from .aniso.plan import STACK_RELERR, STACK_RELERR_INTERMEDIATE
-from .bsdf import BSDF, channel_pairs, refuse_boundary
+from .solved.bsdf import BSDF, channel_pairs, refuse_boundary
 from .config import settings
 from .errors import InfeasibleError
 from .ingredients.aniso_microfacet import AnisoProjectionStats
 from .ingredients.microfacet import ProjectionStats
 from .kernels.runtime import device_for
 from .layers import OperatorJob, kind_of
-from .operator import IsoOperator, Operator, common_representation
+from .operators.operator import IsoOperator, Operator, common_representation
 from .outofcore import memory
 from .outofcore.workspace import Workspace
 from .plan import Plan, make_plan
@@ -109,7 +110,7 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
     tol : float, optional
         Solve to this relative error of bin energies (18 x 36 bins per side, worst of 0, 30,
         60 and 80 degrees) instead of on the planner's ``n`` and ``md``: a ladder of
-        discretisations, each the error estimate of the next (:mod:`layersim.accuracy`). Also
+        discretisations, each the error estimate of the next (:mod:`layersim.plan.accuracy`). Also
         ``tol`` in the scene's ``[discretization]``.
     error_estimate : bool
         Estimate the discretisation error from companion solves at ``n`` and ``md`` over
@@ -160,7 +161,7 @@ def solve(scene: Scene, like: BSDF | None = None, threads: int | None = None,
 
 
 def _solve_to_tolerance(scene: Scene, tol: float, solve_one, log=None) -> BSDF:
-    """Climb the ladder of discretisations of :class:`layersim.accuracy.Ladder`, solving each
+    """Climb the ladder of discretisations of :class:`layersim.plan.accuracy.Ladder`, solving each
     rung with ``solve_one(scene) -> BSDF``, until a rung meets ``tol``."""
     ladder = accuracy.Ladder(scene, tol, log)
     for rung in ladder.rungs():
@@ -177,7 +178,7 @@ def _solve_to_tolerance(scene: Scene, tol: float, solve_one, log=None) -> BSDF:
 
 def _with_estimate(scene: Scene, solve_one, bsdf: BSDF) -> BSDF:
     """``bsdf`` (solved from ``scene``) with its error estimate from the companion solves
-    of :func:`layersim.accuracy.companion_scenes`, each solved by ``solve_one(scene)``."""
+    of :func:`layersim.plan.accuracy.companion_scenes`, each solved by ``solve_one(scene)``."""
     t0 = time.perf_counter()
     companions = []
     for coarser in accuracy.companion_scenes(scene, bsdf.info):
@@ -319,7 +320,7 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
         s = info["seconds"]
         print(f"solved in {s['total']:.2f} s (plan {s['plan']:.2f} s, layers {s['layers']:.2f} s, "
               f"adding {s['adding']:.2f} s)")
-    # the operators hold the radiance inside the smooth boundaries (layersim.boundary)
+    # the operators hold the radiance inside the smooth boundaries (layersim.solved.boundary)
     return BSDF(stacks, plan, info, boundary=plan.boundary,
                 lobes=[_lobes(plan, mono) for mono in monos])
 
@@ -445,8 +446,8 @@ def add(top, bottom, threads: int | None = None):
     Both must be solved on the same discretisation (see ``solve(..., like=...)``) and
     ``top`` must be transmissive, ending in the medium that ``bottom`` starts in. Accepts
     :class:`BSDF` objects (per channel; a 1-channel operand is shared by all channels of the
-    other) or two :class:`~layersim.operator.Operator` objects (an isotropic one is converted
-    when the other is coupled), and returns the same type.
+    other) or two :class:`~layersim.operators.operator.Operator` objects (an isotropic one is
+    converted when the other is coupled), and returns the same type.
     """
     if isinstance(top, Operator) and isinstance(bottom, Operator):
         return _ADDERS[common_representation(top, bottom)](top, bottom, threads)

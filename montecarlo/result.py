@@ -74,7 +74,7 @@ class MCResult:
 
     def z_scores(self, side: str, values) -> np.ndarray:
         """Distances, in standard errors, of ``values`` (bin energies of the same bins from
-        another method, e.g. a solver's :meth:`layersim.bsdf.BSDF.bin_energies`; shape of
+        another method, e.g. a solver's :meth:`layersim.solved.bsdf.BSDF.bin_energies`; shape of
         ``bins[side]``) from these bins, over the populated bins (either nonzero), flattened.
 
         An empty or nearly empty bin has a tiny sample standard error; its real spread is

@@ -47,7 +47,7 @@ class StackArrays:
         :data:`layersim.kernels.tabulated.TABULATED`) holds in place of ``alpha_u`` the offset of
         its packed table (:meth:`layersim.ndf.NDFTable.packed`), and so does a measured base
         (:data:`layersim.kernels.walk.MEASURED`: one channel of its MERL table,
-        :meth:`layersim.merl.MERLTable.packed`). The NDF and MERL tables follow the records,
+        :meth:`layersim.layers.merl.MERLTable.packed`). The NDF and MERL tables follow the records,
         then the compensation tables (:mod:`layersim.compensation.walk`).
     slab_f : ndarray of float32, shape (3 * max(n_slabs, 1),)
         Per slab: tau (along the normal), single-scattering albedo, HG g (padded when empty).

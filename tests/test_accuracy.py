@@ -1,10 +1,10 @@
-"""Error estimates and solves to a tolerance (layersim.accuracy) against refined solves."""
+"""Error estimates and solves to a tolerance (layersim.plan.accuracy) against refined solves."""
 
 import numpy as np
 import pytest
 
 import layersim
-from layersim import accuracy
+from layersim.plan import accuracy
 
 GLASS_ON_WHITE = {"layer": [{"kind": "dielectric", "ior": 1.5, "roughness": 0.3},
                             {"kind": "diffuse", "albedo": 0.5}]}

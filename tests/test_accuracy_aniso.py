@@ -1,6 +1,6 @@
 """The error estimate of anisotropic (coupled-mode) solves sees the truncation of the coupled
 modes: its companions and the rungs of a solve to a tolerance scale ``ms`` by the square root
-of the scale of ``n`` and ``md`` (layersim.accuracy.scaled, scaled_ms)."""
+of the scale of ``n`` and ``md`` (layersim.plan.accuracy.scaled, scaled_ms)."""
 
 import math
 from dataclasses import replace
@@ -8,7 +8,7 @@ from dataclasses import replace
 import pytest
 
 import layersim
-from layersim import accuracy
+from layersim.plan import accuracy
 
 GOLD = [0.143552, 3.98397]
 #: Brushed gold: Beckmann, roughness ratio 2, so the planner's ms is 4 (Zeltner & Jakob 2018,

@@ -12,7 +12,7 @@ import pytest
 import scipy.sparse as sps
 
 import layersim
-from layersim import adding
+from layersim.stacking import adding
 from layersim.aniso import AnisoOperator, adding as aniso_adding, basis, reciprocity_error
 from layersim.aniso.banded import banded_solve
 from layersim.config import configure
@@ -21,7 +21,7 @@ from layersim.ingredients.numeric import numeric_interface_operator
 from layersim.ingredients import interface_operator, medium_operator
 from layersim.ingredients.aniso_microfacet import AnisoProjectionStats, aniso_interface_operator
 from layersim.kernels import projection as kproj
-from layersim.operator import Grid
+from layersim.operators.operator import Grid
 from layersim.scene import Conductor, Dielectric
 
 from conftest import random_directions, unit

@@ -48,7 +48,7 @@ def test_beckmann_samples_transform_to_bessel_series(peaks, shared):
     G = _fft_one_sided(got)
     scale = np.abs(want).max(axis=1, keepdims=True)
     assert np.all(np.abs(G - want) <= 1e-12 * scale)
-    # and the series the projection multiplies with (layersim.fourier.peak_series)
+    # and the series the projection multiplies with (layersim.operators.fourier.peak_series)
     ref = series.peak_series_shifted(q0, qpi, shift, "beckmann", ORDERS)
     assert np.all(np.abs(ref - want) <= 1e-12 * scale)
 

@@ -16,7 +16,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 PACKAGES = {"layersim": ROOT / "layersim", "layersim.kernels": ROOT / "kernels",
             "layersim.montecarlo": ROOT / "montecarlo"}
 #: Modules that define the operator kinds and may tell them apart.
-OPERATOR_MODULES = ("layersim.operator", "layersim.aniso.operator")
+OPERATOR_MODULES = ("layersim.operators.operator", "layersim.aniso.operator")
 
 
 def _modules() -> dict:
@@ -136,7 +136,7 @@ def _function(module: str, name: str) -> ast.FunctionDef:
     return next(n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == name)
 
 
-@pytest.mark.parametrize("module", ["layersim.adding", "layersim.aniso.adding"])
+@pytest.mark.parametrize("module", ["layersim.stacking.adding", "layersim.aniso.adding"])
 def test_the_adding_equations_fit_on_one_screen(module):
     fn = _function(module, "add")
     assert fn.end_lineno - fn.lineno + 1 <= 60
@@ -341,9 +341,9 @@ PHYSICS_EXCEPTIONS = {
         "the same quadrature on rings of directions by FFT along phi",
     "layersim.ndf.table:NDFTable.shadowing":
         "bilinear lookup of the tabulated S(k) that kernels/tabulated.py reads too",
-    "layersim.quadrature:snell_split":
+    "layersim.operators.quadrature:snell_split":
         "how many ordinates of a Snell-matched grid lie in the escape cone (grid geometry)",
-    "layersim.quadrature:snell_matched":
+    "layersim.operators.quadrature:snell_matched":
         "nodes and weights of the Snell-matched grid: Snell's cosine map of quadrature nodes, "
         "computed once per grid",
 }

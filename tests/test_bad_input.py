@@ -661,7 +661,7 @@ def test_block_plots_show_only_the_blocks_that_exist(files, tmp_path):
     """An opaque stack has Rt only: its picture is one panel (narrower than the four of a
     transmissive stack), not three blank ones."""
     import matplotlib.image
-    from layersim import plot
+    from layersim.solved import plot
     gold, glass = (layersim.BSDF.load(files / f"{n}.lsim") for n in ("gold", "glass"))
     assert plot.present_blocks(gold) == ["Rt"]
     assert sorted(plot.present_blocks(glass)) == ["Rb", "Rt", "Tbt", "Ttb"]

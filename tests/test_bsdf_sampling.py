@@ -7,9 +7,10 @@ import pytest
 import scipy.stats
 
 import layersim
-from layersim.interpolation import bin_quadrature as _bin_quadrature  # piecewise-cubic-exact
-from layersim.channels import LUMINANCE
-from layersim.operator import Grid, IsoOperator
+# piecewise-cubic-exact
+from layersim.operators.interpolation import bin_quadrature as _bin_quadrature
+from layersim.solved.channels import LUMINANCE
+from layersim.operators.operator import Grid, IsoOperator
 
 from conftest import random_directions, unit
 
@@ -185,7 +186,7 @@ def test_samples_below_an_opaque_stack_are_flagged_invalid_row_by_row(coated_gol
     wi = np.concatenate([unit(np.array([20.0, 50.0, 70.0])),
                          unit(np.array([20.0, 50.0]), below=True)])
     s = coated_gold.sample(wi, rng.random((5, 2)))
-    assert isinstance(s, layersim.sampling.Sample) and len(s) == 3
+    assert isinstance(s, layersim.solved.sampling.Sample) and len(s) == 3
     wo, weight, pdf = s
     np.testing.assert_array_equal(s.valid, [True, True, True, False, False])
     assert np.all(pdf[:3] > 0) and np.all(weight[:3] > 0)

@@ -10,7 +10,7 @@ import pytest
 
 import layersim
 from layersim import FileFormatError, InfeasibleError, bsdffile
-from layersim.channels import LUMINANCE, green_from_ybr
+from layersim.solved.channels import LUMINANCE, green_from_ybr
 
 from conftest import random_directions, unit
 

@@ -1,12 +1,13 @@
 """BSDF.eval is never negative.
 
-Lobes cut in azimuth are tapered with the Jackson kernel (:func:`layersim.fourier.taper_factors`),
-a non-negative kernel, so that the series at the ordinates stay non-negative; ``eval`` returns the
-positive part of the cubic spline interpolant between them, which may undershoot only slightly on
-the steep flank of a narrow lobe. The tests check the kernel, the series at the ordinates of every
-projection path (with Lanczos sigma factors as the taper, the counter-example that gives them
-their power), and scan random direction pairs of the bench scenes and the example car paint
-and lacquered wood. ``benchmarks/features/eval_positivity.py`` measures the same with either taper, and
+Lobes cut in azimuth are tapered with the Jackson kernel
+(:func:`layersim.operators.fourier.taper_factors`), a non-negative kernel, so that the series at the
+ordinates stay non-negative; ``eval`` returns the positive part of the cubic spline interpolant
+between them, which may undershoot only slightly on the steep flank of a narrow lobe. The tests
+check the kernel, the series at the ordinates of every projection path (with Lanczos sigma factors
+as the taper, the counter-example that gives them their power), and scan random direction pairs of
+the bench scenes and the example car paint and lacquered wood.
+``benchmarks/features/eval_positivity.py`` measures the same with either taper, and
 covers the anisotropic bench scenes, whose solves and evaluations at the default plans take
 minutes on two cores.
 """
@@ -17,9 +18,9 @@ import numpy as np
 import pytest
 
 import layersim
-import layersim.fourier
+import layersim.operators.fourier
 from layersim.ingredients.numeric import numeric_interface_operator
-from layersim.operator import Grid
+from layersim.operators.operator import Grid
 from layersim.scene import Dielectric
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -44,7 +45,7 @@ def kernel(factors, n=1 << 16):
 
 def test_taper_kernel_is_non_negative():
     for m in (1, 2, 3, 8, 64, 247, 470, 1000, 5000):
-        g = layersim.fourier.taper_factors(m)
+        g = layersim.operators.fourier.taper_factors(m)
         assert g.shape == (m,) and g[0] == 1.0 and np.all(np.diff(g) < 0)
         k = kernel(g)
         assert k.min() >= -1e-12 * k.max(), m
@@ -101,7 +102,7 @@ def test_tapered_series_are_non_negative_at_the_ordinates(monkeypatch, projectio
     transmits = [False] if bsdf.opaque else [False, True]
     for transmit in transmits:
         assert lowest(node_values(bsdf, transmit)) >= -1e-9, transmit
-    monkeypatch.setattr(layersim.fourier, "taper_factors", sigma_factors)
+    monkeypatch.setattr(layersim.operators.fourier, "taper_factors", sigma_factors)
     assert lowest(node_values(solve())) < -1e-3
 
 
@@ -117,7 +118,7 @@ def test_device_assembly_tapers_with_the_same_kernel(monkeypatch):
         return node_values(layersim.BSDF([op]))
 
     assert lowest(reflection()) >= -1e-9
-    monkeypatch.setattr(layersim.fourier, "taper_factors", sigma_factors)
+    monkeypatch.setattr(layersim.operators.fourier, "taper_factors", sigma_factors)
     assert lowest(reflection()) < -1e-3
 
 
@@ -132,7 +133,7 @@ def test_coupled_series_ring_far_less_at_the_ordinates(monkeypatch):
              "discretization": {"n": 24, "md": 24}}
     phi_i = np.radians([0.0, 40.0, 90.0])
     assert lowest(node_values(layersim.solve(scene), phi_i=phi_i, n_phi=361)) >= -1e-3
-    monkeypatch.setattr(layersim.fourier, "taper_factors", sigma_factors)
+    monkeypatch.setattr(layersim.operators.fourier, "taper_factors", sigma_factors)
     assert lowest(node_values(layersim.solve(scene), phi_i=phi_i, n_phi=361)) < -1e-2
 
 

@@ -8,11 +8,11 @@ import pytest
 
 import layersim
 import layersim.montecarlo as mc
-from layersim import adding
+from layersim.stacking import adding
 from layersim.config import Settings, configure
 from layersim.errors import InfeasibleError
 from layersim.ingredients import medium
-from layersim.operator import Grid
+from layersim.operators.operator import Grid
 
 
 def _scene(g, albedo, tau=5.0, disc=None):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import layersim
-from layersim import plot
+from layersim.solved import plot
 from layersim.cli import main as cli_main
 
 from conftest import unit
@@ -113,7 +113,7 @@ def test_eval_prints_one_value_per_channel(glass_files, capsys):
 
 def test_energy_notes_go_into_the_bsdf_info_and_info_prints_them(glass_files, glass, tmp_path,
                                                                   capsys):
-    from layersim.energy import check_operator_energy
+    from layersim.operators.energy import check_operator_energy
     scene = layersim.Scene.from_toml(glass_files / "glass.toml")
     plan = layersim.make_plan(scene)
     before = list(plan.notes)
@@ -239,10 +239,10 @@ def test_log_slices_of_an_rgb_bsdf_are_logarithmic(glass_files, tmp_path):
     log = matplotlib.image.imread(plot.plot_slices(rgb, wi, tmp_path / "log.png", log=True))
     assert lin.shape == log.shape and np.abs(lin - log).max() > 0.2
     img = np.nan_to_num(plot.slice_images(rgb, wi, resolution=64)["reflection"])
-    lum = img @ layersim.channels.LUMINANCE
+    lum = img @ layersim.solved.channels.LUMINANCE
     top = lum.max()
     toned, norm = plot._log_tone(img, lum, top)
-    level = toned @ layersim.channels.LUMINANCE
+    level = toned @ layersim.solved.channels.LUMINANCE
     expect = np.clip(np.log10(np.maximum(lum, 1e-300) / top) / plot.LOG_DECADES + 1, 0, 1)
     np.testing.assert_allclose(level, expect, atol=1e-12)
     lit = lum > top * 1e-3

@@ -6,11 +6,11 @@ import pytest
 import scipy.sparse as sps
 
 import layersim
-from layersim import adding
+from layersim.stacking import adding
 from layersim.config import configure
 from layersim.errors import InfeasibleError, OperatorError
 from layersim.ingredients import diffuse_operator, interface_operator, medium_operator
-from layersim.operator import Grid, IsoOperator
+from layersim.operators.operator import Grid, IsoOperator
 from layersim.scene import Conductor, Dielectric
 
 from conftest import unit
@@ -303,7 +303,7 @@ def test_rough_coatings_at_high_resolution_are_finite_and_conserving(alpha, n):
 
 def test_smooth_interface_alone_is_fresnel_and_snell():
     """A bare smooth interface: R = F and T = 1 - F, both deltas, T along the refracted
-    direction (layersim.boundary)."""
+    direction (layersim.solved.boundary)."""
     from layersim.kernels.fresnel import fresnel
     scene = layersim.Scene.from_dict({"layer": [{"kind": "dielectric", "ior": 1.5}]})
     bsdf = layersim.solve(scene)
@@ -354,7 +354,7 @@ def test_plan_reports_what_it_leaves_out():
 
 
 def test_energy_limiter_removes_overcounting_and_keeps_reciprocity():
-    from layersim.energy import limit_energy, node_energy
+    from layersim.operators.energy import limit_energy, node_energy
     d = interface_operator(GRID, M, Dielectric(ior=1.5, alpha_u=0.3, alpha_v=0.3), 1.0)
     # simulate a quadrature that over-counts the lobes of a few ordinates by 0.5 %
     bump = np.ones(GRID.h)
@@ -374,7 +374,7 @@ def test_energy_limiter_removes_overcounting_and_keeps_reciprocity():
 def test_operator_assembly_dense_and_sorted_paths_agree(monkeypatch):
     """_orders_to_csr scatters small operators into a dense array and sorts the triplets of
     large ones: both must give the same pruned per-order blocks (sorted by row, then column)."""
-    from layersim import operator as opmod
+    from layersim.operators import operator as opmod
     grid = opmod.Grid.make("gauss-legendre", 24)
     rng = np.random.default_rng(3)
     h, m = grid.h, 7
@@ -408,7 +408,7 @@ def test_operator_assembly_slabs_of_orders(monkeypatch):
     stops short of m: the same stacked CSR arrays, bit for bit, as one slab of every order and
     as the sorted triplets, and the entries of a dense reference (B_l = c_l f_l w_i mu_i,
     pruned per order)."""
-    from layersim import operator as opmod
+    from layersim.operators import operator as opmod
     grid = opmod.Grid.make("gauss-lobatto", 30)
     rng = np.random.default_rng(5)
     h, m = grid.h, 9
@@ -440,7 +440,7 @@ def test_order_stack_views_and_file_round_trip(tmp_path):
     slices), consistency checks, and an operator file round trip that keeps every order."""
     import scipy.sparse as sps
     from layersim.errors import OperatorError
-    from layersim.operator import Grid, IsoOperator, OrderStack
+    from layersim.operators.operator import Grid, IsoOperator, OrderStack
     rng = np.random.default_rng(0)
     h, m = 5, 4
     dense = rng.random((m, h, h)) * (rng.random((m, h, h)) < 0.4)

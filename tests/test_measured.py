@@ -9,7 +9,7 @@ import pytest
 import layersim
 import layersim.montecarlo as mc
 from layersim.errors import SceneError
-from layersim.merl import DIMS, SCALES, half_diff, read_merl, write_merl
+from layersim.layers.merl import DIMS, SCALES, half_diff, read_merl, write_merl
 
 from conftest import random_directions, unit
 

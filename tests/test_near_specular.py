@@ -1,4 +1,4 @@
-"""Near-specular rough coats (layersim.lobe): the split against the physics and Monte Carlo."""
+"""Near-specular rough coats (layersim.solved.lobe): the split against the physics and Monte Carlo."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,7 @@ import pytest
 import layersim
 from layersim.kernels.fresnel import fresnel
 from layersim.kernels.projection import microfacet_values
-from layersim.lobe import NEAR_SPECULAR_ALPHA, NearSpecularLobe
+from layersim.solved.lobe import NEAR_SPECULAR_ALPHA, NearSpecularLobe
 from layersim.plan import make_plan
 
 GOLD = [0.143552, 3.98397]
@@ -100,7 +100,7 @@ def test_near_specular_coat_agrees_with_monte_carlo_and_survives_save(tmp_path):
 
 
 def _check_sampling(bsdf, wi, count=10000):
-    """Sampling a near-specular BSDF (layersim.sampling.LobeSampler): pdf(wi, wo) is the
+    """Sampling a near-specular BSDF (layersim.solved.sampling.LobeSampler): pdf(wi, wo) is the
     density returned with each sample, the weight is eval |wo.z| / pdf, and the mean weight
     estimates the energy outside the deltas within 4 standard errors."""
     u = np.random.default_rng(5).random((count, 2))

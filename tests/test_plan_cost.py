@@ -9,7 +9,7 @@ import layersim
 from layersim.config import configure
 from layersim.errors import InfeasibleError
 from layersim.ingredients import microfacet
-from layersim.operator import Grid
+from layersim.operators.operator import Grid
 from layersim.plan import budget, cost, make_plan
 from layersim.plan.orders import interface_lengths
 from layersim.scene import Scene

@@ -7,7 +7,7 @@ import pytest
 
 from layersim.ingredients.microfacet import pair_series
 from layersim.kernels import projection as kproj
-from layersim.operator import Grid
+from layersim.operators.operator import Grid
 from layersim.scene import Conductor, Dielectric
 
 ORDERS = 12
@@ -184,7 +184,7 @@ def test_device_compaction_matches_host_csr_assembly():
     """BlockAssembler (scatter with the reciprocity mirror, per-order drop threshold, scan,
     compaction) produces exactly the stacked CSR arrays of the host assembly."""
     from layersim.kernels.sparse import BlockAssembler
-    from layersim.operator import DROP_TOLERANCE, _orders_to_csr
+    from layersim.operators.operator import DROP_TOLERANCE, _orders_to_csr
     rng = np.random.default_rng(3)
     grid, m = Grid.make("gauss-lobatto", 20), 7
     h = grid.h

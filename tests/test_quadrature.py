@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from layersim import quadrature
+from layersim.operators import quadrature
 
 
 def _error(rule, n, degree):

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import layersim
-from layersim import bsdffile, plot
+from layersim import bsdffile
+from layersim.solved import plot
 
 from conftest import random_directions, unit
 

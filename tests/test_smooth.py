@@ -1,5 +1,6 @@
 """Exact smooth interfaces (roughness 0): deltas in the adding equations, smooth conductors,
-smooth dielectric boundaries on the Snell-matched grid (layersim.deltas, layersim.boundary)."""
+smooth dielectric boundaries on the Snell-matched grid (layersim.operators.deltas,
+layersim.solved.boundary)."""
 
 import numpy as np
 import pytest
@@ -165,11 +166,11 @@ def test_boundary_survives_save_and_load_and_refuses_stack_algebra(tmp_path):
 
 def test_mirror_delta_through_both_adding_functions():
     """A non-scattering slab over a smooth conductor: the stack's mirror delta is
-    F(mu) exp(-2 tau / mu) in the isotropic and in the coupled adding (layersim.deltas), and
+    F(mu) exp(-2 tau / mu) in the isotropic and in the coupled adding (layersim.operators.deltas), and
     albedo and specular agree with it."""
     from layersim.ingredients import medium_operator
     from layersim.ingredients.smooth import smooth_conductor_operator
-    from layersim.operator import Grid
+    from layersim.operators.operator import Grid
     tau = 0.3
     grid = Grid.make("gauss-lobatto", 32)
     slab = medium_operator(grid, 4, 0.0, 0.0, tau, 1.0)
@@ -210,7 +211,8 @@ def test_smooth_coating_over_anisotropic_gold_albedo_agrees_with_monte_carlo():
 
 def test_smooth_coating_over_smooth_gold_closed_form():
     """All deltas: R = F + (1 - F)^2 R_g / (1 - F R_g) with R_g the gold Fresnel reflectance
-    at the refracted angle (layersim.deltas with the boundary), 3e-5 to 80 deg, 2e-4 to 89."""
+    at the refracted angle (layersim.operators.deltas with the boundary), 3e-5 to 80 deg, 2e-4 to
+    89."""
     scene = layersim.Scene.from_dict({"layer": [
         {"kind": "dielectric", "ior": 1.5, "roughness": 0},
         {"kind": "conductor", "ior": GOLD, "roughness": 0}]})

@@ -6,16 +6,16 @@ import numpy as np
 import pytest
 
 import layersim
-from layersim.subtract import relative_error, with_noise as noisy
-from layersim import adding
+from layersim.stacking.subtract import relative_error, with_noise as noisy
+from layersim.stacking import adding
 from layersim.aniso import AnisoOperator, adding as aniso_adding
 from layersim.errors import InfeasibleError, OperatorError
 from layersim.ingredients import interface_operator, medium_operator
 from layersim.ingredients.aniso_microfacet import aniso_interface_operator
-from layersim.operator import Grid
+from layersim.operators.operator import Grid
 from layersim.scene import Conductor, Dielectric
-from layersim.subtract import negativity as _negativity
-from layersim.determined import error_by_cut, fill
+from layersim.stacking.subtract import negativity as _negativity
+from layersim.stacking.determined import error_by_cut, fill
 
 G48 = Grid.make("gauss-lobatto", 48)
 G32 = Grid.make("gauss-lobatto", 32)
@@ -95,7 +95,7 @@ def test_automatic_eps_with_one_percent_noise_is_close_to_the_best_in_hindsight(
     d = info["determined"]
     assert d["mu_min"] is not None and d["mu_min"] < 0.5
     assert info["negative_lobes_determined"] <= 1.5 * info["noise"]
-    assert _negativity(layersim.determined.restrict(got, d["mu_min"], "top")) <= 0.015
+    assert _negativity(layersim.stacking.determined.restrict(got, d["mu_min"], "top")) <= 0.015
     raw = layersim.subtract(stack, dust, side="top", eps=1e-4)
     assert _negativity(raw) > 0.1 and energy_error(raw, glass) > 1.0
     again = layersim.subtract(stack, dust, side="top", noise=0.01)
@@ -144,7 +144,7 @@ def test_subtract_on_solved_bsdfs_and_the_cli(tmp_path, capsys):
     assert "side='top'" in capsys.readouterr().err
 
 
-# --- what the stack determines (layersim.determined) -------------------------------------------
+# --- what the stack determines (layersim.stacking.determined) --------------------------------
 
 def _solve(layers, top_ior=1.0, like=None, disc=None):
     d = {"layer": layers, "stack": {"top_ior": top_ior}}
@@ -233,7 +233,7 @@ def test_a_coating_over_a_conductor_declares_what_it_cannot_determine():
         assert 1e-3 < true <= dict(d["estimates"])[min(m for m, _ in d["estimates"]
                                                         if m >= mu_cut)]
     assert info["energy_max"] <= 1.0
-    from layersim.determined import describe
+    from layersim.stacking.determined import describe
     assert "no direction is determined" in describe(d)
 
 

@@ -22,7 +22,7 @@ from layersim.layers.dielectric import Dielectric
 from layersim.layers.interface import Film
 from layersim.montecarlo.backends import opencl_source
 from layersim.montecarlo.stack import flatten
-from layersim.operator import Grid
+from layersim.operators.operator import Grid
 from layersim.statistical.stack import statistical_stacks
 
 from conftest import unit

@@ -1,4 +1,4 @@
-"""Solves to a tolerance and the error estimate (layersim.accuracy) against refined solves.
+"""Solves to a tolerance and the error estimate (layersim.plan.accuracy) against refined solves.
 
 For each scene of ``benchmarks/scenes/`` (the isotropic ones by default) it solves
 
@@ -7,7 +7,7 @@ For each scene of ``benchmarks/scenes/`` (the isotropic ones by default) it solv
 
 and measures each result's error against a reference solve at twice its ``n`` and ``md``
 (1.5 times where the limits refuse twice; an anisotropic solve's coupling half-width ``ms``
-by the same factor, more than :func:`layersim.accuracy.scaled_ms` refines it): relative L2
+by the same factor, more than :func:`layersim.plan.accuracy.scaled_ms` refines it): relative L2
 of bin energies, 18 x 36 bins per side, worst of 0, 30, 60 and 80 degrees (what the estimate
 estimates). It prints the estimate, the
 measured error, their ratio (the estimate is meant to lie above the error and within 3 times
@@ -30,7 +30,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import layersim
-from layersim import accuracy
+from layersim.plan import accuracy
 from layersim.errors import InfeasibleError
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"

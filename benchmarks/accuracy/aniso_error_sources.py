@@ -14,7 +14,7 @@ and with one parameter refined at a time:
 * ``theta_full`` (elevation within which pairs keep every order their lobes need) 89 degrees,
 
 and prints, per variant, the relative L2 distance of its bin energies from the default's
-(18 x 36 bins per side, ``layersim.accuracy.bin_table``) at 0, 30, 60 and 80 degrees
+(18 x 36 bins per side, ``layersim.plan.accuracy.bin_table``) at 0, 30, 60 and 80 degrees
 incidence and the change of the albedo R. With ``--mc PATHS`` it adds a walk on Warp's CPU
 device (``layersim.montecarlo``) at 0, 30 and 60 degrees and compares the albedos of the
 default plan and of the solve at twice ``n`` with it, in the walk's standard errors.
@@ -38,7 +38,7 @@ import layersim
 import layersim.aniso.plan as aplan
 import layersim.montecarlo as mc
 import layersim.solver as solver
-from layersim import accuracy
+from layersim.plan import accuracy
 
 SCENE = Path(__file__).resolve().parents[1] / "scenes" / "additive_validation.toml"
 
@@ -59,7 +59,7 @@ def truncation(coupled: float, stack: tuple):
 
 
 def albedos(bsdf) -> np.ndarray:
-    """R at the incidence angles of :data:`layersim.accuracy.ANGLES`."""
+    """R at the incidence angles of :data:`layersim.plan.accuracy.ANGLES`."""
     out = []
     for theta in np.radians(accuracy.ANGLES):
         wi = np.array([[math.sin(theta), 0.0, math.cos(theta)]])

@@ -7,7 +7,7 @@ the truncation of the coupled modes), and the first once more (the spread of the
 timing noise), and prints the wall
 time, the planner's memory estimate (``layersim.plan.make_plan``) and the relative L2 distance of
 bin energies from the ``ms + 4`` solve (18 x 36 bins per side, worst of 0, 30, 60, 80 deg;
-``layersim.accuracy``).
+``layersim.plan.accuracy``).
 
 Scenes: additive_validation (``benchmarks/scenes/``), brushed gold (Beckmann, alpha 0.1 x 0.2),
 and Table 2 row 5 of Zeltner & Jakob 2018 (dielectric 0.1 over gold 0.1 x 0.3).
@@ -22,7 +22,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import layersim
-from layersim import accuracy
+from layersim.plan import accuracy
 from layersim.aniso import plan as aplan
 from layersim.plan import make_plan
 

@@ -1,5 +1,5 @@
 """How fast the truncation error of the coupled modes falls near the planner's ``ms``, and what
-that means for companions of the error estimate (``layersim.accuracy.scaled_ms``).
+that means for companions of the error estimate (``layersim.plan.accuracy.scaled_ms``).
 
 For Beckmann conductors (gold) and dielectrics (eta 1.5) of roughness (0.1, 0.1 r), r = 2, 3,
 4, 6, it computes the relative (cosine-weighted) L2 error ``err(m)`` of keeping ``|s| <= m``
@@ -7,7 +7,7 @@ from the coefficients of one projection at a generous ``ms`` (the method of
 ``benchmarks/accuracy/ms_study.py``, n = 64, md = 128), and prints ``err`` at the planner's ``ms``
 (``layersim.aniso.plan.ms_for_layer``) and two modes either side, the decay
 ``K = ms ln(err(ms - 1) / err(ms))`` (``err(m) ~ exp(-K m / ms)``), and, where the truncation
-is the whole error, the ratio estimate / error that the estimate of ``layersim.accuracy``
+is the whole error, the ratio estimate / error that the estimate of ``layersim.plan.accuracy``
 (``SAFETY`` x the larger of the distance to the first companion and the weighted distance to the
 second) gives with companions at ``ms sqrt(scale)`` (what ``scaled_ms`` does) and at
 ``ms scale``. The distance to a companion at ``m`` is taken as ``err(m) - err(ms)`` (errors
@@ -28,9 +28,9 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 import ms_study  # noqa: E402  (the truncation errors of benchmarks/accuracy/ms_study.py)
 
-from layersim import accuracy  # noqa: E402
+from layersim.plan import accuracy  # noqa: E402
 from layersim.aniso.plan import ms_for_layer  # noqa: E402
-from layersim.operator import Grid  # noqa: E402
+from layersim.operators.operator import Grid  # noqa: E402
 
 RATIOS = (2.0, 3.0, 4.0, 6.0)
 

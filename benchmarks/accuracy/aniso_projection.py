@@ -32,7 +32,7 @@ from layersim.aniso import series
 from layersim.ingredients import aniso_microfacet as am
 from layersim.ingredients.microfacet import block_pairs
 from layersim.kernels import projection as kproj
-from layersim.operator import Grid
+from layersim.operators.operator import Grid
 from layersim.scene import Conductor, Dielectric
 
 N_PS = 512

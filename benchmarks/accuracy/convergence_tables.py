@@ -1,11 +1,13 @@
 """Bin tables of scenes solved on a ladder of discretisations: the data the error estimate of
-:mod:`layersim.accuracy` is designed and checked on (``benchmarks/accuracy/estimator_study.py``).
+:mod:`layersim.plan.accuracy` is designed and checked on
+(``benchmarks/accuracy/estimator_study.py``).
 
-Each scene is solved at the scales :data:`layersim.accuracy.LADDER` of the planner's ``n`` and
+Each scene is solved at the scales :data:`layersim.plan.accuracy.LADDER` of the planner's ``n`` and
 ``md`` (0.354 ... 2.83; rungs the limits refuse are skipped), and the bin table of each solve
-(:func:`layersim.accuracy.bin_table`: 18 x 36 bins per side at 0, 30, 60, 80 degrees) is written,
-with the rung's ``n``, ``md`` and wall time, to ``benchmarks/accuracy/convergence/SCENE.npz``
-(float32, compressed; a scene whose file exists is skipped, so the run can be resumed).
+(:func:`layersim.plan.accuracy.bin_table`: 18 x 36 bins per side at 0, 30, 60, 80 degrees) is
+written, with the rung's ``n``, ``md`` and wall time, to
+``benchmarks/accuracy/convergence/SCENE.npz`` (float32, compressed; a scene whose file exists is
+skipped, so the run can be resumed).
 
 Scenes: the isotropic ones of ``benchmarks/scenes/`` and single layers / coated conductors of a
 wider range of roughness (:data:`EXTRA`), so that the estimate is judged on more than the
@@ -23,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 import layersim
-from layersim import accuracy
+from layersim.plan import accuracy
 from layersim.errors import InfeasibleError
 from layersim.plan import make_plan
 

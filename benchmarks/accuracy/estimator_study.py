@@ -1,4 +1,4 @@
-"""How the error estimate of :mod:`layersim.accuracy` compares with measured errors, on the
+"""How the error estimate of :mod:`layersim.plan.accuracy` compares with measured errors, on the
 ladders written by ``benchmarks/accuracy/convergence_tables.py`` (the data its factor is chosen on).
 
 A case is a scene solved at a rung ``s`` of the ladder that has the two coarser rungs ``s / sqrt 2``
@@ -8,7 +8,7 @@ measures the error of the rung against the reference (relative L2 of bin energie
 coarser rungs, and prints
 
 * each case: measured error, the adopted estimate
-  (:func:`layersim.accuracy.estimate_from_distances`), their ratio and ``d2 / d1``
+  (:func:`layersim.plan.accuracy.estimate_from_distances`), their ratio and ``d2 / d1``
   (``1 + 2^(p/2)`` where the error fell like ``s^-p``);
 * for candidate estimates (the adopted one, ``d1`` alone, with ``d2`` as a guard against an
   accidental agreement, a Richardson-type weighting, ...): how often each lies above the error
@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from layersim import accuracy
+from layersim.plan import accuracy
 
 DATA = Path(__file__).parent / "convergence"
 

@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from layersim.ingredients import aniso_microfacet as am
-from layersim.operator import Grid
+from layersim.operators.operator import Grid
 from layersim.scene import Conductor, Dielectric
 
 RATIOS = (1.5, 2.0, 3.0, 4.0, 6.0)

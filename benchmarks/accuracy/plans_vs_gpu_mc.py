@@ -2,7 +2,7 @@
 Monte Carlo reference at 1e9 paths: per scene of ``benchmarks/scenes/`` and incidence 0, 30 and
 60 degrees, the fraction of populated 18 x 36 bins (both sides) within 3 standard errors (Poisson
 floor E / N added), the relative L2 difference of bin energies and the albedo difference in
-standard errors; with the solve's error estimate (``layersim.accuracy``) beside it.
+standard errors; with the solve's error estimate (``layersim.plan.accuracy``) beside it.
 
 Usage (on a GPU machine): python benchmarks/accuracy/plans_vs_gpu_mc.py [--tol T ...] [paths]
 [backend] [SCENE[:KEY=VALUE,...] ...] (default 1e9, warp-cuda, every scene, tol 1e-3;

@@ -6,7 +6,7 @@ Four sections (all float64, fixed seeds):
     Which candidate makes the spline interpolant negative, for a few scenes: the same solve with
     the Lanczos sigma factors ``sinc(l / m)`` on lobes cut in azimuth ('before'), with
     no taper (plain truncation), with the sigma factors and twice the orders, and with the
-    Jackson kernel factors (:func:`layersim.fourier.taper_factors`, the library's); each
+    Jackson kernel factors (:func:`layersim.operators.fourier.taper_factors`, the library's); each
     evaluated with the cubic interpolation in the elevations and with linear interpolation
     (non-negative weights). Lowest value over the BSDF's peak and the fraction of pairs below
     ``-1e-6`` of the peak.
@@ -31,9 +31,9 @@ Four sections (all float64, fixed seeds):
     model above 5 % of its maximum), for both tapers.
 
 The 'before' reconstruction is made by substituting the sigma factors for
-``layersim.fourier.taper_factors`` during its solve, the only difference between the two solves;
-linear interpolation (section ``sources``) by substituting
-:func:`layersim.interpolation.hat_weights` for the spline weights of ``eval``.
+``layersim.operators.fourier.taper_factors`` during its solve, the only difference between the two
+solves; linear interpolation (section ``sources``) by substituting
+:func:`layersim.operators.interpolation.hat_weights` for the spline weights of ``eval``.
 
 Usage: python benchmarks/features/eval_positivity.py [--pairs N] [--grazing N] [--sections S,...]
 [--source-scenes A,B,...] [--walk-scenes A,B,...] [--paths N] [SCENE[:KEY=VALUE,...] ...] (section ``sources``: coated_gold and
@@ -57,8 +57,8 @@ from pathlib import Path
 import numpy as np
 
 import layersim
-import layersim.fourier
-import layersim.interpolation
+import layersim.operators.fourier
+import layersim.operators.interpolation
 from layersim.kernels.projection import microfacet_values
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -111,7 +111,7 @@ def solve(scene, taper=None):
     if taper is None:
         bsdf = layersim.solve(scene)
     else:
-        with substituted(layersim.fourier, "taper_factors", taper):
+        with substituted(layersim.operators.fourier, "taper_factors", taper):
             bsdf = layersim.solve(scene)
     return bsdf, time.perf_counter() - t0
 
@@ -119,8 +119,8 @@ def solve(scene, taper=None):
 def interpolant(bsdf, wi, wo, linear=False) -> np.ndarray:
     """The spline interpolant (cubic, or linear in both elevations), shape (Q, channels)."""
     if linear:
-        with substituted(layersim.interpolation, "spline_weights",
-                         layersim.interpolation.hat_weights):
+        with substituted(layersim.operators.interpolation, "spline_weights",
+                         layersim.operators.interpolation.hat_weights):
             f = bsdf.interpolant(wi, wo)
     else:
         f = bsdf.interpolant(wi, wo)

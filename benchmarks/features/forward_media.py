@@ -29,7 +29,7 @@ import numpy as np
 import layersim
 import layersim.ingredients.medium as medium
 import layersim.montecarlo as mc
-from layersim.operator import Grid
+from layersim.operators.operator import Grid
 from layersim.config import settings
 from layersim.outofcore.memory import cap_arenas
 

@@ -1,4 +1,4 @@
-"""Near-specular rough coatings (layersim.lobe): the split solve against the Monte Carlo walk.
+"""Near-specular rough coatings (layersim.solved.lobe): the split solve against the Monte Carlo walk.
 
 A dielectric coat (eta 1.5, Beckmann) over rough gold (alpha 0.2), isotropic with alpha 0.02,
 0.005 and 0.001, and 1:10 anisotropic: ``alpha_u = alpha``, ``alpha_v = 10 alpha`` (alpha 0.005

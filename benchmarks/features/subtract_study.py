@@ -11,8 +11,8 @@ and blocks,
 - ``err reach``: over the directions reached through the known layer (``mu >= mu_reached``).
 
 With noise, every stored operator entry of the stack is multiplied by ``1 + level N(0, 1)``
-(:func:`layersim.subtract.with_noise`, seed 3) and eps is chosen automatically; ``best`` is the
-smallest ``err reach`` (same directions) over eps on a half-decade grid refined by quarter
+(:func:`layersim.stacking.subtract.with_noise`, seed 3) and eps is chosen automatically; ``best`` is
+the smallest ``err reach`` (same directions) over eps on a half-decade grid refined by quarter
 decades around its best, and ``ratio`` the automatic error over it. ``neg det`` is the depth of
 negative lobes over the determined directions (Fejer means of the low orders, relative to the
 peak; 0 for the true layers, and 0 where no direction is declared).
@@ -36,8 +36,8 @@ import numpy as np
 import scipy.sparse as sps
 
 import layersim
-from layersim.determined import error_by_cut
-from layersim.subtract import with_noise
+from layersim.stacking.determined import error_by_cut
+from layersim.stacking.subtract import with_noise
 
 COND = {"kind": "conductor", "ior": [0.2, 3.9]}
 GOLD = {"kind": "conductor", "ior": [0.143552, 3.98397]}
@@ -153,7 +153,7 @@ def study() -> None:
 
 def coupling() -> None:
     """Why the rough coating over a rough conductor is not determined (module docstring)."""
-    from layersim.determined import visibility
+    from layersim.stacking.determined import visibility
     disc = {"n": 96, "md": 96}
     coat = {"kind": "dielectric", "ior": 1.5, "roughness": 0.2}
     base = dict(COND, roughness=0.3)

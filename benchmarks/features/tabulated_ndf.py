@@ -15,7 +15,7 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "tests"))
 
 import layersim                                    # noqa: E402
-from layersim.merl import half_diff, read_merl, write_merl     # noqa: E402
+from layersim.layers.merl import half_diff, read_merl, write_merl     # noqa: E402
 from test_measured import analytic as glossy        # noqa: E402
 from test_tabulated_ndf import beckmann, ggx        # noqa: E402
 from layersim.ndf import sampled_table              # noqa: E402

@@ -19,7 +19,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "tests"))
 
 import layersim                                    # noqa: E402
 import layersim.montecarlo as mc                   # noqa: E402
-from layersim.merl import write_merl               # noqa: E402
+from layersim.layers.merl import write_merl               # noqa: E402
 from layersim.ndf.table import sampled_table       # noqa: E402
 from test_measured import analytic as glossy       # noqa: E402
 from test_tabulated_ndf import beckmann            # noqa: E402

@@ -141,7 +141,7 @@ CASES = {
 
 def load_scene(name):
     import layersim
-    from layersim import accuracy
+    from layersim.plan import accuracy
     from layersim.plan import make_plan
     source, scale = CASES[name]
     scene = (layersim.Scene.from_toml(source["file"]) if "file" in source
@@ -157,7 +157,8 @@ def _part_timer(parts: dict):
     system, all threads) of each part accumulate in ``parts`` (``projection``: interfaces,
     ``media``, ``adding``: isotropic and coupled steps, not counted twice where one calls the
     other)."""
-    from layersim import adding, solver
+    from layersim.stacking import adding
+    from layersim import solver
     from layersim.aniso import adding as aniso_adding
     from layersim.scene import Medium
     cpu = lambda: sum(resource.getrusage(resource.RUSAGE_SELF)[:2])

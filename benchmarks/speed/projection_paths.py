@@ -30,7 +30,7 @@ from layersim.ingredients import interface_operator
 from layersim.ingredients.microfacet import ProjectionStats
 from layersim.ingredients.numeric import numeric_interface_operator
 from layersim.kernels.runtime import cuda_available, device_for
-from layersim.operator import Grid
+from layersim.operators.operator import Grid
 from layersim.scene import Conductor, Dielectric
 
 LAYERS = {

@@ -10,8 +10,8 @@
 * :mod:`.adding` -- the adding equations (Zeltner & Jakob 2018 eq. (11)-(12)) on coupled
   operators, their blocks held by a :class:`~layersim.outofcore.workspace.Workspace`.
 
-Isotropic layers and stacks keep the cheaper :class:`~layersim.operator.IsoOperator`; they are
-converted (block diagonal, no coupling) only when combined with an anisotropic one.
+Isotropic layers and stacks keep the cheaper :class:`~layersim.operators.operator.IsoOperator`; they
+are converted (block diagonal, no coupling) only when combined with an anisotropic one.
 """
 from .operator import AnisoOperator, as_aniso, reciprocity_error
 

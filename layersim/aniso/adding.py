@@ -9,13 +9,13 @@ identities ``(I - Rb1 Rt2)^-1 = I + Rb1 A'^-1 Rt2`` and ``(I - Rb1 Rt2)^-1 Rb1 =
     Ttb = Ttb2 Ttb1 + Ttb2 Rb1 Z1  Rb  = Rb2 + Ttb2 Rb1 Z2
 
 (below an opaque bottom only ``Rt``). This is the mirror image of the arrangement of
-:mod:`layersim.adding` (``A = I - Rb1 Rt2``): the solution is multiplied by the top layer's
+:mod:`layersim.stacking.adding` (``A = I - Rb1 Rt2``): the solution is multiplied by the top layer's
 transmission only, never by the bottom's reflection, which is the largest operator of a
 coated anisotropic base (and ``Tbt1`` is block diagonal when the coating is isotropic).
 ``A'`` is banded by Fourier order and solved with :func:`~layersim.aniso.banded.banded_solve`
 (block LU, pruned block substitution, sparse right-hand sides); results are pruned at
-:data:`layersim.operator.DROP_TOLERANCE` relative to each block's largest entry, and, with the
-``relerr`` of :func:`layersim.solve` (:data:`layersim.aniso.plan.COUPLED_RELERR`), per ordinate
+:data:`layersim.operators.operator.DROP_TOLERANCE` relative to each block's largest entry, and, with
+the ``relerr`` of :func:`layersim.solve` (:data:`layersim.aniso.plan.COUPLED_RELERR`), per ordinate
 pair as the projected layers are, intermediates included.
 
 Memory: the blocks of the step are held by a
@@ -39,10 +39,10 @@ from dataclasses import dataclass
 
 import scipy.sparse as sps
 
-from ..deltas import add_deltas
-from ..adding import check_pair
+from ..operators.deltas import add_deltas
+from ..stacking.adding import check_pair
 from ..errors import OperatorError
-from ..operator import DROP_TOLERANCE, Grid
+from ..operators.operator import DROP_TOLERANCE, Grid
 from ..outofcore.workspace import Blocks, Workspace, block_bytes
 from .banded import banded_solve
 from .operator import AnisoOperator, as_aniso, prune, reciprocal_prune
@@ -64,7 +64,7 @@ def add(top, bottom, relerr: float | None = None, relerr_intermediate: float | N
         Drop coefficients of the result below ``relerr`` times the largest of their ordinate
         pair, keeping it exactly reciprocal (:func:`~.operator.reciprocal_prune`); the
         products with the solution are pruned per pair at ``relerr / 10`` as they are formed.
-        By default only entries below :data:`~layersim.operator.DROP_TOLERANCE` of their
+        By default only entries below :data:`~layersim.operators.operator.DROP_TOLERANCE` of their
         block's largest are dropped.
     relerr_intermediate : float, optional
         The same for ``K``, ``Rt2 Ttb1`` and the solution ``Z`` (:func:`~.pairs.prune_pairs`).
@@ -117,7 +117,7 @@ class _Pair:
     eta_top: float
     eta_bottom: float | None
     opaque: bool
-    delta: dict             # the deltas of the stack (layersim.deltas)
+    delta: dict             # the deltas of the stack (layersim.operators.deltas)
 
     @classmethod
     def of(cls, top: AnisoOperator, bottom: AnisoOperator) -> "_Pair":

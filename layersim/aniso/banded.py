@@ -34,7 +34,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sps
 
-from ..adding import solve_columns, sparse_lu
+from ..stacking.adding import solve_columns, sparse_lu
 from ..errors import InfeasibleError, OperatorError
 from ..outofcore.assemble import from_parts
 from ..outofcore.memory import empty_sparse

@@ -15,10 +15,11 @@ give the scattered mode ``l`` as ``Phi_l^o = sum_s B_{l, l-2s} Phi_{l-2s}^i`` wi
 (eq. (9)-(10)): mode ``k`` couples to ``l = k + 2s`` only. ``f`` is real, so
 ``f_{-d,-s} = conj(f_{d,s})`` and ``B_{-l,-k} = conj(B_{l,k})``.
 
-Isotropic layers (``f = sum_l f_l cos(l phi_d)``, the :class:`~layersim.operator.IsoOperator`
-convention) have ``f_{0,0} = f_0``, ``f_{d,0} = f_|d| / 2`` for ``d != 0`` and ``f_{d,s} = 0`` for
-``s != 0``; hence ``B_{l,l} = c_l f_l w |mu|`` with ``c_0 = 2 pi``, ``c_l = pi``: exactly the
-isotropic order-``|l|`` block.
+Isotropic layers (``f = sum_l f_l cos(l phi_d)``, the
+:class:`~layersim.operators.operator.IsoOperator` convention) have ``f_{0,0} = f_0``,
+``f_{d,0} = f_|d| / 2`` for ``d != 0`` and ``f_{d,s} = 0`` for ``s != 0``; hence
+``B_{l,l} = c_l f_l w |mu|`` with ``c_0 = 2 pi``, ``c_l = pi``: exactly the isotropic order-``|l|``
+block.
 
 Real basis (what the solver stores)
 -----------------------------------

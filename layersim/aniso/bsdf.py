@@ -1,12 +1,12 @@
 """Evaluation, energy fractions and bin energies of solved anisotropic stacks.
 
-:class:`layersim.bsdf.BSDF` evaluates a channel whose operator is an
+:class:`layersim.solved.bsdf.BSDF` evaluates a channel whose operator is an
 :class:`~layersim.aniso.operator.AnisoOperator` with an :class:`AnisoEvaluator` (the registry
-:data:`layersim.bsdf.EVALUATORS`). Conventions are those of
-:mod:`layersim.bsdf` (one place converts public directions to the solver's): ``mu_in = wi.z``,
-``mu_out = -wo.z``, and the *propagation* azimuths ``phi_i = atan2(-wi.y, -wi.x)``,
-``phi_o = atan2(wo.y, wo.x)`` in the stack frame, ``phi_d = phi_o - phi_i``,
-``phi_s = phi_o + phi_i``.
+:data:`layersim.solved.bsdf.EVALUATORS`). Conventions are those of
+:mod:`layersim.solved.bsdf` (one place converts public directions to the solver's):
+``mu_in = wi.z``, ``mu_out = -wo.z``, and the *propagation* azimuths
+``phi_i = atan2(-wi.y, -wi.x)``, ``phi_o = atan2(wo.y, wo.x)`` in the stack frame,
+``phi_d = phi_o - phi_i``, ``phi_s = phi_o + phi_i``.
 
 * ``eval``: cubic spline interpolation of the coefficients between ordinates (as for isotropic
   stacks) and the 2-D series of Zeltner & Jakob 2018 eq. (7)
@@ -27,11 +27,11 @@ import math
 
 import numpy as np
 
-from ..evaluator import Evaluator
-from ..interpolation import (bin_quadrature, block_taps, closed_bin, hat_weights,
-                             side_energies, spline_weights)
+from ..solved.evaluator import Evaluator
+from ..operators.interpolation import (bin_quadrature, block_taps, closed_bin, hat_weights,
+                                       side_energies, spline_weights)
 from ..kernels import fourier_eval2d
-from ..operator import BLOCKS
+from ..operators.operator import BLOCKS
 from . import basis
 
 _BLOCK_ID = {name: k for k, name in enumerate(BLOCKS)}
@@ -174,7 +174,7 @@ class AnisoEvaluator(Evaluator):
                     wi: np.ndarray | None = None) -> np.ndarray:
         """Energy fraction through block ``name`` for beams from each node at the propagation
         azimuths of ``wi`` (Q, 3): shape (Q, h); each outgoing node counted with ``weight``
-        (h,) (default 1; :mod:`layersim.boundary` passes a boundary's transmittance)."""
+        (h,) (default 1; :mod:`layersim.solved.boundary` passes a boundary's transmittance)."""
         op = self.op
         phi_in = np.arctan2(-wi[:, 1], -wi[:, 0])
         if weight is None:
@@ -195,8 +195,8 @@ class AnisoEvaluator(Evaluator):
     def bins(self, wi: np.ndarray, mu_edges: np.ndarray, phi_edges: np.ndarray,
              exits: dict | None = None, deltas: bool = True, taps=None) -> dict:
         """Bin energies for one incident direction ``wi`` (3,) (see
-        :meth:`layersim.bsdf.BSDF.bin_energies`; ``exits``, ``deltas``, ``taps`` as for
-        :meth:`layersim.isobsdf.IsoEvaluator.bins`)."""
+        :meth:`layersim.solved.bsdf.BSDF.bin_energies`; ``exits``, ``deltas``, ``taps`` as for
+        :meth:`layersim.solved.isobsdf.IsoEvaluator.bins`)."""
         op = self.op
         grid = op.grid
         h, md, S = op.h, op.md, op.slots

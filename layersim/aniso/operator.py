@@ -1,7 +1,7 @@
 """Scattering operators with coupled Fourier modes (anisotropic layers and stacks).
 
 An :class:`AnisoOperator` holds the four blocks ``Rt, Rb, Ttb, Tbt`` of Zeltner & Jakob 2018
-sec. 3.2 (same meaning and solver convention as :class:`~layersim.operator.IsoOperator`:
+sec. 3.2 (same meaning and solver convention as :class:`~layersim.operators.operator.IsoOperator`:
 ``mu > 0`` propagates down, blocks indexed ``[outgoing, incident]``) as real sparse matrices of shape ``(S h, S h)`` in
 the slot basis of :mod:`layersim.aniso.basis` (``S = 2 md - 1`` real slots of ``h`` ordinates).
 Row/column ``slot * h + node``. The block coupling Fourier mode ``k`` to ``l`` holds
@@ -21,8 +21,8 @@ import numpy as np
 import scipy.sparse as sps
 
 from ..errors import FileFormatError, OperatorError
-from ..operator import (BLOCKS, DROP_TOLERANCE, Grid, IsoOperator, Operator, header_arrays,
-                        read_blocks, read_delta, register, write_blocks)
+from ..operators.operator import (BLOCKS, DROP_TOLERANCE, Grid, IsoOperator, Operator,
+                                  header_arrays, read_blocks, read_delta, register, write_blocks)
 from ..outofcore import memory
 from ..outofcore.assemble import select_entries
 from ..outofcore.parking import Parked
@@ -37,7 +37,7 @@ from .reciprocity import reciprocal_image, with_reciprocal_image
 @register
 class AnisoOperator(Operator):
     """Operator of an anisotropic layer or stack in the real slot basis (module docstring);
-    implements :class:`layersim.operator.Operator`.
+    implements :class:`layersim.operators.operator.Operator`.
 
     Parameters
     ----------
@@ -50,7 +50,7 @@ class AnisoOperator(Operator):
     eta_top, eta_bottom : float
         Absolute indices of the media above and below (``eta_bottom`` None when opaque).
     delta : dict, optional
-        The delta part of each block per node, ``{block: (h,)}`` (:mod:`layersim.deltas`).
+        The delta part of each block per node, ``{block: (h,)}`` (:mod:`layersim.operators.deltas`).
     ms : int, optional
         Largest mode coupling present (computed from the blocks when omitted).
     """
@@ -173,7 +173,7 @@ class AnisoOperator(Operator):
         cancel in the mean), the ``0<-0`` block for ``l = 0``. The odd part ``Im B_{l,l}`` (sine
         terms in ``phi_d``) is dropped: the result is the even part of the average, non-negative
         wherever the BSDF is. Used as the importance-sampling proposal of anisotropic stacks
-        (:mod:`layersim.sampling`).
+        (:mod:`layersim.solved.sampling`).
         """
         h = self.h
         blocks = {}
@@ -415,8 +415,8 @@ def as_aniso(op, md: int | None = None) -> AnisoOperator:
 
 def prune(mat, tolerance: float = DROP_TOLERANCE):
     """Drop entries below ``tolerance`` times the largest magnitude of ``mat``
-    (:func:`layersim.outofcore.sums.prune`, with :data:`layersim.operator.DROP_TOLERANCE` by
-    default)."""
+    (:func:`layersim.outofcore.sums.prune`, with :data:`layersim.operators.operator.DROP_TOLERANCE`
+    by default)."""
     return prune_below(mat, tolerance)
 
 

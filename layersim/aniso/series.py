@@ -4,7 +4,7 @@
 All series are batched over rows. A real ``2 pi``-periodic function is represented by its
 complex coefficients for non-negative frequencies only, ``g(t) = sum_n G_n exp(i n t)`` with
 ``G_{-n} = conj(G_n)`` (one-sided storage, shape (rows, N)). Physics never appears here: the
-peak factors are those of :mod:`layersim.fourier` (exact series of ``peak(q)`` for
+peak factors are those of :mod:`layersim.operators.fourier` (exact series of ``peak(q)`` for
 ``q = c - d cos(t)``), shifted to the peak's azimuth.
 
 * :func:`peak_shift_params` -- ``q(phi_d)`` at fixed ``phi_s`` is ``a + b cos(phi_d) +
@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import fourier
+from ..operators import fourier
 
 
 def peak_shift_params(q_0, q_half, q_pi):
@@ -54,8 +54,8 @@ def peak_series_shifted(q0, qpi, shift, dist: str, K: int) -> np.ndarray:
     """One-sided complex series (``n = 0..K-1``) of ``peak(q(t - shift))`` where
     ``q(t') = (q0 + qpi)/2 - (qpi - q0)/2 cos(t')`` peaks at ``t' = 0``.
 
-    The cosine coefficients ``c_n`` come from :func:`layersim.fourier.peak_series` (FFT length
-    following the full series length, GGX in closed form); ``cos(n (t - shift))`` contributes
+    The cosine coefficients ``c_n`` come from :func:`layersim.operators.fourier.peak_series` (FFT
+    length following the full series length, GGX in closed form); ``cos(n (t - shift))`` contributes
     ``c_n / 2 exp(-i n shift)`` to frequency ``n``. Shape (P, K).
     """
     c = fourier.peak_series(q0, qpi, dist, K)
@@ -67,7 +67,7 @@ def peak_series_shifted(q0, qpi, shift, dist: str, K: int) -> np.ndarray:
 def peak_samples(q0, qpi, shift, dist: str, t: np.ndarray, trig=None) -> np.ndarray:
     """Peak factor at azimuths ``t`` (rows x samples) for ``q(t) = c - d cos(t - shift)``,
     ``c = (q0 + qpi)/2``, ``d = (qpi - q0)/2``, written as in
-    :func:`layersim.fourier.peak_series`: ``exp(-q0) exp(-d (1 - cos))`` for Beckmann (its
+    :func:`layersim.operators.fourier.peak_series`: ``exp(-q0) exp(-d (1 - cos))`` for Beckmann (its
     FFT gives the Jacobi-Anger/Bessel coefficients ``exp(-q0) I_k(d) e^-d``, phase-shifted by
     ``exp(-i k shift)``: Zeltner & Jakob 2018, eq. (23)-(24)), ``1 / (1 + q)^2`` for GGX
     (geometric series).

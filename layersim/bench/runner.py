@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import accuracy
+from ..plan import accuracy
 from ..errors import LayersimError
 from ..plan import make_plan
 from ..scene import Scene
@@ -145,7 +145,7 @@ def _within(bins, ref, sigma, particles, k=3.0) -> float:
 
 
 def _tolerance_row(scene: Scene, tol: float, s: Settings, ref_bins, ref_alb, log) -> dict:
-    """A solve to ``tol`` (:mod:`layersim.accuracy`): its discretisation, time, estimate and
+    """A solve to ``tol`` (:mod:`layersim.plan.accuracy`): its discretisation, time, estimate and
     error against the reference (which a rung at or above the reference's scale can reach)."""
     try:
         t0 = time.perf_counter()
@@ -200,7 +200,7 @@ def _solver_reference(scene: Scene, s: Settings, out: dict, log):
         plan = make_plan(scene)
         t0 = time.perf_counter()
         # the coupled modes' ms grows too: its truncation is the larger error of anisotropic
-        # stacks (layersim.accuracy.scaled)
+        # stacks (layersim.plan.accuracy.scaled)
         ref = solve(accuracy.scaled(scene, plan.n, plan.md, s.reference_scale, plan.ms))
         ref_bins, ref_alb = _solver_bins(ref, s)
         out["reference"] = {"kind": "solver", "n": ref.info["n"], "md": ref.info["md"],

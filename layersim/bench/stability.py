@@ -29,14 +29,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..adding import add
+from ..stacking.adding import add
 from ..errors import InfeasibleError, LayersimError
 from ..ingredients import medium_operator
 from ..ingredients.numeric import numeric_interface_operator
-from ..operator import Grid
+from ..operators.operator import Grid
 from ..scene import Conductor, Dielectric, Scene
 from ..solver import solve as solve_scene
-from ..subtract import negativity, relative_error, subtract, with_noise
+from ..stacking.subtract import negativity, relative_error, subtract, with_noise
 
 GOLD = [0.143552, 3.98397]
 
@@ -121,7 +121,7 @@ def cases() -> list:
              angles=(0.0, 45.0, 80.0, 89.0)),
         Case("smooth_coating_gold", [diel(1.5, 0.0), cond(GOLD, 0.2)],
              "smooth coating over rough gold (alpha 0.2)"),
-        # near-specular coats (layersim.lobe); not at 0 deg, where the walk itself dips
+        # near-specular coats (layersim.solved.lobe); not at 0 deg, where the walk itself dips
         # (benchmarks/features/near_specular.py)
         Case("near_specular_coat_0.001", [diel(1.5, 0.001), cond(GOLD, 0.2)],
              "coat alpha 0.001 over rough gold (alpha 0.2): near-specular split",
@@ -169,7 +169,7 @@ class SubtractCase:
     """A subtraction case (Zeltner & Jakob 2018 sec. 3.4): build ``add(top, bottom)``, optionally
     perturb it with multiplicative noise, and recover ``bottom`` with automatic regularisation.
     Passes if the result is finite, conserves energy, has no negative lobes deeper than the noise,
-    and is within ``tolerance`` of the truth (:func:`layersim.subtract.relative_error`); an
+    and is within ``tolerance`` of the truth (:func:`layersim.stacking.subtract.relative_error`); an
     ill-posed removal must be refused."""
 
     name: str
@@ -206,7 +206,7 @@ class SubtractCase:
         neg = negativity(got)
         info = got.info.get("subtract", {}) if hasattr(got, "info") else {}
         # with noise, the result vouches for the directions it declares determined (at eps
-        # chosen by estimated error, the others may ring; layersim.determined)
+        # chosen by estimated error, the others may ring; layersim.stacking.determined)
         neg_det = info.get("negative_lobes_determined")
         judged = neg if neg_det is None else neg_det
         problems = []

@@ -8,7 +8,7 @@ import struct
 
 import numpy as np
 
-from ..operator import BLOCKS
+from ..operators.operator import BLOCKS
 
 MAGIC = b"SCATFUN"
 HEADER_SIZE = 64
@@ -42,7 +42,7 @@ def block_indices(name: str, h: int):
 
 def pair_maps(h: int, present=BLOCKS):
     """Between our pair numbering ``b h^2 + o h + i`` (block ``b`` of :data:`BLOCKS`, as in the
-    series tables of :mod:`layersim.bsdf`) and file pairs ``i N + o``, for the blocks in
+    series tables of :mod:`layersim.solved.bsdf`) and file pairs ``i N + o``, for the blocks in
     ``present``: ``(file_of (4 h^2,), ours_of (N^2,))``, -1 where there is no counterpart."""
     N = 2 * h + 2
     file_of = np.full(len(BLOCKS) * h * h, -1, np.int64)

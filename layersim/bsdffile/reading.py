@@ -9,7 +9,7 @@ import scipy.sparse as sps
 from ..aniso import basis
 from ..aniso.operator import AnisoOperator
 from ..errors import FileFormatError
-from ..operator import BLOCKS, Grid, IsoOperator, order_weight
+from ..operators.operator import BLOCKS, Grid, IsoOperator, order_weight
 
 
 def identify_grid(mu32: np.ndarray, rule: str | None) -> Grid:

@@ -1,5 +1,5 @@
 """The contents of a ``.bsdf`` file, :class:`FourierTable`: bytes, renderer-faithful evaluation,
-and conversion from and to a solved :class:`~layersim.bsdf.BSDF`; :func:`export` and
+and conversion from and to a solved :class:`~layersim.solved.bsdf.BSDF`; :func:`export` and
 :func:`read` (:mod:`layersim.bsdffile` for the layout)."""
 
 from __future__ import annotations
@@ -12,13 +12,13 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..bsdf import BSDF
-from ..channels import green_from_ybr
-from ..directions import azimuth, direction_pairs
+from ..solved.bsdf import BSDF
+from ..solved.channels import green_from_ybr
+from ..solved.directions import azimuth, direction_pairs
 from ..errors import FileFormatError, InfeasibleError
-from ..interpolation import spline_weights
+from ..operators.interpolation import spline_weights
 from ..kernels import fourier_eval, fourier_eval2d
-from ..operator import BLOCKS
+from ..operators.operator import BLOCKS
 from .layout import (FLAG_BSDF, FLAG_COMPLEX, FLAG_EXTRAPOLATED, HEADER_SIZE, HEADER_V1,
                      HEADER_V2, MAGIC, U32, file_nodes, n_marginal, pair_maps)
 from .reading import coupled_operator, identify_grid, isotropic_operator
@@ -521,7 +521,7 @@ def export(bsdf: BSDF, path, version: int | None = None, alpha=(0.0, 0.0),
         # format's (the inside nodes are matched by Snell's law)
         if bsdf.lobes[c]:
             raise InfeasibleError(
-                f"channel {c}: this BSDF has a near-specular interface (layersim.lobe), "
+                f"channel {c}: this BSDF has a near-specular interface (layersim.solved.lobe), "
                 "solved as smooth transport plus its exact lobe at evaluation; a .bsdf "
                 "file would need about 1 / alpha ordinates to tabulate that lobe; keep the "
                 "solved BSDF (BSDF.save), or export a rougher interface")

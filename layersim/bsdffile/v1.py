@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..channels import LUMINANCE, aligned_series
+from ..solved.channels import LUMINANCE, aligned_series
 from .layout import integrate_catmull_rom
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..channels import LUMINANCE
+from ..solved.channels import LUMINANCE
 from .layout import FLAG_COMPLEX, integrate_catmull_rom, n_marginal
 
 
@@ -17,7 +17,7 @@ def bsdf_spectrum(bsdf, c: int):
 
 
 def _isotropic_spectrum(table):
-    """:func:`bsdf_spectrum` of a cosine-series table (:class:`layersim.isobsdf.SeriesTable`):
+    """:func:`bsdf_spectrum` of a cosine-series table (:class:`layersim.solved.isobsdf.SeriesTable`):
     ``f = sum_l f_l cos(l phi_d)``, so ``f_{0,0} = f_0`` and ``f_{+-l,0} = f_l / 2``."""
     size = np.diff(table.offsets)
     pair = np.repeat(np.arange(size.size), size)

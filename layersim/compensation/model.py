@@ -1,7 +1,7 @@
 """The compensation terms: separable, azimuth-independent lobes added to a rough interface.
 
 Every term is, per block ``b`` of the interface (``Rt, Rb, Ttb, Tbt`` of
-:mod:`layersim.operator`), ``f_b(mu_i, mu_o) = u_b(mu_i) v_b(mu_o)`` (1/sr, radiance
+:mod:`layersim.operators.operator`), ``f_b(mu_i, mu_o) = u_b(mu_i) v_b(mu_o)`` (1/sr, radiance
 convention), with ``u_b, v_b`` tabulated at the nodes of :mod:`.tables` and interpolated there.
 Its albedo is ``a_b(mu_i) = u_b(mu_i) V_b`` with ``V_b = 2 pi int v_b(mu) mu dmu``. Reflection
 blocks are symmetric (``u_b`` proportional to ``v_b``); the transmission blocks satisfy the

@@ -15,7 +15,8 @@ frame). The BSDF is split by the kernels into ``f = smooth * peak(q)``
    the constants come from the kernel's ``q`` at ``phi_d = 0, pi/2, pi`` (no formula is repeated
    on the host). The peak factor then has an exact series about its azimuth ``theta0``
    (phase-shifted Jacobi-Anger/Bessel for Beckmann, eq. (23); geometric series for GGX), with
-   the FFT length following the *full* series length (:func:`layersim.fourier.peak_series`).
+   the FFT length following the *full* series length
+   (:func:`layersim.operators.fourier.peak_series`).
 3. The smooth factor (Fresnel, shadowing-masking, Jacobian) is fitted per pair with a short
    trigonometric series on the union of the peak's supports over ``phi_s``, weighted by the
    envelope of the peak factor, with soft zero constraints outside, by QR (one factorisation per
@@ -44,13 +45,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import fourier
+from ..operators import fourier
 from ..aniso import basis, series
 from ..aniso.operator import AnisoOperator, rotate_block, slot_column_scale
 from ..aniso.reciprocity import reciprocal_image, with_reciprocal_image
 from ..config import settings
 from ..kernels import projection as kproj
-from ..operator import Grid
+from ..operators.operator import Grid
 from ..outofcore.assemble import from_parts
 from ..outofcore.workspace import Workspace
 from ..threads import parallel_map
@@ -393,8 +394,8 @@ def _truncate(F, md, stats, peak_len, relerr):
     """Zero coefficients below ``relerr`` times the pair's largest (this also ends each pair's
     series in d); taper series whose *peak* is cut at ``md`` (``peak_len``: the rule of
     :func:`layersim.ingredients.microfacet.needs_taper`, shared by all projection paths) with
-    the Jackson kernel factors in d (:func:`layersim.fourier.taper_factors`), so that they blur
-    instead of ringing: a convolution in ``phi_d`` with a non-negative kernel at every
+    the Jackson kernel factors in d (:func:`layersim.operators.fourier.taper_factors`), so that they
+    blur instead of ringing: a convolution in ``phi_d`` with a non-negative kernel at every
     ``phi_s``. A long tail from a kink of the smooth factor (critical angle) is cut at ``md``
     without taper: tapering would blur the whole lobe by ~(d / md)^2 to remove a ringing of the
     tail's size."""

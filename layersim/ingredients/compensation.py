@@ -1,7 +1,7 @@
 """The energy-compensation term of a rough interface added to its operator.
 
 The terms of :mod:`layersim.compensation.model` do not depend on the azimuth, so they enter
-order 0 only: ``B_0[o, i] += 2 pi f_b(mu_i, mu_o) w_i mu_i`` (:mod:`layersim.operator`).
+order 0 only: ``B_0[o, i] += 2 pi f_b(mu_i, mu_o) w_i mu_i`` (:mod:`layersim.operators.operator`).
 
 A dielectric's term is built, as layerlab builds it (``Layer::setMicrofacet``), from the
 operator's own albedos at the ordinates, with the ordinates' quadrature for the hemispherical
@@ -23,7 +23,7 @@ import scipy.sparse as sps
 
 from ..compensation import tables
 from ..compensation.model import CONDUCTOR, DIELECTRIC
-from ..operator import IsoOperator, order_weight
+from ..operators.operator import IsoOperator, order_weight
 
 
 def _discrete_lobes(op: IsoOperator, layer, eta: complex):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sps
 
-from ..operator import Grid, IsoOperator
+from ..operators.operator import Grid, IsoOperator
 
 
 def diffuse_operator(grid: Grid, albedo: float, eta: float) -> IsoOperator:

@@ -1,4 +1,4 @@
-"""Opaque base with a measured isotropic BRDF (MERL layout, :mod:`layersim.merl`): projected
+"""Opaque base with a measured isotropic BRDF (MERL layout, :mod:`layersim.layers.merl`): projected
 into the cosine basis numerically.
 
 For every ordinate pair of the ``Rt`` block the kernel
@@ -17,7 +17,7 @@ import numpy as np
 import scipy.sparse as sps
 
 from ..kernels import projection as kproj
-from ..operator import DROP_TOLERANCE, Grid, IsoOperator
+from ..operators.operator import DROP_TOLERANCE, Grid, IsoOperator
 from .microfacet import block_pairs
 
 #: Smallest number of azimuth intervals on [0, pi] per pair; at least 2 md are used.

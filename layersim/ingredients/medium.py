@@ -49,7 +49,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from ..errors import InfeasibleError
-from ..operator import Grid, IsoOperator
+from ..operators.operator import Grid, IsoOperator
 
 #: Relative truncation of the Legendre series of the phase function.
 PHASE_TOLERANCE = 1e-10

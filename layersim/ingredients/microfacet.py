@@ -2,11 +2,12 @@
 
 For every ordinate pair (mu_i, mu_o) of every block, the BSDF is split by the kernels into
 ``f(phi) = S(phi) * peak(q(phi))`` (see :mod:`layersim.kernels.physics`); the cosine series of
-the peak factor is exact (:func:`layersim.fourier.peak_series`), the smooth factor ``S`` is fitted
-with a short cosine series on the support of the peak (:func:`layersim.fourier.fit_restricted`),
-and the two are multiplied in coefficient space (Jakob's layerlab tutorial sec. 5.2; Zeltner &
-Jakob 2018 sec. 4.1; Jakob et al. 2014). Pairs are processed in batches grouped by series
-length, so the work is proportional to the number of coefficients kept.
+the peak factor is exact (:func:`layersim.operators.fourier.peak_series`), the smooth factor ``S``
+is fitted with a short cosine series on the support of the peak
+(:func:`layersim.operators.fourier.fit_restricted`), and the two are multiplied in coefficient space
+(Jakob's layerlab tutorial sec. 5.2; Zeltner & Jakob 2018 sec. 4.1; Jakob et al. 2014). Pairs are
+processed in batches grouped by series length, so the work is proportional to the number of
+coefficients kept.
 
 Accuracy (``tests/test_projection.py``, against composite Gauss-Legendre quadrature graded around
 the peak, including every grazing pair of a 64-ordinate grid): away from total internal
@@ -29,11 +30,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import fourier
+from ..operators import fourier
 from ..config import settings
 from ..kernels import projection as kproj
 from ..kernels.runtime import device_for
-from ..operator import Grid, IsoOperator
+from ..operators.operator import Grid, IsoOperator
 from ..threads import parallel_map
 
 #: Relative truncation of each pair's cosine series (|f_l| < RELERR |f_0| are dropped).
@@ -318,7 +319,7 @@ def pair_series(mu_i, mu_o, eta: complex, alpha: float, dist: str, m: int, q0=No
     K : int, optional
         Peak-series orders to use (default: enough for every pair, at most ``m + L_HARD``).
     taper : bool
-        Apply the Jackson kernel factors (:func:`layersim.fourier.taper_factors`) to pairs
+        Apply the Jackson kernel factors (:func:`layersim.operators.fourier.taper_factors`) to pairs
         whose series needs more than ``m`` orders (:func:`needs_taper`).
     film : (float, float), optional
         The interface's thin film (relative index, phase scale; :func:`interface_setup`).
@@ -385,7 +386,7 @@ def needs_taper(q0, qpi, dist: str, m: int) -> np.ndarray:
 
 
 def apply_taper(series: np.ndarray, rows: np.ndarray, stats: ProjectionStats) -> None:
-    """Jackson kernel factors (:func:`layersim.fourier.taper_factors`, in place) on the
+    """Jackson kernel factors (:func:`layersim.operators.fourier.taper_factors`, in place) on the
     selected rows: blur instead of Gibbs ringing, and a lobe that is non-negative stays so.
     Order 0, hence energy, is unchanged."""
     m = series.shape[1]

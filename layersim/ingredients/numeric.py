@@ -17,8 +17,8 @@ coarse-bound launch, sampling with each pair's own power-of-two sample count, on
 truncation launch, then the assembly kernels of :mod:`layersim.kernels.sparse` (scatter with
 reciprocity, per-order drop threshold, scan, compaction); only the three coarse numbers per
 pair, the row pointers and the nonzeros come back. The host keeps the decisions that need the
-analytic series lengths (:func:`layersim.fourier.peak_length`) and the few pairs too peaked to
-sample.
+analytic series lengths (:func:`layersim.operators.fourier.peak_length`) and the few pairs too
+peaked to sample.
 """
 
 from __future__ import annotations
@@ -29,10 +29,10 @@ import time
 import numpy as np
 import scipy.fft
 
-from .. import fourier
+from ..operators import fourier
 from ..kernels import projection as kproj
 from ..kernels.sparse import BlockAssembler
-from ..operator import DROP_TOLERANCE, Grid, IsoOperator, OrderStack
+from ..operators.operator import DROP_TOLERANCE, Grid, IsoOperator, OrderStack
 from . import microfacet
 from .microfacet import ProjectionStats
 

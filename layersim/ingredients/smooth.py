@@ -10,11 +10,11 @@ with the same value in every Fourier order, on any grid: the Fresnel reflectance
 * A smooth **dielectric boundary** (the top interface of a stack, or the bottom one of a
   transmissive stack) refracts ``mu`` to its Snell image, which is diagonal only on a grid whose
   nodes are matched across the interface. The solver keeps the refraction out of the blocks: on
-  the Snell-matched grid of :func:`layersim.quadrature.snell_matched` the stack is solved in the
-  directions just inside the boundary, with the boundary's internal reflection
+  the Snell-matched grid of :func:`layersim.operators.quadrature.snell_matched` the stack is solved
+  in the directions just inside the boundary, with the boundary's internal reflection
   (:func:`boundary_reflector`: diagonal ``F``, 1 under total internal reflection, and unit
   transmission that hands the radiance arriving at the boundary on); the BSDF then applies the
-  Fresnel transmission and the change of solid angle (:mod:`layersim.boundary`).
+  Fresnel transmission and the change of solid angle (:mod:`layersim.solved.boundary`).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sps
 
 from ..kernels.fresnel import fresnel
-from ..operator import Grid, IsoOperator
+from ..operators.operator import Grid, IsoOperator
 
 
 def smooth_conductor_operator(grid: Grid, m: int, eta: complex, eta_above: float,
@@ -32,7 +32,7 @@ def smooth_conductor_operator(grid: Grid, m: int, eta: complex, eta_above: float
     """Opaque operator of a smooth conductor of relative index ``eta`` (complex: ``eta.real +
     i eta.imag``): ``Rt = diag(F(mu))`` in each of the ``m`` orders, all of it a delta.
     ``reflectance`` (h,) replaces ``F``: a near-specular conductor's rough reflected energy
-    (:meth:`layersim.lobe.NearSpecularLobe.reflectance`); ``film`` (relative index, phase
+    (:meth:`layersim.solved.lobe.NearSpecularLobe.reflectance`); ``film`` (relative index, phase
     scale) makes ``F`` the Airy reflectance of a filmed conductor
     (:func:`layersim.kernels.fresnel.fresnel`)."""
     F = (fresnel(grid.mu, eta.real, eta.imag, film) if reflectance is None
@@ -59,7 +59,7 @@ def boundary_reflector(grid: Grid, m: int, side: str, eta_rel: float,
         Absolute index of the medium inside the boundary.
     reflectance : ndarray (h,), optional
         Internal reflectance per node in place of Fresnel's: a near-specular boundary's rough
-        one (:meth:`layersim.lobe.NearSpecularLobe.internal_reflectance`).
+        one (:meth:`layersim.solved.lobe.NearSpecularLobe.internal_reflectance`).
 
     Returns
     -------

@@ -14,7 +14,7 @@ Sample counts: ``N_d`` is the smallest power of two >= ``4 md`` (at least :data:
 that orders up to ``md`` are clean of aliasing from series up to ``3 md`` long; ``N_s`` is that
 of the analytic coupled path for the layer's ``ms``. Orders beyond ``md`` that are still
 significant (> ``relerr`` of the pair's largest) are cut with the Jackson kernel factors
-(:func:`layersim.fourier.taper_factors`), as in the analytic paths; coefficients below
+(:func:`layersim.operators.fourier.taper_factors`), as in the analytic paths; coefficients below
 ``relerr`` of their pair's largest are dropped.
 
 Assembly, reciprocity (reflection blocks from one triangle of pairs, ``Tbt`` from ``Ttb``) and
@@ -29,10 +29,10 @@ import time
 
 import numpy as np
 
-from .. import fourier
+from ..operators import fourier
 from ..aniso import basis
 from ..kernels import projection as kproj
-from ..operator import Grid
+from ..operators.operator import Grid
 from .microfacet import block_pairs
 
 #: Smallest number of phi_d samples per pair.

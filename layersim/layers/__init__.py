@@ -7,7 +7,7 @@ planner, the solver, the Monte Carlo walk and the statistical model need from it
   :mod:`.tabulated`);
 * :mod:`.medium` -- homogeneous scattering and absorbing slab;
 * :mod:`.diffuse` -- Lambertian base;
-* :mod:`.measured` -- measured (MERL) base.
+* :mod:`.measured` -- measured (MERL) base, its files read by :mod:`.merl`.
 
 A new kind subclasses :class:`LayerKind`, declares its record and fields, implements the hooks
 of the stages it takes part in, and calls :func:`register`; nothing else in the package needs to

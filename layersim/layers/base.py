@@ -106,11 +106,11 @@ class Survey:
         (:meth:`LayerKind.on_grid`).
     boundary : dict
         Smooth dielectric boundaries, ``{"top" | "bottom": index outside}``
-        (:mod:`layersim.boundary`).
+        (:mod:`layersim.solved.boundary`).
     snell_eta : float or None
         Their relative index (inside / outside), which sets the Snell-matched grid.
     lobes : dict
-        Near-specular boundaries, ``{"top": parameters of layersim.lobe.NearSpecularLobe}``.
+        Near-specular boundaries, ``{"top": parameters of layersim.solved.lobe.NearSpecularLobe}``.
     near_specular : tuple of int
         The layers solved by a near-specular split.
     hints : list of str

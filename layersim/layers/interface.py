@@ -29,7 +29,7 @@ import numpy as np
 
 from ..aniso import plan as aplan
 from ..aniso.plan import COUPLED_RELERR
-from ..energy import check_operator_energy
+from ..operators.energy import check_operator_energy
 from ..ingredients import tabulated as tabulated_projection
 from ..ingredients.aniso_microfacet import aniso_interface_operator
 from ..ingredients.compensation import compensate

@@ -1,5 +1,5 @@
 """The measured base: an opaque surface whose isotropic BRDF is a MERL-layout table
-(:mod:`layersim.merl`), three channels.
+(:mod:`layersim.layers.merl`), three channels.
 
 It is projected numerically (cosine series; :mod:`layersim.ingredients.measured`) and sized as a
 Beckmann lobe as wide as its specular peak; the walk samples it with cosine-weighted directions
@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .. import merl
-from ..energy import check_operator_energy
+from . import merl
+from ..operators.energy import check_operator_energy
 from ..ingredients.measured import measured_operator
 from ..kernels import walk
 from .base import Layer, LayerKind, LayerPlan, WalkBoundary
@@ -28,9 +28,9 @@ __all__ = ["Measured", "MeasuredKind"]
 
 @dataclass(frozen=True)
 class Measured(Layer):
-    """Opaque base with a measured isotropic BRDF (MERL layout, :mod:`layersim.merl`): channel
+    """Opaque base with a measured isotropic BRDF (MERL layout, :mod:`layersim.layers.merl`): channel
     ``channel`` of ``data``. ``alpha`` is the width (radians) of its specular lobe
-    (:meth:`layersim.merl.MERLTable.equivalent_alpha`), which sizes the plan as a Beckmann
+    (:meth:`layersim.layers.merl.MERLTable.equivalent_alpha`), which sizes the plan as a Beckmann
     lobe of that roughness would."""
 
     kind = "measured"

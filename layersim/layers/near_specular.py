@@ -1,5 +1,5 @@
-"""Near-specular interfaces (roughness up to :data:`~layersim.lobe.NEAR_SPECULAR_ALPHA`): the
-smooth transport plus the observable lobe (:mod:`layersim.lobe`).
+"""Near-specular interfaces (roughness up to :data:`~layersim.solved.lobe.NEAR_SPECULAR_ALPHA`): the
+smooth transport plus the observable lobe (:mod:`layersim.solved.lobe`).
 
 * a dielectric top coat over an opaque base that scatters wider than its refraction blur is
   a smooth boundary (Snell-matched ordinates) whose direct reflection is the microfacet lobe
@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from ..errors import InfeasibleError
 from ..ingredients.smooth import smooth_conductor_operator
-from ..lobe import (NEAR_SPECULAR_ALPHA, NEAR_SPECULAR_BASE_ALPHA, NEAR_SPECULAR_WIDE_MAX,
-                    NearSpecularLobe, near_specular_conductor_error, near_specular_error)
+from ..solved.lobe import (NEAR_SPECULAR_ALPHA, NEAR_SPECULAR_BASE_ALPHA, NEAR_SPECULAR_WIDE_MAX,
+                           NearSpecularLobe, near_specular_conductor_error, near_specular_error)
 from . import smooth
 from .base import LayerPlan
 
@@ -30,10 +30,10 @@ def plan_coat(scene, i: int, layer, survey) -> bool:
     the top interface, too rough, a tabulated NDF, a boundary the smooth machinery refuses, or a
     base that would show the refraction blur the split leaves out (the split needs an opaque
     base that scatters wider than that blur: diffuse, measured, or a conductor rougher than
-    :data:`~layersim.lobe.NEAR_SPECULAR_ALPHA`)."""
+    :data:`~layersim.solved.lobe.NEAR_SPECULAR_ALPHA`)."""
     lo, hi = min(layer.alpha_u, layer.alpha_v), max(layer.alpha_u, layer.alpha_v)
     if layer.ndf is not None or layer.film is not None:
-        # the lobe of layersim.lobe is analytic, with bare Fresnel factors
+        # the lobe of layersim.solved.lobe is analytic, with bare Fresnel factors
         return False
     base = scene.channel(0).layers[-1]
     if (i != 0 or lo > NEAR_SPECULAR_ALPHA or hi > NEAR_SPECULAR_WIDE_MAX
@@ -55,7 +55,7 @@ def plan_coat(scene, i: int, layer, survey) -> bool:
     lp.action = "near-specular split (smooth top boundary + lobe)"
     lp.detail = (f"{layer.distribution} alpha=({layer.alpha_u:g}, {layer.alpha_v:g}), relative "
                  f"index {survey.snell_eta:.4g}: Snell-matched smooth transport with the rough "
-                 "transmittance; the direct reflection is the microfacet lobe (layersim.lobe); "
+                 "transmittance; the direct reflection is the microfacet lobe (layersim.solved.lobe); "
                  f"{near_specular_error(hi)}")
     survey.lobes["top"] = {"eta": survey.snell_eta, "alpha_u": layer.alpha_u,
                            "alpha_v": layer.alpha_v, "distribution": layer.distribution,
@@ -75,15 +75,15 @@ def _blurred_below(scene, i: int) -> bool:
 def plan_conductor(scene, i: int, layer, survey) -> bool:
     """Plan a nearly smooth conductor as a mirror (Fresnel diagonal) whose reflectance is the
     rough interface's reflected energy ``E_R`` (azimuth average, single-scattering loss
-    included; :meth:`layersim.lobe.NearSpecularLobe.reflectance`), and return True; False
+    included; :meth:`layersim.solved.lobe.NearSpecularLobe.reflectance`), and return True; False
     where it is left to the exact projection.
 
     Alone (the top layer), the conductor is the whole BSDF: ``eval``, ``albedo`` and
     ``bin_energies`` use its exact microfacet lobe, and the mirror only stands for it when the
     BSDF is added to other layers. Under other layers its lobe (about ``2 alpha`` wide) must be
     blurred by a rough interface above it (:func:`_blurred_below`) and both its roughnesses be
-    at most :data:`~layersim.lobe.NEAR_SPECULAR_BASE_ALPHA`; behind a smooth or near-specular coat
-    the lobe is seen directly, and near the coat's critical angle part of it is trapped, which
+    at most :data:`~layersim.solved.lobe.NEAR_SPECULAR_BASE_ALPHA`; behind a smooth or near-specular
+    coat the lobe is seen directly, and near the coat's critical angle part of it is trapped, which
     a mirror does not reproduce (``benchmarks/features/near_specular.txt``)."""
     lo, hi = min(layer.alpha_u, layer.alpha_v), max(layer.alpha_u, layer.alpha_v)
     if lo > NEAR_SPECULAR_ALPHA or layer.film is not None:
@@ -108,7 +108,7 @@ def plan_conductor(scene, i: int, layer, survey) -> bool:
             "single-scattering loss is negligible but near grazing: a mirror of alpha 0.03 "
             "loses 1e-6 at 78 degrees, 1.6 % at 85)")
     where = ("alone: eval, albedo and bin_energies use its exact microfacet lobe "
-             "(layersim.lobe)" if i == 0 else
+             "(layersim.solved.lobe)" if i == 0 else
              f"the rough interface above blurs its lobe; {near_specular_conductor_error(hi)}")
     survey.layers.append(LayerPlan(
         i, layer.kind, "near-specular conductor (mirror with the rough reflectance)",

@@ -4,7 +4,7 @@ A smooth conductor is a Fresnel diagonal, exact on any grid. A smooth dielectric
 between two grids of ordinates that only one of them can match: it is solved exactly as the top
 boundary of the stack (and as the bottom one of a transmissive stack with the same index ratio),
 on a Snell-matched grid whose inside nodes in the escape cone are the refracted outside nodes
-(:mod:`layersim.boundary`); elsewhere it is refused.
+(:mod:`layersim.solved.boundary`); elsewhere it is refused.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ def matched_film_error(i: int, who: str) -> SceneError:
 
 def refuse_film(scene, i: int, layer, matched: bool) -> None:
     """Refuse what the solver does not solve with a film on a dielectric: an index-matched
-    interface, and a smooth boundary (whose transmission :mod:`layersim.boundary` applies at
+    interface, and a smooth boundary (whose transmission :mod:`layersim.solved.boundary` applies at
     evaluation, with bare Fresnel factors).
 
     Raises

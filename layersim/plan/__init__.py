@@ -7,8 +7,8 @@ module of this package, and :func:`make_plan` composes them in order:
   adding-doubling, a diffuse base needs order 0; transmission blocks below an opaque base,
   index-matched interfaces and empty media (exact no-ops) are left out.
 * **Representation and coupling** ``ms`` (:mod:`.coupling`; see :mod:`layersim.aniso`):
-  isotropic stacks use the cosine series of :class:`~layersim.operator.IsoOperator`. A stack
-  with an anisotropic interface (``alpha_u != alpha_v``) uses coupled modes; each anisotropic
+  isotropic stacks use the cosine series of :class:`~layersim.operators.operator.IsoOperator`. A
+  stack with an anisotropic interface (``alpha_u != alpha_v``) uses coupled modes; each anisotropic
   layer is projected with the ``ms`` its roughness ratio needs
   (:func:`layersim.aniso.plan.ms_for_layer`), isotropic layers keep their cheaper operators
   and runs of them are added isotropically before conversion.

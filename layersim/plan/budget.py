@@ -10,7 +10,7 @@ import math
 
 from ..config import settings
 from ..errors import InfeasibleError
-from ..operator import Grid
+from ..operators.operator import Grid
 from ..outofcore.memory import memory_limit
 from ..outofcore.parking import park_directory
 from ..scene import Discretization, Scene

@@ -16,8 +16,8 @@ stack as a whole:
 * **Media** (adding-doubling). Time: the matrix exponential and doublings of the scattering
   orders (``orders h^3``) and the dense ``(md, h, h)`` arrays every order of the unscattered
   beam passes through (``md h^2``). Memory: those arrays (:func:`medium_transient`).
-* **Adding** (isotropic equations, :mod:`layersim.adding`). An order is solved with dense
-  LAPACK (``h^3``) only where its operands are dense enough (:func:`layersim.adding.
+* **Adding** (isotropic equations, :mod:`layersim.stacking.adding`). An order is solved with dense
+  LAPACK (``h^3``) only where its operands are dense enough (:func:`layersim.stacking.adding.
   sparse_density`); the others go through sparse LU at a cost per stored nonzero. The
   densities per order come from the pre-pass (pairs whose series reach the order) and the
   media's orders (:func:`adding_chain`).
@@ -50,10 +50,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..adding import ORDER_BATCH_ELEMENTS, SPARSE_MIN_H, sparse_density
+from ..stacking.adding import ORDER_BATCH_ELEMENTS, SPARSE_MIN_H, sparse_density
 from ..aniso import plan as aplan
 from ..ingredients.medium import hg_scaling
-from ..operator import Grid
+from ..operators.operator import Grid
 from ..scene import Medium, Scene
 
 #: Seconds per unit of work on the 2-core CI VM (see the module docstring and
@@ -94,7 +94,7 @@ BYTES = {
     "medium_entries": 25,
     "medium_orders": 140,
     # adding: arrays of a batch of dense orders in flight (each at most
-    # layersim.adding.ORDER_BATCH_ELEMENTS float64)
+    # layersim.stacking.adding.ORDER_BATCH_ELEMENTS float64)
     "adding_arrays": 10,
     # every solve: bookkeeping beside the operators
     "solve": 2 << 20,
@@ -251,9 +251,9 @@ def adding_chain(ings: list, md: int, h: int) -> list:
     """The steps of adding ``ings`` (isotropic, top to bottom) bottom up, as
     :func:`layersim.solver.solve` does: per step, the orders that go dense (their operands'
     nonzeros, the top's ``Rb``, ``Ttb``, ``Tbt`` and the bottom's blocks, at least
-    :func:`layersim.adding.sparse_density` of the entries; every order below
-    :data:`~layersim.adding.SPARSE_MIN_H` ordinates), the nonzeros of the others, and the size
-    of the stack. A stack's blocks hold, per order, the nonzeros of both operands (products
+    :func:`layersim.stacking.adding.sparse_density` of the entries; every order below
+    :data:`~layersim.stacking.adding.SPARSE_MIN_H` ordinates), the nonzeros of the others, and the
+    size of the stack. A stack's blocks hold, per order, the nonzeros of both operands (products
     spread them; at most ``h^2``)."""
     if not ings:
         return []

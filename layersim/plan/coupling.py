@@ -19,7 +19,7 @@ def needed_ms(layers: list, left_out: list, notes: list) -> int:
     if not ms:
         left_out.append("anisotropic coupling (ms = 0): every projected layer is isotropic"
                         + (" (the anisotropy of near-specular layers is applied at evaluation,"
-                           " layersim.lobe, or averaged over the azimuth in a mirror)"
+                           " layersim.solved.lobe, or averaged over the azimuth in a mirror)"
                            if any("near-specular" in lp.action for lp in layers) else ""))
         return 0
     iso = [lp for lp in layers if lp.action not in ("left out", "project (coupled modes)")]

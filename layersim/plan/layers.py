@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from ..layers import kind_of
 from ..layers.base import Survey
-from ..operator import Grid
+from ..operators.operator import Grid
 from ..scene import Scene
 
 __all__ = ["Survey", "survey_layers", "scale_media"]

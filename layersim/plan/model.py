@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ..layers.base import LayerPlan
-from ..operator import Grid
+from ..operators.operator import Grid
 
 __all__ = ["LayerPlan", "Plan"]
 
@@ -36,10 +36,10 @@ class Plan:
     #: ``make_plan(scene, refuse=False)``.
     refused: str | None = None
     #: Smooth dielectric boundaries of the stack, ``{"top" | "bottom": index outside}``
-    #: (:mod:`layersim.boundary`).
+    #: (:mod:`layersim.solved.boundary`).
     boundary: dict = field(default_factory=dict)
     #: Near-specular rough boundaries among them, ``{"top": parameters}`` of
-    #: :class:`layersim.lobe.NearSpecularLobe`, and the layer indices they stand for.
+    #: :class:`layersim.solved.lobe.NearSpecularLobe`, and the layer indices they stand for.
     lobes: dict = field(default_factory=dict)
     near_specular: tuple = ()
 

@@ -6,7 +6,7 @@ length of every significant ordinate pair's series; the plan keeps every order n
 whose incident and outgoing elevations are both within :data:`THETA_FULL` of the normal. A lobe
 at elevation theta is ~alpha cos(theta) wide in azimuth, so pairs closer to the horizon would
 need ~1/(alpha mu) orders (thousands at the most grazing ordinates); they are truncated and
-tapered with the Jackson kernel (:func:`layersim.fourier.taper_factors`: a non-negative
+tapered with the Jackson kernel (:func:`layersim.operators.fourier.taper_factors`: a non-negative
 kernel, so that they blur instead of ringing negative). Truncating
 orders never changes energy (only order 0 carries energy). Media add the reach of their phase
 function.
@@ -22,7 +22,7 @@ from ..aniso import plan as aplan
 from ..errors import InfeasibleError
 from ..ingredients import aniso_microfacet, microfacet
 from ..layers import kind_of
-from ..operator import Grid
+from ..operators.operator import Grid
 from ..scene import MAX_ORDERS, Discretization, Scene
 
 #: Lobes with both elevations within this angle (degrees) of the normal keep all their

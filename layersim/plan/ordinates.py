@@ -11,9 +11,9 @@ from __future__ import annotations
 import math
 
 from ..errors import InfeasibleError
-from ..operator import Grid
+from ..operators.operator import Grid
 from ..layers.base import N_PER_WIDTH
-from ..quadrature import SNELL, snell_rule
+from ..operators.quadrature import SNELL, snell_rule
 from ..scene import Discretization
 
 N_MIN, N_MAX = 64, 4096
@@ -72,7 +72,8 @@ def choose_n(disc: Discretization, rule: str, widths: list, notes: list,
 def choose_grid(disc: Discretization, rule: str, survey, notes: list, overridden: dict) -> Grid:
     """The grid of the plan: ``rule`` with :func:`choose_n` ordinates, or, for a stack with a
     smooth dielectric boundary (``survey.snell_eta``), the Snell-matched grid of that boundary
-    (:func:`layersim.quadrature.snell_rule`) with :data:`SNELL_N_FACTOR` times the ordinates.
+    (:func:`layersim.operators.quadrature.snell_rule`) with :data:`SNELL_N_FACTOR` times the
+    ordinates.
 
     Raises
     ------

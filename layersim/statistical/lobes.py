@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..directions import bin_edges, direction_pairs, unit_directions
+from ..solved.directions import bin_edges, direction_pairs, unit_directions
 from ..errors import InfeasibleError
 from .forward import add_stack
 from .stack import statistical_stacks
@@ -188,7 +188,7 @@ class StatisticalBSDF:
 
     def _check(self, wi):
         """``wi`` as unit vectors (..., 3) above the surface (as :class:`layersim.BSDF`
-        takes them: :func:`layersim.directions.unit_directions`)."""
+        takes them: :func:`layersim.solved.directions.unit_directions`)."""
         return self._above(unit_directions("wi", wi))
 
     def eval(self, wi, wo) -> np.ndarray:

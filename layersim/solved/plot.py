@@ -21,8 +21,9 @@ and hemispherical slices for one incident direction.
 Both accept anything with ``eval(wi, wo)``, ``channels`` and ``opaque`` (a
 :class:`layersim.BSDF` or a :class:`layersim.bsdffile.FourierTable`); Fourier orders need a
 ``BSDF``; for an anisotropic one they are those of its rotational average
-(:meth:`~layersim.aniso.operator.AnisoOperator.rotational_average`, the ``s = 0`` terms). RGB shows the luminance in the block plot and colour images in the slices.
-Figures are drawn with matplotlib's object API and the Agg canvas: no global backend is changed.
+(:meth:`~layersim.aniso.operator.AnisoOperator.rotational_average`, the ``s = 0`` terms). RGB shows
+the luminance in the block plot and colour images in the slices. Figures are drawn with matplotlib's
+object API and the Agg canvas: no global backend is changed.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from matplotlib.patches import Circle
 
 from .bsdf import BSDF
 from .channels import LUMINANCE
-from .interpolation import spline_weights
+from ..operators.interpolation import spline_weights
 
 #: Panel order of layerlab's plot_layer: (block, mu_i range, mu_o range).
 PANELS = (("Tbt", (-1, 0), (-1, 0)), ("Rt", (0, 1), (-1, 0)),
@@ -57,7 +58,7 @@ def _scalar(values: np.ndarray, channels: int, channel) -> np.ndarray:
 
 def _directions(mu_in, mu_out, dphi):
     """wi, wo with ``wi.z = mu_in``, ``wo.z = -mu_out`` and propagation azimuth difference
-    ``dphi`` (the inverse of the conversion in :mod:`layersim.bsdf`)."""
+    ``dphi`` (the inverse of the conversion in :mod:`layersim.solved.bsdf`)."""
     si = np.sqrt(np.maximum(0.0, 1.0 - mu_in ** 2))
     so = np.sqrt(np.maximum(0.0, 1.0 - mu_out ** 2))
     wi = np.stack([si, np.zeros_like(si), mu_in], axis=-1)

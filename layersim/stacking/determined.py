@@ -44,8 +44,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sps
 
-from .aniso.operator import AnisoOperator
-from .operator import BLOCKS, IsoOperator
+from ..aniso.operator import AnisoOperator
+from ..operators.operator import BLOCKS, IsoOperator
 
 #: Smallest visibility of a reached ordinate (fraction of a unit ordinate vector that the known
 #: layer's transmission passes at the subtraction's eps).

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SceneError
+from ..errors import SceneError
 
 __all__ = ["MERLTable", "read_merl", "write_merl", "half_diff", "DIMS", "SCALES"]
 

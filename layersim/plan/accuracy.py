@@ -38,9 +38,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .errors import InfeasibleError
-from .plan import make_plan
-from .scene import Scene
+from ..errors import InfeasibleError
+from . import make_plan
+from ..scene import Scene
 
 #: Incidence angles (degrees) at which the estimate compares bin energies; the estimate is the
 #: worst of them.

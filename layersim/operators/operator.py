@@ -31,8 +31,8 @@ blocks are ``None`` ("left out") and adding skips them.
 A delta in direction (the unscattered transmission through media, the mirror reflection of a
 smooth interface) sits on the diagonal of its block with the same value in every order. It stays
 in the blocks (the adding equations need it), and is also recorded in ``delta[name]`` (per node,
-any of the four blocks; :mod:`layersim.deltas`), so that the BSDF can evaluate the smooth part
-without it and report it separately.
+any of the four blocks; :mod:`layersim.operators.deltas`), so that the BSDF can evaluate the smooth
+part without it and report it separately.
 
 Orders at or beyond ``m`` are exactly zero. Blocks are scipy CSR matrices (a list, or an
 :class:`OrderStack` holding the orders of a block in one array triple); entries whose magnitude is
@@ -51,8 +51,8 @@ import numpy as np
 import scipy.sparse as sps
 
 from . import energy, quadrature
-from .errors import FileFormatError, OperatorError
-from .outofcore import memory
+from ..errors import FileFormatError, OperatorError
+from ..outofcore import memory
 
 BLOCKS = ("Rt", "Rb", "Ttb", "Tbt")
 #: Relative drop threshold for operator entries (per block and order).
@@ -113,8 +113,8 @@ class Operator(ABC):
     ----------
     representation : str
         ``"isotropic"`` or ``"anisotropic"``; the key of :func:`representation_class` and of the
-        per-representation registries of :mod:`layersim.bsdf` and :mod:`layersim.subtract`;
-        stored in operator files (absent means isotropic).
+        per-representation registries of :mod:`layersim.solved.bsdf` and
+        :mod:`layersim.stacking.subtract`; stored in operator files (absent means isotropic).
     grid : Grid
         The discrete ordinates (``h = grid.h`` per hemisphere).
     m : int
@@ -128,11 +128,13 @@ class Operator(ABC):
         Absolute indices of the media above and below (``eta_bottom`` None when opaque).
     delta : dict
         The delta (specular or straight-through) part of each block per node, ``{block: (h,)}``
-        (:mod:`layersim.deltas`): the unscattered transmission of media, smooth interfaces.
+        (:mod:`layersim.operators.deltas`): the unscattered transmission of media, smooth
+        interfaces.
 
     Smooth dielectric boundaries and near-specular lobes applied where a stack is evaluated
-    are the BSDF's (:attr:`layersim.bsdf.BSDF.boundary`, :attr:`~layersim.bsdf.BSDF.lobes`),
-    not the operator's: the same blocks serve inside and outside them.
+    are the BSDF's (:attr:`layersim.solved.bsdf.BSDF.boundary`,
+    :attr:`~layersim.solved.bsdf.BSDF.lobes`), not the operator's: the same blocks serve inside and
+    outside them.
     """
 
     representation: str = ""
@@ -184,8 +186,8 @@ class Operator(ABC):
 
     def limit_energy(self) -> tuple[float, int] | None:
         """Remove a small energy excess of the quadrature in place, keeping reciprocity
-        (:func:`layersim.energy.limit_energy`); returns ``(excess, scaled ordinates)``, or None
-        when the representation does not correct it (the caller then reports the excess)."""
+        (:func:`layersim.operators.energy.limit_energy`); returns ``(excess, scaled ordinates)``, or
+        None when the representation does not correct it (the caller then reports the excess)."""
         return None
 
     @abstractmethod

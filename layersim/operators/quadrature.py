@@ -134,10 +134,11 @@ def snell_matched(eta: float, h: int) -> tuple[np.ndarray, np.ndarray]:
     """Hemisphere nodes and weights matched across a smooth boundary of relative index ``eta``.
 
     ``h_e = snell_split(h, eta)`` outside nodes ``x_j`` and weights ``v_j`` of Gauss-Radau on
-    (0, 1] (normal incidence is a node, as in the default Gauss-Lobatto grids) map to the inside cosines ``mu_j = sqrt(1 - (1 - x_j^2) / eta^2)`` in (mu_c, 1) with
-    weights ``v_j x_j / (eta^2 mu_j)`` (``mu dmu = x dx / eta^2``), so that the flux weights
-    ``w mu`` of an outside node and its image differ by exactly ``eta^2`` and a sum over the
-    escape cone is the outside rule's sum. The total-internal-reflection range (0, mu_c),
+    (0, 1] (normal incidence is a node, as in the default Gauss-Lobatto grids) map to the inside
+    cosines ``mu_j = sqrt(1 - (1 - x_j^2) / eta^2)`` in (mu_c, 1) with weights
+    ``v_j x_j / (eta^2 mu_j)`` (``mu dmu = x dx / eta^2``), so that the flux weights ``w mu`` of an
+    outside node and its image differ by exactly ``eta^2`` and a sum over the escape cone is the
+    outside rule's sum. The total-internal-reflection range (0, mu_c),
     ``mu_c = sqrt(1 - 1 / eta^2)``, gets Gauss-Legendre with the other ``h - h_e`` nodes.
     Returns increasing nodes (h,) and weights (h,).
     """

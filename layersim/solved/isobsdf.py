@@ -1,8 +1,8 @@
 """Evaluation, energy fractions and bin energies of solved isotropic stacks.
 
-:class:`layersim.bsdf.BSDF` evaluates a channel whose operator is an
-:class:`~layersim.operator.IsoOperator` with an :class:`IsoEvaluator` (the registry
-:data:`layersim.bsdf.EVALUATORS`). Conventions are those of :mod:`layersim.bsdf`:
+:class:`layersim.solved.bsdf.BSDF` evaluates a channel whose operator is an
+:class:`~layersim.operators.operator.IsoOperator` with an :class:`IsoEvaluator` (the registry
+:data:`layersim.solved.bsdf.EVALUATORS`). Conventions are those of :mod:`layersim.solved.bsdf`:
 ``mu_in = wi.z``, ``mu_out = -wo.z``, ``dphi = phi(wo) - phi(wi) - pi``.
 
 * ``eval``: cubic spline interpolation of the coefficients between ordinates and the cosine
@@ -22,10 +22,10 @@ import numpy as np
 
 from .evaluator import Evaluator
 from .directions import azimuth
-from .interpolation import (bin_quadrature, block_taps, closed_bin, hat_weights,
-                            side_energies, spline_weights)
-from .kernels import fourier_eval
-from .operator import BLOCKS, order_weight
+from ..operators.interpolation import (bin_quadrature, block_taps, closed_bin, hat_weights,
+                                       side_energies, spline_weights)
+from ..kernels import fourier_eval
+from ..operators.operator import BLOCKS, order_weight
 
 _BLOCK_ID = {name: k for k, name in enumerate(BLOCKS)}
 
@@ -96,8 +96,8 @@ class IsoEvaluator(Evaluator):
     def node_energy(self, name: str, weight: np.ndarray | None = None,
                     wi: np.ndarray | None = None) -> np.ndarray:
         """Energy fraction per incident node through block ``name`` (order 0 + delta), each
-        outgoing node counted with ``weight`` (h,) (default 1; :mod:`layersim.boundary` passes
-        the transmittance of a smooth boundary); the same for every incident azimuth, so
+        outgoing node counted with ``weight`` (h,) (default 1; :mod:`layersim.solved.boundary`
+        passes the transmittance of a smooth boundary); the same for every incident azimuth, so
         ``wi`` is not used. Shape (h,)."""
         op = self.op
         fw = op.grid.flux_weight
@@ -114,14 +114,14 @@ class IsoEvaluator(Evaluator):
     def bins(self, wi: np.ndarray, mu_edges: np.ndarray, phi_edges: np.ndarray,
              exits: dict | None = None, deltas: bool = True, taps=None) -> dict:
         """Bin energies for one incident direction ``wi`` (3,) (see
-        :meth:`layersim.bsdf.BSDF.bin_energies`).
+        :meth:`layersim.solved.bsdf.BSDF.bin_energies`).
 
         ``exits`` (optional, per side ``"top"`` / ``"bottom"``) replaces the elevation
         integral of a side by an object with ``points(edges) -> (mu, weight, bin)`` (points in
         the operator's cosines, weights including ``mu dmu``) and ``weight(mu)``, the fraction
-        of the radiance at ``mu`` that leaves (:class:`layersim.boundary.Exit`). ``deltas=False``
-        leaves the delta parts out; ``taps`` (two arrays of 4) replaces the linear interpolation
-        weights of the incident elevation."""
+        of the radiance at ``mu`` that leaves (:class:`layersim.solved.boundary.Exit`).
+        ``deltas=False`` leaves the delta parts out; ``taps`` (two arrays of 4) replaces the linear
+        interpolation weights of the incident elevation."""
         op = self.op
         grid = op.grid
         mu_in = wi[2]

@@ -20,13 +20,13 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sps
 
-from .errors import InfeasibleError
+from ..errors import InfeasibleError
 
 
 def node_energy(op, w_top: np.ndarray, w_bot: np.ndarray):
     """R + T per incident ordinate from the top and from the bottom after scaling by the
     factors ``w_top``/``w_bot`` (ordinates above/below the interface) of the
-    :class:`~layersim.operator.IsoOperator` ``op``."""
+    :class:`~layersim.operators.operator.IsoOperator` ``op``."""
     fw = op.grid.flux_weight
     rt = op.blocks["Rt"][0]
     top = w_top * ((rt.T @ (w_top * fw)) / fw)
@@ -39,8 +39,8 @@ def node_energy(op, w_top: np.ndarray, w_bot: np.ndarray):
 
 
 def limit_energy(op, tolerance: float = 1e-13, iterations: int = 200):
-    """Scale the :class:`~layersim.operator.IsoOperator` ``op`` (in place) so that no incident
-    ordinate gains energy (:meth:`~layersim.operator.IsoOperator.limit_energy`).
+    """Scale the :class:`~layersim.operators.operator.IsoOperator` ``op`` (in place) so that no incident
+    ordinate gains energy (:meth:`~layersim.operators.operator.IsoOperator.limit_energy`).
 
     Returns
     -------
@@ -81,8 +81,8 @@ ENERGY_REFUSE = 1e-2
 def check_operator_energy(op, i: int, layer, n: int) -> list[str]:
     """Refuse the operator of layer ``i`` if it grossly over-counts energy (its lobes are
     narrower than the spacing of ``n`` ordinates); remove small excesses where the
-    representation can (:meth:`~layersim.operator.Operator.limit_energy`), and return notes
-    saying what was done or left (they go into the BSDF's ``info["notes"]``).
+    representation can (:meth:`~layersim.operators.operator.Operator.limit_energy`), and return
+    notes saying what was done or left (they go into the BSDF's ``info["notes"]``).
 
     Raises
     ------

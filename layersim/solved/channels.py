@@ -45,8 +45,8 @@ def aligned_series(bsdf) -> tuple[np.ndarray, np.ndarray]:
     -------
     offsets : int64 ndarray, shape (4 h^2 + 1,)
         Pair ``p`` (block-major, then outgoing node, then incident node, as in
-        :class:`layersim.isobsdf.SeriesTable`) owns ``coef[offsets[p]:offsets[p + 1]]``; its length is
-        the longest series of that pair over all channels.
+        :class:`layersim.solved.isobsdf.SeriesTable`) owns ``coef[offsets[p]:offsets[p + 1]]``; its
+        length is the longest series of that pair over all channels.
     coef : float64 ndarray, shape (C, channels)
         ``f_l(mu_o, mu_i)`` in 1/sr for ``l = 0, 1, ...`` of every pair, per channel (zero-padded
         where a channel's series is shorter). The unscattered delta of media is not included.

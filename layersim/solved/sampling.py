@@ -26,8 +26,8 @@ Negative values
 The series at the ordinates are non-negative up to small projection errors next to the critical
 angle (lobes cut in azimuth are tapered with a non-negative kernel), but cubic interpolation
 between ordinates undershoots slightly below zero next to sharp edges of a lobe (``eval`` returns
-the positive part of the interpolant; see :mod:`layersim.bsdf`). The *sampling* density is kept
-non-negative, and ``pdf`` reports exactly the density that is sampled:
+the positive part of the interpolant; see :mod:`layersim.solved.bsdf`). The *sampling* density is
+kept non-negative, and ``pdf`` reports exactly the density that is sampled:
 
 * elevation: in an interval between ordinates where the interpolated ``f_0`` is negative at one
   of the four nodes involved or the cubic dips below zero, the sampler (and ``pdf``) use the
@@ -42,9 +42,9 @@ non-negative, and ``pdf`` reports exactly the density that is sampled:
 
 RGB
 ---
-A three-channel BSDF is sampled by luminance (Rec. 709 weights, :data:`layersim.channels.LUMINANCE`,
-as layerlab and Mitsuba do with the ``Y`` channel of ``.bsdf`` files); the weights are returned
-per channel, ``weight[..., c] = f_c |wo.z| / pdf``.
+A three-channel BSDF is sampled by luminance (Rec. 709 weights,
+:data:`layersim.solved.channels.LUMINANCE`, as layerlab and Mitsuba do with the ``Y`` channel of
+``.bsdf`` files); the weights are returned per channel, ``weight[..., c] = f_c |wo.z| / pdf``.
 
 Anisotropic stacks
 ------------------
@@ -61,11 +61,12 @@ incident direction from which no energy leaves give an invalid sample, row by ro
 ``weight = 0`` and ``wo = (0, 0, 0)`` (not a direction), flagged by :attr:`Sample.valid`. This is
 Mitsuba 3's contract (an invalid ``BSDFSample3f`` with zero weight and pdf) rather than an
 exception, so that a batch in which some rows hit an opaque surface from behind keeps its other
-rows, and a single direction behaves as a batch of one; :func:`layersim.directions.unit_directions`
-still raises for ``wi`` that is not a unit vector. Delta parts (the unscattered transmission of media, the mirror reflection of smooth
-interfaces) are not part of ``eval`` and are not sampled: :meth:`layersim.bsdf.BSDF.specular`
-gives their directions and energies. A BSDF with a smooth dielectric boundary is sampled inside
-the boundary and refracted out (:class:`BoundarySampler`).
+rows, and a single direction behaves as a batch of one;
+:func:`layersim.solved.directions.unit_directions` still raises for ``wi`` that is not a unit
+vector. Delta parts (the unscattered transmission of media, the mirror reflection of smooth
+interfaces) are not part of ``eval`` and are not sampled: :meth:`layersim.solved.bsdf.BSDF.specular`
+gives their directions and energies. A BSDF with a smooth dielectric boundary is sampled inside the
+boundary and refracted out (:class:`BoundarySampler`).
 """
 
 from __future__ import annotations
@@ -78,9 +79,9 @@ import numpy as np
 
 from .channels import luminance, luminance_series
 from .directions import azimuth, direction_pairs, unit_directions
-from .interpolation import spline_weights
-from .kernels import fourier_sample
-from .operator import BLOCKS
+from ..operators.interpolation import spline_weights
+from ..kernels import fourier_sample
+from ..operators.operator import BLOCKS
 
 _BLOCK_ID = {name: k for k, name in enumerate(BLOCKS)}
 
@@ -127,7 +128,7 @@ def sampler_for(bsdf) -> "FourierSampler":
 
 
 class BoundarySampler:
-    """Sampling of a BSDF with smooth dielectric boundaries (:mod:`layersim.boundary`): the
+    """Sampling of a BSDF with smooth dielectric boundaries (:mod:`layersim.solved.boundary`): the
     inside series is sampled as by :class:`FourierSampler`, in the refracted incident
     direction, and the sampled inside direction is refracted out. The density changes by the
     solid-angle factor ``domega_in / domega_out = x / (eta^2 mu)`` (``x`` and ``mu`` the outside
@@ -183,8 +184,8 @@ class BoundarySampler:
 
 
 class LobeSampler:
-    """Sampling of a BSDF with a near-specular lobe (:mod:`layersim.lobe`): a mixture of the
-    lobe's own sampling (visible normals, reflected: :meth:`layersim.lobe.NearSpecularLobe.
+    """Sampling of a BSDF with a near-specular lobe (:mod:`layersim.solved.lobe`): a mixture of the
+    lobe's own sampling (visible normals, reflected: :meth:`layersim.solved.lobe.NearSpecularLobe.
     sample`), chosen with probability ``P(wi)``, the lobe's share of the (luminance) energy
     leaving from ``wi`` outside the deltas, and the sampler of the rest of the BSDF (the same
     operators without the lobe). The density is ``P pdf_lobe + (1 - P) pdf_rest`` and the weight

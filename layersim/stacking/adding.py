@@ -39,10 +39,10 @@ import scipy.sparse.linalg as spla
 
 from threadpoolctl import threadpool_limits
 
-from .config import settings
-from .deltas import add_deltas
-from .errors import OperatorError
-from .operator import IsoOperator, OrderStack, prune_order
+from ..config import settings
+from ..operators.deltas import add_deltas
+from ..errors import OperatorError
+from ..operators.operator import IsoOperator, OrderStack, prune_order
 
 try:  # optional, faster sparse LU
     import scikits.umfpack as _umfpack  # noqa: F401

@@ -1,7 +1,7 @@
 """Near-specular rough dielectric boundaries: the smooth transport plus the observable lobe.
 
 A dielectric top interface whose roughness is at most :data:`NEAR_SPECULAR_ALPHA` (both axes)
-is solved as a smooth boundary on the Snell-matched grid (:mod:`layersim.boundary`), and its
+is solved as a smooth boundary on the Snell-matched grid (:mod:`layersim.solved.boundary`), and its
 roughness is applied where it is observable:
 
 * its direct reflection is the single-scattering microfacet lobe of
@@ -34,9 +34,9 @@ import math
 
 import numpy as np
 
-from .kernels.fresnel import fresnel
-from .kernels.lobe import facet_events, microfacet_reflection, reflection_pdf, sample_reflection
-from .kernels.pointwise import slope_radius
+from ..kernels.fresnel import fresnel
+from ..kernels.lobe import facet_events, microfacet_reflection, reflection_pdf, sample_reflection
+from ..kernels.pointwise import slope_radius
 
 #: A dielectric top interface whose narrower roughness ``min(alpha_u, alpha_v)`` is at most
 #: this is solved as a near-specular boundary: its exact projection over rough gold costs
@@ -235,7 +235,7 @@ class NearSpecularLobe:
     def reflected(self, x) -> np.ndarray:
         """Reflected energy at outside cosines ``x``, averaged over the incident azimuth and
         interpolated in a table (the share of the lobe when a BSDF with it is sampled,
-        :class:`layersim.sampling.LobeSampler`)."""
+        :class:`layersim.solved.sampling.LobeSampler`)."""
         if self._reflected is None:
             nodes = np.linspace(0.0, 1.0, _X_TABLE) ** 2
             self._reflected = (nodes, self._average(nodes, 0))

@@ -2,7 +2,7 @@
 
 A delta in direction sits on the diagonal of a block with the same value in every Fourier order
 (``phi = 0`` is the mirror or straight-through direction of the propagation directions, see
-:mod:`layersim.operator`). Products of diagonals are diagonal, and a product with a smooth
+:mod:`layersim.operators.operator`). Products of diagonals are diagonal, and a product with a smooth
 (integrable) kernel is smooth, so the delta part of a stack follows the adding equations
 (Jakob's layerlab tutorial eq. (3)) with elementwise algebra, per node::
 
@@ -43,7 +43,7 @@ def specular(op, wi: np.ndarray) -> dict:
     horizon): ``{"top": (energy (Q,), wo (Q, 3)), "bottom": ...}``, the energy fraction that
     leaves through each side in the mirror (same side: ``wo = (-x, -y, z)``) or straight-through
     (other side: ``wo = -wi``) direction, interpolated linearly in the incident elevation between
-    the ordinates (as :meth:`layersim.bsdf.BSDF.albedo`)."""
+    the ordinates (as :meth:`layersim.solved.bsdf.BSDF.albedo`)."""
     from .interpolation import hat_weights
     mu = wi[:, 2]
     idx, w = hat_weights(op.grid.mu, np.abs(mu))

@@ -38,7 +38,7 @@ import math
 import numpy as np
 import scipy.special
 
-from .kernels import pointwise
+from ..kernels import pointwise
 
 #: Largest FFT used for a Beckmann peak series; longer series use scipy.special.ive.
 FFT_MAX = 1 << 15

@@ -1,8 +1,8 @@
 """The solved BSDF of a stack: evaluation, energy fractions and bin energies.
 
 Directions follow ``docs/conventions.md``: unit vectors ``(..., 3)`` in the local frame, both
-pointing away from the surface. This module is the one place where they are converted to the solver's
-discrete-ordinates convention::
+pointing away from the surface. This module is the one place where they are converted to the
+solver's discrete-ordinates convention::
 
     mu_in = wi.z,   mu_out = -wo.z,   dphi = phi(wo) - phi(wi) - pi
 
@@ -15,7 +15,7 @@ top reflection ``Rt`` (wi.z > 0, wo.z > 0), bottom reflection ``Rb``, top-to-bot
 splines in both elevations, constant beyond the outermost ordinates, sums the cosine
 series in ``dphi`` (a Warp kernel) and returns the positive part of that interpolant. The
 series at the ordinates are non-negative (lobes cut in azimuth are tapered with a non-negative
-kernel, :func:`layersim.fourier.taper_factors`), but cubic weights are partly negative, so
+kernel, :func:`layersim.operators.fourier.taper_factors`), but cubic weights are partly negative, so
 between ordinates the interpolant can undershoot zero: by a few millionths of the BSDF's peak on
 the steep flank of a narrow lobe, by ~1e-3 next to the critical angle of total internal
 reflection (docs/method.md, "Non-negative evaluation", measured by
@@ -23,9 +23,10 @@ reflection (docs/method.md, "Non-negative evaluation", measured by
 ``bin_energies`` interpolate the incident elevation
 linearly instead: a convex combination of the energies at the ordinates, so that they are never
 negative and never exceed 1 where the ordinates do not. Delta parts (the unscattered
-transmission through media, the mirror reflection of smooth interfaces; :mod:`layersim.deltas`)
-are not part of ``eval``; ``albedo`` and ``bin_energies`` include them and :meth:`BSDF.specular`
-reports them. Smooth dielectric boundaries are applied by :mod:`layersim.boundary`.
+transmission through media, the mirror reflection of smooth interfaces;
+:mod:`layersim.operators.deltas`) are not part of ``eval``; ``albedo`` and ``bin_energies`` include
+them and :meth:`BSDF.specular` reports them. Smooth dielectric boundaries are applied by
+:mod:`layersim.solved.boundary`.
 """
 
 from __future__ import annotations
@@ -38,12 +39,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .aniso.bsdf import AnisoEvaluator
+from ..aniso.bsdf import AnisoEvaluator
 from .boundary import BoundaryEvaluator
 from .directions import bin_edges, direction_pairs, unit_directions
-from .errors import FileFormatError, OperatorError
+from ..errors import FileFormatError, OperatorError
 from .isobsdf import IsoEvaluator
-from .operator import from_arrays
+from ..operators.operator import from_arrays
 from .sampling import sampler_for
 
 FORMAT_VERSION = 1
@@ -53,7 +54,7 @@ ZIP_MAGIC = b"PK\x03\x04"
 #: stay version 1, readable by older layersim versions.
 FORMAT_VERSION_ANISO = 2
 
-#: Evaluator class of each operator representation (:attr:`layersim.operator.Operator.
+#: Evaluator class of each operator representation (:attr:`layersim.operators.operator.Operator.
 #: representation`): built from one operator, it provides ``table``, ``eval(wi, wo)``,
 #: ``albedo(wi)`` and ``bins(wi, mu_edges, phi_edges)`` on flattened, validated directions.
 EVALUATORS = {"isotropic": IsoEvaluator, "anisotropic": AnisoEvaluator}
@@ -72,7 +73,7 @@ def channel_pairs(a: "BSDF", b: "BSDF", mismatch: str) -> list:
 def refuse_boundary(what: str, *bsdfs: "BSDF") -> None:
     """Refuse stack algebra (``what``: "add", "subtract") on BSDFs with smooth dielectric
     boundaries: their operators' blocks hold the radiance inside the boundary, which
-    :mod:`layersim.boundary` applies only at evaluation."""
+    :mod:`layersim.solved.boundary` applies only at evaluation."""
     if any(b.boundary for b in bsdfs):
         raise OperatorError(
             f"cannot {what} a BSDF with a smooth dielectric boundary (roughness 0 at the "
@@ -142,7 +143,7 @@ class BSDF:
 
     Attributes
     ----------
-    operators : list of layersim.operator.Operator
+    operators : list of layersim.operators.operator.Operator
         One per channel (all of one representation).
     plan : layersim.plan.Plan or None
     info : dict
@@ -151,13 +152,13 @@ class BSDF:
         Smooth dielectric boundaries kept out of the operators' blocks, ``{"top" | "bottom":
         index of the medium outside}``, the same for all channels: the blocks then hold the
         radiance just inside that boundary, on the Snell-matched grid of
-        :func:`layersim.quadrature.snell_matched`, and evaluation applies the boundary's
-        Fresnel transmission and refraction (:mod:`layersim.boundary`). Empty for ordinary
+        :func:`layersim.operators.quadrature.snell_matched`, and evaluation applies the boundary's
+        Fresnel transmission and refraction (:mod:`layersim.solved.boundary`). Empty for ordinary
         stacks.
     lobes : list of dict
         Per channel, the near-specular rough boundaries among them, ``{"top": parameters}``
-        of :class:`layersim.lobe.NearSpecularLobe`: their direct reflection is that lobe and
-        their transmittance the rough one (:mod:`layersim.lobe`). On a side without a
+        of :class:`layersim.solved.lobe.NearSpecularLobe`: their direct reflection is that lobe and
+        their transmittance the rough one (:mod:`layersim.solved.lobe`). On a side without a
         boundary (a bare near-specular conductor) the lobe replaces the operator's own delta
         reflection on that side, which stands for it in the adding equations. Empty dicts
         otherwise.
@@ -196,7 +197,7 @@ class BSDF:
         """Estimated relative L2 error of the bin energies (18 x 36 bins per side, worst
         incidence of 0, 30, 60, 80 degrees) from the discretisation, or None if the solve
         did not estimate it (``layersim.solve(..., error_estimate=True)`` or ``tol=``;
-        :mod:`layersim.accuracy`)."""
+        :mod:`layersim.plan.accuracy`)."""
         acc = self.info.get("accuracy")
         return None if acc is None else float(acc["estimate"])
 
@@ -218,13 +219,13 @@ class BSDF:
 
     def series_table(self, c: int):
         """The per-pair series table of channel ``c``
-        (:class:`layersim.isobsdf.SeriesTable` or
+        (:class:`layersim.solved.isobsdf.SeriesTable` or
         :class:`layersim.aniso.bsdf.SeriesTable2D`)."""
         return self.evaluator(c).table
 
     def rotational_average(self) -> "BSDF":
         """This BSDF averaged over rotations about the normal (itself when isotropic): the
-        importance-sampling proposal of anisotropic stacks (:mod:`layersim.sampling`)."""
+        importance-sampling proposal of anisotropic stacks (:mod:`layersim.solved.sampling`)."""
         ops = [op.rotational_average() for op in self.operators]
         if all(a is b for a, b in zip(ops, self.operators)):
             return self
@@ -264,7 +265,8 @@ class BSDF:
     def interpolant(self, wi, wo) -> np.ndarray:
         """The spline interpolant of the solved series that :meth:`eval` takes the positive
         part of (1/sr; same arguments and shape). Between ordinates it can undershoot zero
-        slightly (module docstring); ``benchmarks/features/eval_positivity.py`` measures by how much."""
+        slightly (module docstring); ``benchmarks/features/eval_positivity.py`` measures by how
+        much."""
         wi, wo, shape = direction_pairs(wi, wo)
         return self._per_channel(lambda c: self.evaluator(c).eval(wi, wo).reshape(shape))
 
@@ -292,10 +294,10 @@ class BSDF:
                          per[0][side][1].reshape(shape + (3,)))
         return out
 
-    # ---- importance sampling (layersim.sampling) ----------------------------------------
+    # ---- importance sampling (layersim.solved.sampling) ----------------------------------------
 
     def sample(self, wi, u):
-        """Importance-sample outgoing directions (:mod:`layersim.sampling`).
+        """Importance-sample outgoing directions (:mod:`layersim.solved.sampling`).
 
         Parameters
         ----------
@@ -306,7 +308,7 @@ class BSDF:
 
         Returns
         -------
-        layersim.sampling.Sample
+        layersim.solved.sampling.Sample
             ``(wo, weight, pdf)``: ``wo`` (..., 3), ``weight = f(wi, wo) |wo.z| / pdf`` per
             channel, ``pdf`` (...) in 1/sr, and ``valid`` (...), False for rows where no
             direction is drawn: ``wi`` on the horizon, or ``wi.z < 0`` when the stack is opaque
@@ -319,7 +321,7 @@ class BSDF:
 
     def pdf(self, wi, wo) -> np.ndarray:
         """Solid-angle density (1/sr) with which :meth:`sample` draws ``wo``. See
-        :mod:`layersim.sampling`."""
+        :mod:`layersim.solved.sampling`."""
         return sampler_for(self).pdf(wi, wo)
 
     # ---- energy ------------------------------------------------------------------------

@@ -47,14 +47,14 @@ the four blocks of the unknown layer to the four blocks of the stack is square, 
 is fitted at any small eps, and the residual reaches the noise level only where the
 regularisation has already biased the result. There eps minimises the **estimated error** of the
 result (:func:`_choose_eps_by_error`): the bias from the round trip of
-:mod:`layersim.determined` and the spread from a second recovery with independent noise of the
-estimated level, on common directions.
+:mod:`layersim.stacking.determined` and the spread from a second recovery with independent noise of
+the estimated level, on common directions.
 
 What the stack determines
 -------------------------
 The result reports the directions that the data determine (``info["subtract"]["determined"]``,
-:mod:`layersim.determined`): the ordinates reached through the known layer, those among them
-where the estimated error is within the tolerance (1e-3, or twice the noise level) and the
+:mod:`layersim.stacking.determined`): the ordinates reached through the known layer, those among
+them where the estimated error is within the tolerance (1e-3, or twice the noise level) and the
 result has no negative lobes deeper than ``max(TAU * noise, NEG_FLOOR)`` of its peak, and the rule
 that fills the hidden ones (a continuation of the BSDF coefficients; for isotropic data without
 noise also a correction for the light that returns through them).
@@ -87,13 +87,14 @@ from threadpoolctl import threadpool_limits
 from .adding import BLAS_SINGLE_BELOW
 from .adding import add as iso_add
 from . import determined
-from .aniso import basis
-from .aniso.adding import add as coupled_add
-from .aniso.banded import banded_solve
-from .aniso.operator import AnisoOperator, prune
-from .bsdf import BSDF, channel_pairs, refuse_boundary
-from .errors import InfeasibleError, OperatorError
-from .operator import BLOCKS, DROP_TOLERANCE, IsoOperator, common_representation, order_weight
+from ..aniso import basis
+from ..aniso.adding import add as coupled_add
+from ..aniso.banded import banded_solve
+from ..aniso.operator import AnisoOperator, prune
+from ..solved.bsdf import BSDF, channel_pairs, refuse_boundary
+from ..errors import InfeasibleError, OperatorError
+from ..operators.operator import (BLOCKS, DROP_TOLERANCE, IsoOperator, common_representation,
+                                  order_weight)
 
 #: Discrepancy factor of the automatic choice of eps.
 TAU = 1.5
@@ -110,10 +111,10 @@ NOISE_FLOOR = 1e-9
 #: Seed of the independent noise that estimates how noise propagates into the result.
 PERTURB_SEED = 12345
 #: With noise, directions count as determined where the estimated error is at most this many
-#: times the noise level (or layersim.determined.TOLERANCE, whichever is larger).
+#: times the noise level (or layersim.stacking.determined.TOLERANCE, whichever is larger).
 NOISE_TOLERANCE = 2.0
 #: Largest noise level at which the recovered layer is corrected for light returned through
-#: hidden directions (layersim.determined.correct).
+#: hidden directions (layersim.stacking.determined.correct).
 CORRECT_NOISE = 1e-6
 #: Negative lobes allowed (fraction of the peak) regardless of noise (see negativity).
 NEG_FLOOR = 1e-4
@@ -202,7 +203,7 @@ def subtract(stack, known, side: str = "top", eps: float | None = None,
 def _subtract_op(stack, known, side, eps, noise):
     if any(name in op.delta for op in (stack, known) for name in ("Rt", "Rb")):
         # the recovered layer's mirror delta would need the delta algebra inverted
-        # (layersim.deltas); without it the delta would be smeared into the smooth part
+        # (layersim.operators.deltas); without it the delta would be smeared into the smooth part
         raise OperatorError("cannot subtract operators with a mirror (specular) reflection "
                             "delta (a smooth interface, roughness 0); give it a roughness > 0")
     if stack.grid != known.grid:
@@ -278,8 +279,8 @@ def _subtract_checked(stack, known, side, eps, noise):
 def _determine(known, op, side: str, eps: float, noise_level: float, svd: dict | None,
                spread=None):
     """What the stack determines of the recovered ``op``, and ``op`` with its hidden directions
-    filled (and corrected, if isotropic): :mod:`layersim.determined`. The estimate runs on the
-    rotational averages (the azimuthal mean) of anisotropic operators. ``svd``: the SVD cache of
+    filled (and corrected, if isotropic): :mod:`layersim.stacking.determined`. The estimate runs on
+    the rotational averages (the azimuthal mean) of anisotropic operators. ``svd``: the SVD cache of
     the known layer's isotropic algebra, if any; ``spread``: the noise part of the error per mu
     cut (:func:`_choose_eps_by_error`), if any."""
     known_iso = known.rotational_average()
@@ -328,8 +329,8 @@ def _without_oscillation(det, op, side: str, tol: float) -> float:
 def _choose_eps_by_error(alg, known, side: str, noise_level: float):
     """Choose eps for noisy data by the smallest estimated error of the recovered layer over the
     reached directions: ``sqrt(bias^2 + spread^2)``, the bias from the round trip of the
-    recovered layer (:func:`layersim.determined.assess`), the spread from a second recovery of
-    the stack with independent multiplicative noise of the estimated level added, both over the
+    recovered layer (:func:`layersim.stacking.determined.assess`), the spread from a second recovery
+    of the stack with independent multiplicative noise of the estimated level added, both over the
     directions reached at ``eps = max(noise, VISIBLE_EPS)`` for every candidate. A grid of
     half decades from ``noise / 10`` (or the algebra's floor) to 1, refined by quarter decades
     around its best. Returns ``(recovered blocks, re-adding residual, eps, method, negativity,
@@ -865,6 +866,6 @@ class _AnisoAlgebra:
     energy_max = staticmethod(_energy_max)
 
 
-#: The algebra of each representation (:func:`layersim.operator.common_representation` of the
-#: stack and the known layer).
+#: The algebra of each representation (:func:`layersim.operators.operator.common_representation` of
+#: the stack and the known layer).
 _ALGEBRAS = {"isotropic": _IsoAlgebra, "anisotropic": _AnisoAlgebra}

@@ -1,8 +1,8 @@
 """Smooth dielectric boundaries of a stack, applied where the BSDF is evaluated.
 
 A stack whose top (or bottom) interface is smooth is solved on the Snell-matched grid
-(:func:`layersim.quadrature.snell_matched`) in the directions just inside that boundary, with
-the boundary's internal reflection in the blocks (:func:`layersim.ingredients.smooth.
+(:func:`layersim.operators.quadrature.snell_matched`) in the directions just inside that boundary,
+with the boundary's internal reflection in the blocks (:func:`layersim.ingredients.smooth.
 boundary_reflector`); the BSDF's ``boundary[side]`` records the index outside. Refraction maps an
 outside cosine ``x`` to ``mu = sqrt(1 - (1 - x^2) / eta^2)`` (``eta`` = inside / outside) and
 keeps the azimuth; the grid's nodes in the escape cone are exactly the images of a quadrature in
@@ -16,7 +16,7 @@ boundary, where the factor ``(1 - F)`` is 1 too), plus the boundary's own mirror
 ``F(x_i)``, a delta. Energies use ``1 - F`` without the ``eta^2`` (radiance is compressed into
 the smaller solid angle). :class:`BoundaryEvaluator` wraps the evaluator of the inside
 operator with these factors. A near-specular rough boundary (the BSDF's ``lobes``,
-:mod:`layersim.lobe`) replaces ``1 - F`` by its rough transmittance and the mirror reflection
+:mod:`layersim.solved.lobe`) replaces ``1 - F`` by its rough transmittance and the mirror reflection
 by its microfacet reflection lobe. A lobe on a side without a boundary (a bare near-specular
 conductor) replaces the operator's own delta reflection on that side.
 """
@@ -27,8 +27,8 @@ import math
 
 import numpy as np
 
-from .interpolation import bin_quadrature, closed_bin, hat_weights, spline_weights
-from .kernels.fresnel import fresnel
+from ..operators.interpolation import bin_quadrature, closed_bin, hat_weights, spline_weights
+from ..kernels.fresnel import fresnel
 from .lobe import NearSpecularLobe
 
 
@@ -54,7 +54,7 @@ class Exit:
 
     def transmittance(self, x) -> np.ndarray:
         """``1 - F`` at outside cosines ``x`` (a near-specular boundary: its rough
-        transmittance, :meth:`layersim.lobe.NearSpecularLobe.transmittance`)."""
+        transmittance, :meth:`layersim.solved.lobe.NearSpecularLobe.transmittance`)."""
         if self.lobe is not None:
             return self.lobe.transmittance(x)
         return 1.0 - fresnel(np.asarray(x, float), self.eta)
@@ -90,18 +90,20 @@ class Exit:
 
 class BoundaryEvaluator:
     """Evaluation of an operator with smooth boundaries, wrapping the evaluator ``inner`` of
-    its inside blocks; same interface as :class:`layersim.isobsdf.IsoEvaluator`.
+    its inside blocks; same interface as :class:`layersim.solved.isobsdf.IsoEvaluator`.
 
     Parameters
     ----------
-    op : layersim.operator.Operator
+    op : layersim.operators.operator.Operator
         The stack's operator, its blocks inside the boundaries.
     inner : evaluator
-        The evaluator of ``op`` (:data:`layersim.bsdf.EVALUATORS`).
+        The evaluator of ``op`` (:data:`layersim.solved.bsdf.EVALUATORS`).
     boundary : dict
-        ``{"top" | "bottom": index of the medium outside}`` (:attr:`layersim.bsdf.BSDF.boundary`).
+        ``{"top" | "bottom": index of the medium outside}``
+        (:attr:`layersim.solved.bsdf.BSDF.boundary`).
     lobes : dict
-        ``{"top": parameters of a NearSpecularLobe}`` or empty (:attr:`layersim.bsdf.BSDF.lobes`).
+        ``{"top": parameters of a NearSpecularLobe}`` or empty
+        (:attr:`layersim.solved.bsdf.BSDF.lobes`).
     """
 
     def __init__(self, op, inner, boundary: dict, lobes: dict):
@@ -121,7 +123,7 @@ class BoundaryEvaluator:
 
     def _map(self, w: np.ndarray):
         """Inside directions of ``w`` (Q, 3) and the boundary's ``1 - F`` (1 off boundaries;
-        a near-specular boundary's transmitted energy, :mod:`layersim.lobe`)."""
+        a near-specular boundary's transmitted energy, :mod:`layersim.solved.lobe`)."""
         w_in, t = w.copy(), np.ones(w.shape[0])
         for side, ex in self.exits.items():
             sel = self._side(w) == side
@@ -152,7 +154,7 @@ class BoundaryEvaluator:
 
     def _taps(self, wi: np.ndarray):
         """Interpolation taps (Q, 4) of the incident elevation into the nodes. On a side with
-        a boundary: cubic (:func:`~layersim.interpolation.spline_weights`) in the outside
+        a boundary: cubic (:func:`~layersim.operators.interpolation.spline_weights`) in the outside
         cosine between the images of the escaping nodes, since what the stack does is smooth in
         it (Fresnel factors and path lengths are), and linear interpolation there is the
         largest error against Monte Carlo (docs/performance.md). Elsewhere linear in ``mu``.

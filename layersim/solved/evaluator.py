@@ -1,9 +1,9 @@
 """The interface of a BSDF channel's evaluator, whatever the operator's representation.
 
-:class:`layersim.bsdf.BSDF` picks one evaluator per channel by the operator's representation
-(:data:`layersim.bsdf.EVALUATORS`: :class:`layersim.isobsdf.IsoEvaluator` for cosine series,
-:class:`layersim.aniso.bsdf.AnisoEvaluator` for coupled modes) and wraps it in
-:class:`layersim.boundary.BoundaryEvaluator` outside a smooth dielectric boundary. Every
+:class:`layersim.solved.bsdf.BSDF` picks one evaluator per channel by the operator's representation
+(:data:`layersim.solved.bsdf.EVALUATORS`: :class:`layersim.solved.isobsdf.IsoEvaluator` for cosine
+series, :class:`layersim.aniso.bsdf.AnisoEvaluator` for coupled modes) and wraps it in
+:class:`layersim.solved.boundary.BoundaryEvaluator` outside a smooth dielectric boundary. Every
 evaluator takes validated, flattened directions ``(Q, 3)`` in the public convention
 (docs/conventions.md) and answers:
 
@@ -12,14 +12,14 @@ evaluator takes validated, flattened directions ``(Q, 3)`` in the public convent
   incident node;
 * ``albedo(wi)``: ``(R, T)``, each ``(Q,)``;
 * ``bins(wi, mu_edges, phi_edges, exits=None, deltas=True, taps=None)``: bin energies;
-* ``specular(wi)``: the delta parts (:func:`layersim.deltas.specular`).
+* ``specular(wi)``: the delta parts (:func:`layersim.operators.deltas.specular`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .deltas import specular
+from ..operators.deltas import specular
 
 
 class Evaluator:
@@ -47,5 +47,5 @@ class Evaluator:
         return self._table
 
     def specular(self, wi: np.ndarray) -> dict:
-        """The delta parts for beams from ``wi`` (Q, 3) (:func:`layersim.deltas.specular`)."""
+        """The delta parts for beams from ``wi`` (Q, 3) (:func:`layersim.operators.deltas.specular`)."""
         return specular(self.op, wi)
