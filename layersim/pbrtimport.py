@@ -30,7 +30,7 @@ import math
 import re
 
 from .errors import SceneError
-from .lobe import NEAR_SPECULAR_ALPHA
+from .solved.lobe import NEAR_SPECULAR_ALPHA
 
 __all__ = ["pbrt_to_dict", "MATERIALS"]
 

@@ -72,7 +72,7 @@ def z_map(est, err, particles, values, values_err=None, values_particles=None) -
     particles : int
         The walk's paths.
     values : ndarray (n_mu, n_phi)
-        The other estimate (a solver's :meth:`~layersim.bsdf.BSDF.bin_energies`, or a walk's).
+        The other estimate (a solver's :meth:`~layersim.solved.bsdf.BSDF.bin_energies`, or a walk's).
     values_err, values_particles : optional
         For another walk: its standard errors and paths.
     """

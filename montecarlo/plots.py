@@ -1,5 +1,5 @@
 """Pictures of Monte Carlo result files (matplotlib's object API, Agg canvas, as
-:mod:`layersim.plot`): per walk and side, a polar map over the outgoing direction, radius the
+:mod:`layersim.solved.plot`): per walk and side, a polar map over the outgoing direction, radius the
 polar angle ``theta_o`` from the side's normal (0 to 90 deg) and angle the azimuth ``phi_o``.
 
 :func:`plot_bins` draws the energy per solid angle ``E_b / Omega_b`` (1/sr, ``Omega_b =

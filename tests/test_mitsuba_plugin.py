@@ -323,7 +323,7 @@ def test_bad_input(variant, tmp_path):
 #: Chi-square cases: layers, incident direction, n. Glass is solved at n = 100: at n = 50
 #: its samples fail the test at 40 deg from above (statistic 1205 for 1082 d.o.f., p ~ 0.005,
 #: with 8 x 8 pdf points per cell), where layersim's azimuthal inversion follows an
-#: interpolated series that dips below zero (layersim.sampling, "Negative values").
+#: interpolated series that dips below zero (layersim.solved.sampling, "Negative values").
 CHI2_CASES = {
     "conductor": ([{"kind": "conductor", "ior": GOLD, "roughness": 0.3}], incident(40), 50),
     "aniso": ([{"kind": "conductor", "ior": GOLD, "roughness": [0.15, 0.4]}], incident(40), 50),
@@ -337,7 +337,7 @@ def adapter(path, wi):
     """Sample and pdf functors of the chi-square test, as mitsuba.chi2.BSDFAdapter builds
     them but counting every sample with ``pdf > 0``: BSDFAdapter drops samples of zero weight,
     and layersim's sampler draws, with the density its pdf reports, directions where the
-    clipped interpolant is 0 (next to sharp lobe edges; :mod:`layersim.sampling`) or where an
+    clipped interpolant is 0 (next to sharp lobe edges; :mod:`layersim.solved.sampling`) or where an
     anisotropic stack is 0 under its rotational-average proposal, so the histogram would miss
     mass that pdf counts (1.4-3.3 % here)."""
     import drjit as dr

@@ -84,7 +84,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bsdf import BSDF
+from ..solved.bsdf import BSDF
 from ..errors import InfeasibleError
 from . import rgl_color, rgl_fit
 from .marginal2d import Marginal2D

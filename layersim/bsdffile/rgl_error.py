@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..bsdf import BSDF
+from ..solved.bsdf import BSDF
 from . import rgl_color
 from .rgl_table import RGLTable
 

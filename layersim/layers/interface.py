@@ -38,7 +38,7 @@ from ..ingredients.numeric import numeric_interface_operator
 from ..kernels import walk
 from ..kernels.physics import DISTRIBUTION_CODES, SHADOWING_CODES
 from ..kernels.tabulated import TABULATED
-from ..lobe import NEAR_SPECULAR_ALPHA
+from ..solved.lobe import NEAR_SPECULAR_ALPHA
 from . import tabulated
 from .base import Layer, LayerKind, LayerPlan, WalkBoundary
 from .fields import Field, choice, film, real, roughness
@@ -217,7 +217,7 @@ class InterfaceKind(LayerKind):
     @staticmethod
     def _parse_shadow_choice(ctx, value, au: float, av: float) -> str:
         """A value of ``shadowing``; a height-correlated term is refused for a near-specular
-        roughness, whose lobe tables (:mod:`layersim.lobe`) use the separable one."""
+        roughness, whose lobe tables (:mod:`layersim.solved.lobe`) use the separable one."""
         if value not in SHADOWINGS:
             raise ctx.error("shadowing", f"unknown shadowing {value!r}; expected one of "
                                          + ", ".join(SHADOWINGS))

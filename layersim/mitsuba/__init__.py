@@ -2,7 +2,7 @@
 
 After :func:`register`, a Mitsuba 3 scene may use ``{"type": "layersim", "filename":
 "x.lsim"}`` (or ``<bsdf type="layersim"><string name="filename" value="x.lsim"/></bsdf>``) to
-render a stack solved by ``layersim solve`` or :meth:`layersim.bsdf.BSDF.save`.
+render a stack solved by ``layersim solve`` or :meth:`layersim.solved.bsdf.BSDF.save`.
 
 What it does: ``eval``, ``pdf``, ``eval_pdf`` and ``sample`` from the solved Fourier series
 (reflection and transmission, isotropic and anisotropic stacks, near-specular lobes as part of

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..channels import luminance
+from ..solved.channels import luminance
 
 
 def width(x) -> int:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bsdf import BSDF
+from ..solved.bsdf import BSDF
 from ..errors import LayersimError
 from . import drjit_io as io
 from . import wavefront as wf

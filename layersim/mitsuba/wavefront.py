@@ -18,12 +18,12 @@ Conventions (Mitsuba 3, ``include/mitsuba/render/bsdf.h``; layersim, docs/conven
   ``roughdielectric`` (``bs.eta = eta_wo / eta_wi``). Evaluating one order keeps ``eval``,
   ``pdf`` and ``sample`` exactly consistent (``weight = eval / pdf``).
 * Components (:data:`GLOSSY_R` ... :data:`DELTA_T`): the smooth part of the solved series in
-  reflection and in transmission, and the delta parts of :meth:`layersim.bsdf.BSDF.specular`
+  reflection and in transmission, and the delta parts of :meth:`layersim.solved.bsdf.BSDF.specular`
   (mirror reflection of smooth interfaces, unscattered transmission), which ``eval`` and
   ``pdf`` leave out (0) and ``sample`` draws as discrete events.
 * Sampling picks a component with ``u1`` in proportion to the (luminance) energy each carries
   from ``wi`` among those enabled (``P_smooth``, ``P_delta``), then, for the smooth part,
-  draws ``wo`` with layersim's own sampler (:mod:`layersim.sampling`, Jakob et al. 2014,
+  draws ``wo`` with layersim's own sampler (:mod:`layersim.solved.sampling`, Jakob et al. 2014,
   sec. 7) from ``u2``. The smooth density is ``P_smooth pdf_layersim``; a delta sample has
   ``pdf = P_delta`` and weight ``energy / P_delta`` (Mitsuba's ``dielectric`` convention).
 * A smooth-part sample that lands in a disabled lobe (``ctx`` restricted to reflection or to
@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..channels import luminance
+from ..solved.channels import luminance
 
 #: Component indices, in the order of the plug-in's ``m_components``.
 GLOSSY_R, GLOSSY_T, DELTA_R, DELTA_T = range(4)
@@ -49,7 +49,7 @@ def as_channels(x, channels: int) -> np.ndarray:
 
 def lum(x: np.ndarray) -> np.ndarray:
     """Luminance of ``(N, C)`` values: the channel itself for one channel, Rec. 709 for three
-    (:data:`layersim.channels.LUMINANCE`, the weights layersim's sampler uses)."""
+    (:data:`layersim.solved.channels.LUMINANCE`, the weights layersim's sampler uses)."""
     return x[:, 0] if x.shape[1] == 1 else luminance(x)
 
 
@@ -83,7 +83,7 @@ def component_probabilities(bsdf, wi: np.ndarray, enabled) -> tuple:
 
     Parameters
     ----------
-    bsdf : layersim.bsdf.BSDF
+    bsdf : layersim.solved.bsdf.BSDF
     wi : ndarray (N, 3)
         Valid incident directions (:func:`valid_incident`).
     enabled : sequence of 4 bool
@@ -134,7 +134,7 @@ def eval_pdf(bsdf, wi, wo, active, radiance: bool, enabled, want=(True, True)) -
 
     Parameters
     ----------
-    bsdf : layersim.bsdf.BSDF
+    bsdf : layersim.solved.bsdf.BSDF
     wi, wo : ndarray (N, 3)
         Unit directions (Mitsuba's ``si.wi`` and ``wo``), local frame.
     active : ndarray (N,) bool
