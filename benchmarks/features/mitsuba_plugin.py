@@ -146,7 +146,7 @@ ACCURACY = [
 
 
 def accuracy_report():
-    print("\naccuracy (llvm_ad_rgb): relative L2 of eval (f |cos theta_o|, radiance mode) "
+    print(f"\naccuracy ({mi.variant()}): relative L2 of eval (f |cos theta_o|, radiance mode) "
           "against Mitsuba over a 24 x 48 grid per hemisphere; R: same side, T: other side "
           "(max: Mitsuba's largest value there)")
     for dist in ("beckmann", "ggx"):
@@ -169,7 +169,7 @@ def accuracy_report():
 
 
 def furnace_report():
-    print("\nwhite furnace (llvm_ad_rgb, importance mode): mean luminance of 2^16 sample "
+    print(f"\nwhite furnace ({mi.variant()}, importance mode): mean luminance of 2^16 sample "
           "weights +- standard error against the solver's albedo R + T")
     cases = [("rough gold", [{"kind": "conductor", "ior": GOLD, "roughness": 0.3}]),
              ("smooth coat over rough gold (delta reflection)",
