@@ -30,10 +30,6 @@ VIEW = np.array([0.0, 0.8, 4.2]) / np.hypot(0.8, 4.2)
 MAX_ANGLE = 85.0
 #: Points standing for the sun disc (:func:`layersim.mitsuba.sky.sun_samples`).
 SUN_POINTS = 256
-#: Samples per pixel of the Mitsuba render.
-MITSUBA_SPP = 64
-
-
 def table_angles(count: int) -> np.ndarray:
     """Incidence angles (degrees) of the tables: ``count`` from 0 to :data:`MAX_ANGLE`."""
     return np.linspace(0.0, MAX_ANGLE, count)
@@ -94,7 +90,7 @@ def images(tab: dict, resolution: int, env, sources=None, per_axis: int = 3) -> 
     return out
 
 
-def mitsuba_render(bsdf, resolution: int, spp: int = MITSUBA_SPP):
+def mitsuba_render(bsdf, resolution: int, spp: int):
     """The solved BSDF (continuous, not binned) rendered by Mitsuba 3 from the view of the
     binned images: ``(image (H, W, 3) linear RGB, variant)``, or ``(None, reason)`` where
     mitsuba is not installed or refuses."""
@@ -132,9 +128,9 @@ def run(scene, bsdf, mc, s, direction, log=print) -> tuple[dict, dict]:
         row["relative_difference"] = img["relative"]
         row["sigma_rms"] = float(np.sqrt(np.nanmean(img["sigma"] ** 2)))
     t0 = time.perf_counter()
-    img["mitsuba"], info = mitsuba_render(bsdf, s.render_resolution)
+    img["mitsuba"], info = mitsuba_render(bsdf, s.render_resolution, s.render_spp)
     row["mitsuba" if img["mitsuba"] is not None else "mitsuba_note"] = info
-    row.update(spp=MITSUBA_SPP, mitsuba_seconds=time.perf_counter() - t0)
+    row.update(spp=s.render_spp, mitsuba_seconds=time.perf_counter() - t0)
     log(f"  render: walk {row.get('montecarlo_seconds') or 0:.1f} s, binned renders "
         f"{row['render_seconds']:.1f} s, Mitsuba ({info}) "
         f"{row['mitsuba_seconds']:.1f} s; solver - walk, relative RMS "

@@ -21,8 +21,9 @@ def display(rgb) -> np.ndarray:
 def figure(name: str, row: dict, img: dict):
     """The comparison figure of scene ``name`` (pyplot figure; the caller saves and closes
     it): ``row`` and ``img`` from :func:`layersim.bench.rendercompare.run`."""
-    from .report import _plt
-    plt = _plt()
+    import matplotlib
+    matplotlib.use("Agg")        # files only, never a window
+    import matplotlib.pyplot as plt
     panels = [("solver, binned", img["solver"])]
     if "montecarlo" in img:
         panels.append((f"Monte Carlo, binned\n{row['particles']:.0e} paths per angle",

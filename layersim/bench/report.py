@@ -83,7 +83,8 @@ def _render_settings(settings) -> dict | None:
     if not settings.render:
         return None
     return {"angles": settings.render_angles, "bins": list(settings.render_bins),
-            "particles": settings.render_particles, "resolution": settings.render_resolution}
+            "particles": settings.render_particles, "resolution": settings.render_resolution,
+            "spp": settings.render_spp}
 
 
 def _json_default(x):

@@ -57,6 +57,7 @@ class Settings:
     render_bins: tuple = (18, 36)
     render_particles: int = 1_000_000
     render_resolution: int = 96
+    render_spp: int = 64
 
     @classmethod
     def quick(cls) -> "Settings":
@@ -79,7 +80,7 @@ class Settings:
         return cls(angles=(0.0, 30.0, 60.0), n_mu=9, n_phi=18, scales=(0.5, 1.0),
                    tols=(1e-2,), reference_scale=2.0,
                    particles=(10_000, 100_000, 1_000_000), check_particles=200_000,
-                   render_particles=QUICK_RENDER_PARTICLES)
+                   render_particles=QUICK_RENDER_PARTICLES, render_spp=32)
 
     @property
     def mu_edges(self) -> np.ndarray:
