@@ -93,6 +93,7 @@ def test_bench_render_writes_the_rendered_comparison(tmp_path):
     row = data["scenes"][0]["render"]
     assert data["settings"]["render"]["particles"] == 20_000 and row["angles"] == 16
     assert 0 < row["relative_difference"] < 0.05 and row["sigma_rms"] > 0
+    assert row["within_3sigma"] > 0.9
     assert (tmp_path / "coated_gold_render.png").stat().st_size > 5000
     report = (tmp_path / "report.md").read_text()
     assert "![coated_gold_render.png](coated_gold_render.png)" in report

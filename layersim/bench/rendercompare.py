@@ -127,6 +127,11 @@ def run(scene, bsdf, mc, s, direction, log=print) -> tuple[dict, dict]:
     if "relative" in img:
         row["relative_difference"] = img["relative"]
         row["sigma_rms"] = float(np.sqrt(np.nanmean(img["sigma"] ** 2)))
+        on = ~np.isnan(img["difference"])
+        # pixels share bins, so this is a picture of where the difference exceeds the
+        # walk's noise, not a count of independent tests
+        row["within_3sigma"] = float(np.mean(np.abs(img["difference"][on])
+                                             <= 3 * img["sigma"][on]))
     t0 = time.perf_counter()
     img["mitsuba"], info = mitsuba_render(bsdf, s.render_resolution, s.render_spp)
     row["mitsuba" if img["mitsuba"] is not None else "mitsuba_note"] = info

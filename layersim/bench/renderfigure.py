@@ -61,17 +61,15 @@ def _difference_panel(fig, ax, row: dict, img: dict) -> None:
     cmap = _cmap()
     mesh = ax.imshow(diff, cmap=cmap, vmin=-vmax, vmax=vmax)
     ax.set_title(f"solver - Monte Carlo (luminance)\nrelative RMS "
-                 f"{row['relative_difference']:.2g}; walk's sigma RMS {row['sigma_rms']:.2g}",
-                 fontsize=8)
+                 f"{row['relative_difference']:.2g}; walk's sigma RMS {row['sigma_rms']:.2g};\n"
+                 f"{100 * row['within_3sigma']:.0f}% of pixels within 3 sigma", fontsize=8)
     fig.colorbar(mesh, ax=ax, shrink=0.8, label="radiance (sky units)")
 
 
 def _cmap():
     """A diverging colour map whose zero is white, with NaN (off the sphere) grey."""
     import matplotlib
-    cmap = matplotlib.colormaps["RdBu_r"].copy()
-    cmap.set_bad((BACKGROUND,) * 3)
-    return cmap
+    return matplotlib.colormaps["RdBu_r"].with_extremes(bad=(BACKGROUND,) * 3)
 
 
 def markdown(row: dict) -> list[str]:
@@ -87,8 +85,9 @@ def markdown(row: dict) -> list[str]:
             "`layersim render`, reflection only; the difference shows the two tables' "
             "difference, the walk's noise included")
     if "relative_difference" in row:
-        text += (f" (relative RMS {row['relative_difference']:.2g}, the walk's standard error "
-                 f"RMS {row['sigma_rms']:.2g} in radiance)")
+        text += (f" (relative RMS {row['relative_difference']:.2g}; the walk's standard error "
+                 f"propagated to the image, RMS {row['sigma_rms']:.2g} in radiance; "
+                 f"{100 * row['within_3sigma']:.0f}% of pixels within 3 of it)")
     if row.get("mitsuba"):
         text += (f". Right: the solver's continuous BSDF rendered by Mitsuba 3 "
                  f"({row['mitsuba']}) from the same view")
