@@ -30,7 +30,7 @@ def figure(name: str, row: dict, img: dict):
                        img["montecarlo"]))
     mitsuba = img.get("mitsuba")
     count = len(panels) + ("difference" in img) + (mitsuba is not None)
-    fig, axes = plt.subplots(1, count, figsize=(3.1 * count + 0.6, 3.6), layout="constrained")
+    fig, axes = plt.subplots(1, count, figsize=(3.1 * count + 0.6, 4.0), layout="constrained")
     axes = list(np.atleast_1d(axes))
     for ax, (title, rgb) in zip(axes, panels):
         ax.imshow(display(rgb))
