@@ -9,7 +9,9 @@ For each scene and a few incidence angles:
 * the **solver** at a ladder of discretisations (``scales`` times the planner's n and md) with
   wall time and error against the reference;
 * **Monte Carlo** at a ladder of particle counts per backend, with wall time, error and standard
-  error.
+  error;
+* with ``render``, the rendered comparison of the planner's solve and the walk
+  (:mod:`.rendercompare`).
 
 Error metrics, over the bin energies E_b of both sides and all incidence angles:
 ``error`` = relative L2 = sqrt(sum (E - E_ref)^2 / sum E_ref^2); ``albedo_error`` =
