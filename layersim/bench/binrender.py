@@ -31,8 +31,9 @@ uniform in ``mu^2`` and ``phi`` (equal projected solid angle per point) for the 
 of the environment, and exactly for point sources (a small sun sampled as points): each adds
 ``E_j cos theta_j / Omega_b`` to the bin holding its direction. ``E_b(v)`` is interpolated
 linearly in ``cos theta_v`` between the table's angles, constant beyond its extremes.
-Reference: the bin energies of ``docs/conventions.md``; the adjoint reading of reflection by
-reciprocity, e.g. Veach 1997, thesis, sec. 5.3 (eq. 5.8).
+References: the bin energies of ``docs/conventions.md``; the reciprocity of reflection that
+lets a table lit from ``v`` shade the light arriving at ``v`` (Veach 1997, PhD thesis,
+Stanford, chapter 6).
 """
 
 from __future__ import annotations
