@@ -130,3 +130,16 @@ def test_bench_refuses_bad_render_options_in_one_line(tmp_path, capsys, argv, me
     assert main(["bench", "--quick", "--out", str(tmp_path / "o")] + argv) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err and "Traceback" not in err
+
+
+def test_report_text_says_what_is_missing():
+    """The report's paragraph names a skipped scene's reason, a missing walk and a missing
+    Mitsuba render instead of leaving them out silently."""
+    from layersim.bench import renderfigure
+    (skip, _) = renderfigure.markdown({"skipped": "anisotropic stack: azimuth"})
+    assert "skipped (anisotropic stack: azimuth)" in skip
+    row = {"bins": [18, 36], "angles": 16, "particles": 1_000_000,
+           "mitsuba_note": "mitsuba not installed (No module named 'mitsuba')"}
+    (text, _) = renderfigure.markdown(row)
+    assert "16 incidence angles" in text and "1e+06 paths per angle" in text
+    assert "no Monte Carlo backend" in text and "No Mitsuba render: mitsuba not installed" in text

@@ -84,7 +84,9 @@ def markdown(row: dict) -> list[str]:
             "binned renderer (layersim/bench/binrender.py) on a sphere under the sky of "
             "`layersim render`, reflection only; the difference shows the two tables' "
             "difference, the walk's noise included")
-    if "relative_difference" in row:
+    if "relative_difference" not in row:
+        text += " (no Monte Carlo backend installed: the solver's render alone)"
+    else:
         text += (f" (relative RMS {row['relative_difference']:.2g}; the walk's standard error "
                  f"propagated to the image, RMS {row['sigma_rms']:.2g} in radiance; "
                  f"{100 * row['within_3sigma']:.0f}% of pixels within 3 of it)")
