@@ -5,7 +5,7 @@
     layersim solve SCENE [-o FILE] [--like STACK.lsim]
                                      solve, print plan, timings and albedos; save the BSDF
     layersim info FILE               summary and albedos of a saved BSDF (.lsim) or .bsdf file
-    layersim bench [--quick] [--stability] [--backend B ...] --out DIR
+    layersim bench [--quick] [--stability] [--backend B ...] [--render] --out DIR
                                      solver vs Monte Carlo report and stability suite
     layersim export SRC [-o F.bsdf] [--version 1|2] [--format rgl [--resolution N]]
                                      write a tabulated Fourier BSDF file (v1: layerlab/Mitsuba
@@ -321,11 +321,15 @@ def cmd_bench(args) -> int:
         reason = why_unavailable(missing[0]) or "not available"
         raise ValueError(f"--backend {missing[0]}: not available on this machine (available: "
                          f"{', '.join(here)}): {reason}")
+    if args.render_paths is not None and args.render_paths < 1:
+        raise ValueError(f"--render-paths {args.render_paths}: must be a whole number >= 1")
+    if args.render_paths is not None and not args.render:
+        raise ValueError("--render-paths is an option of --render; add --render")
     _output_folder(args.out, "--out")
     results = bench.run(args.out, quick=args.quick, stability=args.stability,
                         backends=backends, scene_dir=args.scenes,
                         scenes=args.scene, command="layersim " + " ".join(args.argv),
-                        seed=args.seed)
+                        seed=args.seed, render=args.render, render_particles=args.render_paths)
     fails = [c["name"] for c in results["stability"] if c["outcome"] == "fail"]
     print(f"wrote {args.out}/results.json, report.md and plots")
     if fails:
@@ -673,7 +677,8 @@ command exits with status 2, as 'layersim solve' would refuse it.""",
     "bench": """examples:
   layersim bench --out bench-quick --quick
   layersim bench --out bench --stability --backend warp-cuda --backend opencl
-  layersim bench --out bench --scene coated_gold""",
+  layersim bench --out bench --scene coated_gold
+  layersim bench --out bench-render --quick --render --scene coated_gold""",
     "export": """examples:
   layersim export examples/coated_gold.toml -o coated_gold.bsdf
   layersim export brushed.lsim -o brushed.bsdf --version 2 --relerr 1e-3
@@ -795,6 +800,11 @@ def build_parser() -> argparse.ArgumentParser:
                     "repeatable")
     sp.add_argument("--seed", type=int, default=1, help="seed of the Monte Carlo runs "
                     "(default 1)")
+    sp.add_argument("--render", action="store_true", help="also render each isotropic scene "
+                    "from the solver's and the walk's bins, with their difference "
+                    "(SCENE_render.png)")
+    sp.add_argument("--render-paths", type=int, help="Monte Carlo paths per incidence angle "
+                    "of --render (default 1e6, 2e5 with --quick)")
     sp.set_defaults(func=cmd_bench)
 
     sp = _subparser(sub, "design", "inverse design (Bati et al. 2021): stacks whose "

@@ -77,6 +77,42 @@ def test_quick_bench_writes_results_report_and_plots(tmp_path):
     assert "| tol | n | md |" in report
     assert (tmp_path / "vandehulst_slab_error_time.png").stat().st_size > 1000
     assert results["stability"] == []
+    # --render is off by default: the default bench's cost and outputs are unchanged
+    assert data["settings"]["render"] is None and not list(tmp_path.glob("*_render.png"))
+    assert "render" not in scene
+
+
+@pytest.mark.slow
+def test_bench_render_writes_the_rendered_comparison(tmp_path):
+    """``--render`` on a quick scene (2e4 paths per angle): SCENE_render.png is written and
+    named in report.md, and the solver's and the walk's binned renders agree within a few
+    times the walk's noise (relative RMS of the difference)."""
+    bench.run(tmp_path, quick=True, scenes=["coated_gold"], log=lambda *a: None,
+              render=True, render_particles=20_000)
+    data = json.loads((tmp_path / "results.json").read_text())
+    row = data["scenes"][0]["render"]
+    assert data["settings"]["render"]["particles"] == 20_000 and row["angles"] == 16
+    assert 0 < row["relative_difference"] < 0.05 and row["sigma_rms"] > 0
+    assert row["within_3sigma"] > 0.9
+    assert (tmp_path / "coated_gold_render.png").stat().st_size > 5000
+    report = (tmp_path / "report.md").read_text()
+    assert "![coated_gold_render.png](coated_gold_render.png)" in report
+    assert "Rendered comparison" in report
+
+
+def test_render_skips_anisotropic_stacks_and_says_why():
+    """An anisotropic stack's bins depend on the incident azimuth: the render step skips it
+    with the reason, before any walk or render."""
+    import layersim
+    from layersim.bench import rendercompare, runner
+    scene = layersim.Scene.from_dict({"layer": [{"kind": "conductor", "ior": [0.2, 3.0],
+                                                 "roughness": [0.2, 0.4]}],
+                                      "discretization": {"n": 24}})
+    bsdf = layersim.solve(scene)
+    assert bsdf.anisotropic
+    row, img = rendercompare.run(scene, bsdf, None, runner.Settings(), runner.direction,
+                                 log=lambda *a: None)
+    assert "anisotropic" in row["skipped"] and img == {}
 
 
 @pytest.mark.slow

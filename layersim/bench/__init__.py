@@ -23,7 +23,7 @@ def default_scene_dir() -> Path:
 
 def run(out, quick: bool = False, stability: bool = False, backends=("auto",),
         scene_dir=None, scenes=None, command: str | None = None, log=print,
-        seed: int = 1) -> dict:
+        seed: int = 1, render: bool = False, render_particles: int | None = None) -> dict:
     """Run the benchmark and write ``out/results.json``, ``out/report.md`` and PNG plots.
 
     Parameters
@@ -43,6 +43,13 @@ def run(out, quick: bool = False, stability: bool = False, backends=("auto",),
         Scene names (file stems) to run (default: all, or :data:`QUICK_SCENES` when quick).
     seed : int
         Seed of the Monte Carlo runs (incidence angle ``k`` uses ``seed + k``).
+    render : bool
+        Also render each isotropic scene from the solver's and the walk's bin energies, with
+        their difference and a Mitsuba 3 render (:mod:`.rendercompare`): ``SCENE_render.png``.
+    render_particles : int, optional
+        Monte Carlo paths per incidence angle of the render (default
+        :attr:`runner.Settings.render_particles`, or :data:`runner.QUICK_RENDER_PARTICLES`
+        when quick).
     """
     if layersim_settings().device != "cpu":
         # an unusable device is refused here: the runner takes a refused solve for the
@@ -62,6 +69,9 @@ def run(out, quick: bool = False, stability: bool = False, backends=("auto",),
     settings = runner.Settings.quick() if quick else runner.Settings()
     settings.backends = tuple(backends)
     settings.seed = seed
+    settings.render = render
+    if render_particles is not None:
+        settings.render_particles = render_particles
     machine = report.machine_info(command or " ".join(["layersim"] + sys.argv[1:]))
     results_scenes = []
     for f in files:

@@ -1,5 +1,6 @@
 """Write a benchmark run: ``results.json`` (raw numbers), ``report.md`` (tables) and PNG plots
-(error against run time per scene, hemispherical slices solver vs Monte Carlo, throughput)."""
+(error against run time per scene, hemispherical slices solver vs Monte Carlo, throughput, and
+with ``--render`` the rendered comparison of :mod:`.renderfigure`)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import numpy as np
 import scipy
 
 from ..kernels.runtime import cuda_available
+from . import renderfigure
 from .statistical import markdown as statistical_markdown
 
 
@@ -64,7 +66,8 @@ def write(out: Path, machine: dict, scenes: list, stability: list, settings) -> 
                             "reference_scale": settings.reference_scale,
                             "particles": list(settings.particles),
                             "check_particles": settings.check_particles,
-                            "seed": settings.seed},
+                            "seed": settings.seed,
+                            "render": _render_settings(settings)},
                "scenes": [_public(s) for s in scenes], "stability": stability}
     (out / "results.json").write_text(json.dumps(results, indent=1, default=_json_default))
     images = {}
@@ -73,6 +76,15 @@ def write(out: Path, machine: dict, scenes: list, stability: list, settings) -> 
     throughput = _throughput_plot(out, scenes)
     (out / "report.md").write_text(_markdown(results, images, throughput))
     return results
+
+
+def _render_settings(settings) -> dict | None:
+    """The settings of the rendered comparison (None when ``--render`` is off)."""
+    if not settings.render:
+        return None
+    return {"angles": settings.render_angles, "bins": list(settings.render_bins),
+            "particles": settings.render_particles, "resolution": settings.render_resolution,
+            "spp": settings.render_spp}
 
 
 def _json_default(x):
@@ -149,6 +161,12 @@ def _plots(out: Path, s: dict, settings) -> list[str]:
         if mcb is not None and s["reference"].get("kind") == "solver":
             panels.append((f"Monte Carlo ({mc[-1]['particles']:.0e} paths)", mcb))
         name = _slices(out, s["name"], panels, settings)
+        names.append(name)
+    if s.get("_render_images"):
+        fig = renderfigure.figure(s["name"], s["render"], s["_render_images"])
+        name = f"{s['name']}_render.png"
+        fig.savefig(out / name, dpi=110)
+        plt.close(fig)
         names.append(name)
     return names
 
@@ -261,6 +279,8 @@ def _markdown(results: dict, images: dict, throughput) -> str:
         lines += _solver_markdown(s) + _tolerance_markdown(s) + _montecarlo_markdown(s)
         if s.get("statistical"):
             lines += statistical_markdown(s["statistical"], _fmt)
+        if s.get("render"):
+            lines += renderfigure.markdown(s["render"])
         for img in images.get(s["name"], []):
             lines += [f"![{img}]({img})", ""]
     if throughput:

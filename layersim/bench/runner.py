@@ -9,7 +9,9 @@ For each scene and a few incidence angles:
 * the **solver** at a ladder of discretisations (``scales`` times the planner's n and md) with
   wall time and error against the reference;
 * **Monte Carlo** at a ladder of particle counts per backend, with wall time, error and standard
-  error.
+  error;
+* with ``render``, the rendered comparison of the planner's solve and the walk
+  (:mod:`.rendercompare`).
 
 Error metrics, over the bin energies E_b of both sides and all incidence angles:
 ``error`` = relative L2 = sqrt(sum (E - E_ref)^2 / sum E_ref^2); ``albedo_error`` =
@@ -31,7 +33,12 @@ from ..errors import LayersimError
 from ..plan import make_plan
 from ..scene import Scene
 from ..solver import solve
+from . import rendercompare
 from .statistical import statistical_row
+
+
+#: Monte Carlo paths per incidence angle of the rendered comparison of ``--quick``.
+QUICK_RENDER_PARTICLES = 200_000
 
 
 @dataclass
@@ -46,6 +53,13 @@ class Settings:
     check_particles: int = 10_000_000
     backends: tuple = ("auto",)
     seed: int = 1
+    # the rendered comparison (layersim.bench.rendercompare), off unless asked for
+    render: bool = False
+    render_angles: int = 16
+    render_bins: tuple = (18, 36)
+    render_particles: int = 1_000_000
+    render_resolution: int = 96
+    render_spp: int = 64
 
     @classmethod
     def quick(cls) -> "Settings":
@@ -67,7 +81,8 @@ class Settings:
         """
         return cls(angles=(0.0, 30.0, 60.0), n_mu=9, n_phi=18, scales=(0.5, 1.0),
                    tols=(1e-2,), reference_scale=2.0,
-                   particles=(10_000, 100_000, 1_000_000), check_particles=200_000)
+                   particles=(10_000, 100_000, 1_000_000), check_particles=200_000,
+                   render_particles=QUICK_RENDER_PARTICLES, render_spp=32)
 
     @property
     def mu_edges(self) -> np.ndarray:
@@ -183,6 +198,8 @@ def run_scene(path: Path, s: Settings, log=print) -> dict:
                             for tol in s.tols]
     if mc is not None:
         _montecarlo_ladder(mc, scene, s, out, ref_bins, ref_alb, log)
+    if s.render:
+        _render(scene, mc, s, out, log)
     # the statistical model: a third method, where it represents the scene
     out["statistical"] = statistical_row(scene, s, ref_bins, ref_alb, _solver_bins, _error,
                                          _albedo_error)
@@ -254,6 +271,8 @@ def _solver_ladder(scene: Scene, plan, s: Settings, out: dict, ref_bins, ref_alb
                "albedo_error": _albedo_error(alb, ref_alb)}
         out["solver"].append(row)
         out.setdefault("_solver_bins", {})[scale] = bins
+        if scale == 1.0:
+            out["_bsdf"] = b                 # the planner's solve, rendered by --render
         log(f"  solver n={row['n']:4d} md={row['md']:5d}: {sec:7.2f} s  error {row['error']:.2e}")
 
 
@@ -279,3 +298,17 @@ def _montecarlo_ladder(mc, scene: Scene, s: Settings, out: dict, ref_bins, ref_a
             out["_mc_bins"] = b
             log(f"  MC {used} {particles:.0e}: {sec:7.2f} s  error {row['error']:.2e} "
                 f"(stderr {row['stderr']:.1e}, {100 * row['within_3sigma']:.0f}% in 3 sigma)")
+
+
+def _render(scene: Scene, mc, s: Settings, out: dict, log) -> None:
+    """The rendered comparison (:mod:`.rendercompare`) of the solve at the planner's
+    discretisation: ``out["render"]`` (results.json) and ``out["_render_images"]``."""
+    bsdf = out.get("_bsdf")
+    if bsdf is None:
+        try:
+            bsdf = solve(scene)
+        except LayersimError as exc:
+            out["render"] = {"skipped": f"the solver refused the scene: {exc}"}
+            return
+    out["render"], out["_render_images"] = rendercompare.run(scene, bsdf, mc, s, direction,
+                                                             log)

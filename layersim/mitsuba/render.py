@@ -2,8 +2,8 @@
 
 The scene is a unit sphere with the stack as its BSDF (the ``layersim`` plug-in, whose local
 frame on a sphere is Mitsuba's shading frame: ``z`` the normal), a perspective camera, a point
-light and an environment map generated here (nothing is downloaded): a sky whose colour runs
-from a pale horizon to blue at the zenith, a dim warm ground, and a small bright sun-like disc.
+light and the environment map of :mod:`layersim.mitsuba.sky` (generated here, nothing is
+downloaded): a sky from a pale horizon to blue at the zenith, a dim warm ground, a small sun.
 It renders in ``llvm_ad_rgb`` where LLVM >= 16 is found (whole wavefronts per BSDF call, in
 Dr.Jit's evaluated mode, which a Python BSDF needs), else in ``scalar_rgb`` (one ray per call:
 much slower).
@@ -13,31 +13,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from .llvm import point_drjit_to_llvm
-
-#: Sky colours (linear RGB): horizon, zenith, ground.
-HORIZON, ZENITH, GROUND = (0.9, 0.9, 0.85), (0.3, 0.5, 0.9), (0.2, 0.18, 0.15)
-#: The sun: direction (polar angle from +y, azimuth; radians), angular radius (radians),
-#: radiance (linear, relative to the sky's).
-SUN_THETA, SUN_PHI, SUN_RADIUS, SUN_RADIANCE = 0.6, 1.0, 0.06, 40.0
-
-
-def sky_bitmap(width: int = 128, height: int = 64) -> np.ndarray:
-    """The environment map, ``(height, width, 3)`` float32 linear RGB in Mitsuba's
-    latitude-longitude layout (rows from the +y pole down, ``y`` up in world space)."""
-    theta = (np.arange(height) + 0.5) / height * np.pi
-    phi = (np.arange(width) + 0.5) / width * 2 * np.pi
-    T, P = np.meshgrid(theta, phi, indexing="ij")
-    up = np.clip(np.cos(T), 0.0, 1.0)[..., None]
-    sky = (1 - up) * np.array(HORIZON) + up * np.array(ZENITH)
-    sky[T > np.pi / 2] = GROUND
-    d = np.stack([np.sin(T) * np.cos(P), np.cos(T), np.sin(T) * np.sin(P)], -1)
-    sun = np.array([np.sin(SUN_THETA) * np.cos(SUN_PHI), np.cos(SUN_THETA),
-                    np.sin(SUN_THETA) * np.sin(SUN_PHI)])
-    sky = sky + SUN_RADIANCE * (d @ sun > np.cos(SUN_RADIUS))[..., None]
-    return sky.astype(np.float32)
+from .sky import sky_bitmap
 
 
 def scene_dict(mi, lsim: str, resolution: tuple[int, int], spp: int) -> dict:
@@ -84,3 +61,33 @@ def render(lsim, output, resolution=(128, 128), spp=16, seed: int = 0) -> str:
     mi.util.write_bitmap(str(output), image, write_async=False)
     return variant
 
+
+
+def orthographic_dict(mi, lsim: str, resolution: int, spp: int, view) -> dict:
+    """The material test seen by an orthographic camera from the unit direction ``view``
+    (world space, ``y`` up), the unit sphere filling a ``resolution`` square, under the sky
+    alone (no point light): the view of :mod:`layersim.bench.binrender`."""
+    d = scene_dict(mi, lsim, (resolution, resolution), spp)
+    del d["lamp"]
+    origin = [4.0 * float(x) for x in view]
+    d["sensor"] = {"type": "orthographic",
+                   "to_world": mi.ScalarTransform4f().look_at(origin=origin, target=[0, 0, 0],
+                                                              up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": resolution, "height": resolution,
+                            "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent", "sample_count": spp}}
+    return d
+
+
+def render_orthographic(lsim, resolution: int, spp: int, view, seed: int = 0):
+    """Render :func:`orthographic_dict` for the solved stack in ``lsim`` (a ``.lsim`` file):
+    ``(image, variant)``, the image linear RGB as a numpy array (resolution, resolution, 3)."""
+    point_drjit_to_llvm()
+    import mitsuba as mi
+    from . import register
+    variant = start_variant(mi)
+    register()
+    scene = mi.load_dict(orthographic_dict(mi, str(Path(lsim).resolve()), resolution, spp,
+                                           view))
+    import numpy as np
+    return np.array(mi.render(scene, seed=seed))[..., :3], variant
