@@ -127,7 +127,8 @@ def fit(template, target, *, coarse: bool = True, threads: int | None = None,
         A scene with free values ``{ fit = [lo, hi], start = x }`` (:mod:`.template`).
     target : BSDF, path or tuple
         A solved BSDF, the path of a saved one (``.lsim``), or point measurements ``(wi, wo,
-        f)`` of shapes (N, 3), (N, 3), (N,) or (N, C) with f in 1/sr (:func:`.target.as_target`).
+        f)`` of shapes (N, 3), (N, 3), (N,) or (N, C) with f in 1/sr, optionally with the
+        standard deviations of f as a fourth array (:func:`.target.as_target`).
     coarse : bool
         Start with the coarse stage (module docstring).
     threads : int, optional
@@ -139,7 +140,8 @@ def fit(template, target, *, coarse: bool = True, threads: int | None = None,
     -------
     FitResult
         Minimising the sum of squares of ``(f_model - f_target) cos(theta_o)`` over the
-        target's direction pairs and channels.
+        target's direction pairs and channels (of ``(f_model - f) / sigma`` for measurements
+        with standard deviations).
 
     Raises
     ------
@@ -160,10 +162,10 @@ def fit(template, target, *, coarse: bool = True, threads: int | None = None,
                                         "coarse", history, bar, threads, final)
             x = res.x
             plans.append({**disc, "nfev": res.nfev})
-    return _result(template, res, history, plans)
+    return _result(template, res, history, plans, target.unit)
 
 
-def _result(template: Template, res, history: list, plans: list) -> FitResult:
+def _result(template: Template, res, history: list, plans: list, unit: str) -> FitResult:
     cov, cond = covariance(res.jac, res.fun)
     corr = correlation(cov)
     names = template.names
@@ -175,4 +177,4 @@ def _result(template: Template, res, history: list, plans: list) -> FitResult:
                      params=dict(zip(names, map(float, res.x))),
                      uncertainty=dict(zip(names, map(float, np.sqrt(np.diag(cov))))),
                      correlation=corr, residual=float(np.sqrt(np.mean(res.fun ** 2))),
-                     residuals=res.fun, history=history, warnings=warnings, plans=plans)
+                     residuals=res.fun, unit=unit, history=history, warnings=warnings, plans=plans)

@@ -39,7 +39,10 @@ class FitResult:
     correlation : ndarray, shape (P, P)
         Correlations of the parameters (order of ``params``).
     residual : float
-        RMS of the residuals ``(f_model - f_target) cos(theta_o)`` (1/sr), final plan.
+        RMS of the residuals, final plan: ``(f_model - f_target) cos(theta_o)`` (1/sr), or
+        ``(f_model - f) / sigma`` for measurements with standard deviations.
+    unit : str
+        What the residuals are measured in.
     residuals : ndarray, shape (M,)
         The residuals themselves.
     history : list of dict
@@ -56,6 +59,7 @@ class FitResult:
     correlation: np.ndarray
     residual: float
     residuals: np.ndarray
+    unit: str = "1/sr (f cos theta_o)"
     history: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
     plans: list = field(default_factory=list)
@@ -64,7 +68,7 @@ class FitResult:
         """One line per parameter, ``name = value +- error``, then the RMS residual and the
         warnings."""
         lines = [f"{k} = {v:.6g} +- {self.uncertainty[k]:.2g}" for k, v in self.params.items()]
-        lines.append(f"rms residual (f cos theta_o) = {self.residual:.3g} 1/sr")
+        lines.append(f"rms residual = {self.residual:.3g} {self.unit}")
         lines += [f"warning: {w}" for w in self.warnings]
         return "\n".join(lines)
 

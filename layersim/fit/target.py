@@ -4,7 +4,10 @@ A solved BSDF (or a saved ``.lsim``) is sampled on a fixed set of direction pair
 (:func:`direction_pairs`); point measurements ``(wi, wo, f)`` are used as given. The residual of
 a fit is, at every pair and channel, ``(f_model - f_target) cos(theta_o)`` (1/sr times a
 cosine): the reflected radiance per unit incident irradiance, which weights each pair by what
-it carries and stays finite at grazing views.
+it carries and stays finite at grazing views. Measurements with their standard deviations,
+``(wi, wo, f, sigma)``, give the residuals ``(f_model - f) / sigma`` instead (dimensionless:
+chi-square), so that points of larger noise (a noise proportional to f) weigh less and the
+standard errors of the fit hold.
 """
 
 from __future__ import annotations
@@ -59,12 +62,15 @@ class Target:
         The target BSDF value (1/sr) per channel.
     points : bool
         True for measurements (residual noise), False for a sampled BSDF.
+    sigma : ndarray, shape (N, C), or None
+        Standard deviations of ``f`` (1/sr), when the measurements come with them.
     """
 
     wi: np.ndarray
     wo: np.ndarray
     f: np.ndarray
     points: bool
+    sigma: np.ndarray | None = None
 
     @property
     def channels(self) -> int:
@@ -72,11 +78,16 @@ class Target:
 
     @property
     def weight(self) -> np.ndarray:
-        """``cos(theta_o)``, shape (N, 1)."""
-        return self.wo[:, 2:3]
+        """``cos(theta_o)``, shape (N, 1), or ``1 / sigma``, shape (N, C) (1/sr)^-1."""
+        return self.wo[:, 2:3] if self.sigma is None else 1.0 / self.sigma
+
+    @property
+    def unit(self) -> str:
+        """The unit of the residuals."""
+        return "1/sr (f cos theta_o)" if self.sigma is None else "sigma (chi)"
 
     def residual(self, bsdf: BSDF) -> np.ndarray:
-        """``(f_model - f_target) cos(theta_o)`` flattened, shape (N * C,)."""
+        """The residuals (module docstring) flattened, shape (N * C,)."""
         f = np.asarray(bsdf.eval(self.wi, self.wo), dtype=float).reshape(len(self.wi), -1)
         return ((f - self.f) * self.weight).ravel()
 
@@ -94,7 +105,20 @@ def _unit(a, name: str) -> np.ndarray:
     return a / norm[:, None]
 
 
-def _points(wi, wo, f) -> Target:
+def _sigma(sigma, f) -> np.ndarray | None:
+    if sigma is None:
+        return None
+    sigma = np.asarray(sigma, dtype=float)
+    sigma = sigma[:, None] if sigma.ndim == 1 else sigma
+    if sigma.shape != f.shape:
+        raise ValueError(f"fit target: sigma must have the shape of f, {f.shape}, got "
+                         f"{sigma.shape}")
+    if not np.all(np.isfinite(sigma) & (sigma > 0)):
+        raise ValueError("fit target: sigma must be positive and finite")
+    return sigma
+
+
+def _points(wi, wo, f, sigma=None) -> Target:
     wi, wo = _unit(wi, "wi"), _unit(wo, "wo")
     f = np.asarray(f, dtype=float)
     f = f[:, None] if f.ndim == 1 else f
@@ -103,12 +127,13 @@ def _points(wi, wo, f) -> Target:
                          f"(N,) or (N, C)), got {len(wi)}, {len(wo)} and {f.shape}")
     if not np.all(np.isfinite(f)):
         raise ValueError("fit target: f holds a non-finite value")
-    return Target(wi, wo, f, points=True)
+    return Target(wi, wo, f, points=True, sigma=_sigma(sigma, f))
 
 
 def as_target(target) -> Target:
     """A :class:`Target` from a solved BSDF, the path of a saved one (``.lsim``) or point
-    measurements ``(wi, wo, f)`` of shapes (N, 3), (N, 3), (N,) or (N, C).
+    measurements ``(wi, wo, f)`` of shapes (N, 3), (N, 3), (N,) or (N, C), optionally with the
+    standard deviations of f, ``(wi, wo, f, sigma)``, sigma of the shape of f.
 
     Raises
     ------
@@ -117,13 +142,16 @@ def as_target(target) -> Target:
     LayersimError
         A path that is not a saved BSDF (``FileFormatError``), or a target of another type.
     """
+    if isinstance(target, Target):
+        return target
     if isinstance(target, (str, os.PathLike)):
         target = BSDF.load(target)
     if isinstance(target, BSDF):
         wi, wo = direction_pairs()
         f = np.asarray(target.eval(wi, wo), dtype=float).reshape(len(wi), -1)
         return Target(wi, wo, f, points=False)
-    if isinstance(target, (tuple, list)) and len(target) == 3:
+    if isinstance(target, (tuple, list)) and len(target) in (3, 4):
         return _points(*target)
     raise LayersimError("a fit target is a solved BSDF, the path of a saved one (.lsim) or "
-                        f"point measurements (wi, wo, f), got {type(target).__name__}")
+                        "point measurements (wi, wo, f) or (wi, wo, f, sigma), got "
+                        f"{type(target).__name__}")

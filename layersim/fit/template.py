@@ -208,16 +208,26 @@ class Template:
         return Scene.from_dict(data, source=self.source, default_name="fit")
 
     def _check_bounds(self) -> None:
-        self.scene(self.start)
         for k, p in enumerate(self.params):
-            for end, value in (("lo", p.lo), ("hi", p.hi)):
+            for end, value in (("start", p.start), ("lo", p.lo), ("hi", p.hi)):
                 x = self.start.copy()
                 x[k] = value
                 try:
                     self.scene(x)
                 except SceneError as exc:
-                    raise SceneError(f"{p.name}: fit {end} = {value:g} is outside what the "
-                                     f"field allows ({exc})") from None
+                    # another parameter's start can be the value the field refuses
+                    owner = self._owner(exc) or p
+                    if owner is not p:
+                        end, value = "start", owner.start
+                    raise SceneError(f"{owner.name}: {'fit ' * (end != 'start')}{end} = "
+                                     f"{value:g} is outside what the field allows "
+                                     f"({exc})") from None
+
+    def _owner(self, exc: SceneError) -> Parameter | None:
+        """The parameter in the layer and field that ``exc`` names, if one is."""
+        base = (exc.field or "").split("[")[0].split(".")[0]
+        return next((p for p in self.params if p.path[1] == exc.layer and p.path[2] == base),
+                    None) if exc.layer is not None else None
 
 
 def _read_toml(path: Path) -> dict:
