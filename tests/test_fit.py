@@ -89,6 +89,7 @@ def test_a_parameter_the_data_do_not_see_is_reported(hidden):
     assert result.uncertainty["layer[1].rotation"] == np.inf
 
 
+@pytest.mark.slow
 def test_a_parameter_stopped_by_its_bound_is_reported(hidden):
     template = _scene()
     template["layer"][1]["roughness"] = {"fit": [0.25, 0.35]}   # the truth, 0.4, lies above
@@ -188,3 +189,15 @@ def test_cli_fits_a_saved_bsdf_and_writes_the_scene_and_plot(tmp_path, hidden, c
     assert fitted.layers[0].alpha_u == pytest.approx(0.3, rel=1e-3)
     assert fitted.layers[1].alpha_u == pytest.approx(0.4, rel=1e-3)
     assert png.stat().st_size > 10_000
+
+
+def test_cli_checks_its_outputs_before_the_work_and_shows_examples(tmp_path, capsys):
+    argv = ["fit", str(tmp_path / "absent.toml"), str(tmp_path / "absent.npz")]
+    assert main(argv + ["-o", str(tmp_path / "no" / "fitted.toml")]) == 2
+    assert "-o " in capsys.readouterr().err
+    assert main(argv + ["-o", str(tmp_path / "f.toml"), "--plot", str(tmp_path / "f.xyz")]) == 2
+    assert "unknown image format" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["fit", "--help"])
+    out = capsys.readouterr().out
+    assert "examples:" in out and "layersim fit template.toml" in out
