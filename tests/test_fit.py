@@ -81,6 +81,19 @@ def test_a_stack_is_recovered_from_noisy_points_within_its_uncertainty(hidden):
     assert np.allclose(result.correlation, result.correlation.T)
 
 
+@pytest.mark.slow
+def test_a_stage_whose_plan_is_too_coarse_restarts_on_a_finer_one():
+    """Started rough (0.45), the coarse stage plans few ordinates; the optimiser's way to the
+    true 0.15 crosses scenes whose lobes that plan cannot hold, and the stage restarts."""
+    truth = _scene({**TRUTH, "coat roughness": 0.15})
+    hidden = layersim.solve(layersim.Scene.from_dict(truth))
+    truth["layer"][0]["roughness"] = {"fit": [0.1, 0.5], "start": 0.45}
+    result = layersim.fit(truth, hidden)
+    coarse = sorted({h["n"] for h in result.history if h["stage"] == "coarse"})
+    assert len(coarse) == 2 and result.plans[0]["n"] == coarse[1]
+    assert result.params["layer[0].roughness"] == pytest.approx(0.15, rel=1e-3)
+
+
 def test_a_parameter_the_data_do_not_see_is_reported(hidden):
     template = _scene()
     template["layer"][1]["rotation"] = {"fit": [0.0, 90.0]}     # isotropic: no effect
@@ -201,3 +214,28 @@ def test_cli_checks_its_outputs_before_the_work_and_shows_examples(tmp_path, cap
         main(["fit", "--help"])
     out = capsys.readouterr().out
     assert "examples:" in out and "layersim fit template.toml" in out
+
+
+def test_covariance_is_sigma_squared_times_the_inverse_of_jtj():
+    from layersim.fit.result import covariance
+    rng = np.random.default_rng(1)
+    jac = rng.standard_normal((50, 3)) * [1.0, 100.0, 1e-3]      # columns of unlike scales
+    r = rng.standard_normal(50)
+    cov, cond = covariance(jac, r)
+    expected = (r @ r) / 47 * np.linalg.inv(jac.T @ jac)
+    assert np.allclose(cov, expected, rtol=1e-10)
+    assert 1 <= cond < 10
+
+
+def test_nearly_equal_columns_are_reported_as_unidentifiable():
+    from layersim.fit.result import correlation, covariance, diagnose
+    rng = np.random.default_rng(2)
+    a = rng.standard_normal(40)
+    jac = np.stack([a, 2 * a + 1e-9 * rng.standard_normal(40), rng.standard_normal(40)], axis=1)
+    cov, cond = covariance(jac, rng.standard_normal(40))
+    corr = correlation(cov)
+    warnings = diagnose(["a", "b", "c"], np.full(3, 0.5), np.zeros(3), np.ones(3), jac, cond,
+                        corr, np.zeros(3))
+    assert cond > 1e6 and len(warnings) == 1
+    assert "ill-conditioned" in warnings[0] and "a and b (correlation" in warnings[0]
+    assert " c " not in warnings[0] and "and c" not in warnings[0]
