@@ -239,3 +239,39 @@ def test_nearly_equal_columns_are_reported_as_unidentifiable():
     assert cond > 1e6 and len(warnings) == 1
     assert "ill-conditioned" in warnings[0] and "a and b (correlation" in warnings[0]
     assert " c " not in warnings[0] and "and c" not in warnings[0]
+
+
+def test_elements_of_nested_list_fields_are_parameters():
+    data = {"layer": [{"kind": "dielectric", "ior": 1.5,
+                       "roughness": [{"fit": [0.1, 0.4]}, 0.2]},
+                      {"kind": "conductor", "roughness": 0.3,
+                       "ior": [[0.2, 3.6], [{"fit": [0.3, 0.8], "start": 0.5}, 2.5], [1.4, 1.9]]}]}
+    t = Template(data)
+    assert t.names == ["layer[0].roughness[0]", "layer[1].ior[1][0]"]
+    scene = t.scene([0.3, 0.6])
+    assert scene.channels == 3
+    coat = scene.channel(0).layers[0]
+    assert (coat.alpha_u, coat.alpha_v) == (0.3, 0.2)
+    assert scene.channel(1).layers[1].ior == complex(0.6, 2.5)
+
+
+def test_point_files_read_back_as_targets(tmp_path):
+    from layersim.errors import FileFormatError
+    from layersim.fit import as_target
+    from layersim.fit.files import read_target
+    wi = np.array([[0.0, 0.0, 2.0], [0.6, 0.0, 0.8]])
+    wo = np.array([[0.0, 0.6, 0.8], [0.0, 0.0, 1.0]])
+    f = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
+    np.savez(tmp_path / "p.npz", wi=wi, wo=wo, f=f, sigma=0.1 * f)
+    np.savetxt(tmp_path / "p.csv", np.hstack([wi, wo, f]), delimiter=",",
+               header="wi_x,wi_y,wi_z,wo_x,wo_y,wo_z,f_r,f_g,f_b")
+    a, b = as_target(read_target(tmp_path / "p.npz")), as_target(read_target(tmp_path / "p.csv"))
+    for t in (a, b):
+        assert np.allclose(t.wi[0], [0, 0, 1]) and np.allclose(t.f, f) and t.channels == 3
+    assert np.allclose(a.sigma, 0.1 * f) and b.sigma is None
+    np.savez(tmp_path / "q.npz", wi=wi, f=f)
+    with pytest.raises(FileFormatError, match="missing wo"):
+        read_target(tmp_path / "q.npz")
+    np.savetxt(tmp_path / "q.csv", np.hstack([wi, wo]), delimiter=",")
+    with pytest.raises(FileFormatError, match="7 or more columns"):
+        read_target(tmp_path / "q.csv")
