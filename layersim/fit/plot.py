@@ -64,5 +64,5 @@ def plot_fit(path, result, target: Target, target_bsdf: BSDF | None = None) -> N
         _slices(ax, target_bsdf, fitted)
     else:
         _scatter(ax, target, fitted)
-    ax.set_title(f"fit: rms residual {result.residual:.3g} 1/sr")
+    ax.set_title(f"fit: rms residual {result.residual:.3g} {result.unit}")
     fig.savefig(path, dpi=120)

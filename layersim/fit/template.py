@@ -205,7 +205,8 @@ class Template:
         data = self.as_dict(x)
         if discretization:
             data["discretization"] = {**data.get("discretization", {}), **discretization}
-        return Scene.from_dict(data, source=self.source, default_name="fit")
+        return Scene.from_dict(data, source=self.source,
+                               default_name=Path(self.source).stem if self.source else "fit")
 
     def _check_bounds(self) -> None:
         for k, p in enumerate(self.params):
