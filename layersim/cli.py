@@ -15,6 +15,8 @@
     layersim plot SRC (--wi THETA,PHI | --blocks) [-o F.png]   draw slices or operator blocks
     layersim subtract STACK KNOWN --side top|bottom [-o FILE] [--eps EPS] [--noise NOISE]
                                      recover the unknown layer of a solved two-layer stack
+    layersim fit TEMPLATE TARGET -o FITTED.toml [--plot F.png] [--quiet]
+                                     fit a template's free values to a BSDF or measurements
     layersim mc SCENE --wi THETA,PHI [--paths N | --stderr E] -o OUT.npz
                                      Monte Carlo walks into a resumable result file
     layersim mc SWEEP.toml [--workers N | --cluster ADDR | --devices all] -o OUT.npz
@@ -691,6 +693,10 @@ command exits with status 2, as 'layersim solve' would refuse it.""",
   layersim plot coated_gold.lsim --wi 30,0 -o slices.png --log
   layersim plot coated_gold.lsim --blocks -o blocks.png
   layersim plot coated_gold.lsim --blocks --order 2 -o order2.png""",
+    "fit": """examples:
+  layersim fit template.toml stack.lsim -o fitted.toml --plot fit.png
+  layersim fit template.toml samples.npz -o fitted.toml   # arrays wi (N,3), wo (N,3), f (N[,C])
+  layersim fit template.toml samples.csv -o fitted.toml   # rows wi_x..wi_z, wo_x..wo_z, f...""",
     "fit-ndf": """examples:
   layersim fit-ndf view.npz -o ndf.npz --complete rot1.npz rot2.npz rot3.npz --fill
   layersim fit-ndf view.csv -o partial.npz --partial --plot partial.png
@@ -890,6 +896,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--noise", type=float, help="relative noise level of the stack (default: "
                                                 "estimated from its reciprocity defect)")
     sp.set_defaults(func=cmd_subtract)
+    _add_fit(sub, quiet)
     _add_fit_ndf(sub)
     _add_mc(sub, quiet)
     _add_render(sub, src_help, quiet)
@@ -987,6 +994,39 @@ def cmd_render(args) -> int:
         lsim = bsdf.save(Path(tmp) / "stack.lsim")
         variant = render(lsim, out, (int(size[0]), int(size[1])), args.spp)
     print(f"wrote {out} ({int(size[0])} x {int(size[1])}, {args.spp} spp, Mitsuba {variant})")
+    return 0
+
+
+def _add_fit(sub, quiet) -> None:
+    sp = _subparser(sub, "fit", "fit the free values of a template ({ fit = [lo, hi] }) to a "
+                                "solved BSDF or point measurements by exact transport",
+                    parents=[quiet])
+    sp.add_argument("template", help="scene file (.toml) with free values")
+    sp.add_argument("target", help="saved BSDF (.lsim) or point measurements (.npz or .csv; "
+                                   "layout in docs/conventions.md)")
+    sp.add_argument("-o", "--output", required=True, help="fitted scene to write (.toml)")
+    sp.add_argument("--plot", metavar="PNG", help="also draw the target against the fit")
+    sp.set_defaults(func=cmd_fit)
+
+
+def cmd_fit(args) -> int:
+    from .fit import Template, as_target, fit
+    from .fit.files import read_target
+    from .fit.plot import plot_fit
+    from .tomlwrite import dumps
+    out = _output(args.output, "-o")
+    plot = _image(args.plot, "--plot") if args.plot else None
+    template = Template(args.template)
+    raw = read_target(args.target)
+    target = as_target(raw)
+    result = fit(template, target, progress=None if not args.quiet else False)
+    out.write_text(dumps(result.scene.to_dict(), f"fitted by layersim fit to {args.target}"),
+                   encoding="utf-8")
+    print(result.summary())
+    print(f"wrote {out}")
+    if plot:
+        plot_fit(plot, result, target, BSDF.load(raw) if isinstance(raw, Path) else None)
+        print(f"wrote {plot}")
     return 0
 
 

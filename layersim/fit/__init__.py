@@ -1,0 +1,10 @@
+"""Fit a stack to a target by exact transport: templates with free values, the least-squares
+fit on solves of the adding equations, standard errors and correlations of the result."""
+
+from .optimize import fit
+from .result import FitResult
+from .target import Target, as_target, direction_pairs
+from .template import Parameter, Template
+
+__all__ = ["fit", "FitResult", "Template", "Parameter", "Target", "as_target",
+           "direction_pairs"]

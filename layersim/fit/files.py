@@ -1,0 +1,65 @@
+"""Fit targets on disk: a saved BSDF (``.lsim``) or point measurements (``.npz``, ``.csv``).
+
+Point measurements (``docs/conventions.md``, "Fitting"):
+
+- ``.npz``: arrays ``wi`` (N, 3), ``wo`` (N, 3) and ``f`` (N,) or (N, C), f in 1/sr without the
+  cosine factor, and optionally ``sigma`` (the shape of f): the standard deviations of f;
+- ``.csv``: comma-separated rows ``wi_x, wi_y, wi_z, wo_x, wo_y, wo_z, f[, f_1, ...]`` (one f
+  column per channel); lines starting with ``#`` are comments.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FileFormatError
+
+__all__ = ["read_target"]
+
+
+def _npz(path: Path) -> tuple:
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            missing = [k for k in ("wi", "wo", "f") if k not in d.files]
+            if missing:
+                raise FileFormatError(f"{path}: point measurements need arrays wi, wo and f; "
+                                      f"missing {', '.join(missing)}")
+            return (d["wi"], d["wo"], d["f"]) + ((d["sigma"],) if "sigma" in d.files else ())
+    except (ValueError, OSError) as exc:
+        if isinstance(exc, FileFormatError):
+            raise
+        raise FileFormatError(f"{path}: not an .npz file of point measurements ({exc})") from None
+
+
+def _csv(path: Path) -> tuple:
+    try:
+        a = np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
+    except ValueError as exc:
+        raise FileFormatError(f"{path}: not a CSV file of numbers ({exc})") from None
+    if a.shape[1] < 7:
+        raise FileFormatError(f"{path}: point measurements need 7 or more columns (wi_x, wi_y, "
+                              f"wi_z, wo_x, wo_y, wo_z, f...), got {a.shape[1]}")
+    return a[:, 0:3], a[:, 3:6], a[:, 6:]
+
+
+def read_target(path) -> object:
+    """The fit target stored at ``path``: the path itself for a saved BSDF (``.lsim``), else
+    the tuple ``(wi, wo, f)`` or ``(wi, wo, f, sigma)`` of point measurements.
+
+    Raises
+    ------
+    FileFormatError
+        An unknown suffix or a file without the layout of the module docstring.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".lsim":
+        return path
+    if suffix == ".npz":
+        return _npz(path)
+    if suffix == ".csv":
+        return _csv(path)
+    raise FileFormatError(f"{path}: a fit target is a saved BSDF (.lsim) or point measurements "
+                          f"(.npz or .csv), got {suffix or 'no suffix'}")
