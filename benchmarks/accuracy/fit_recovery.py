@@ -11,7 +11,9 @@ Per case it prints the true and fitted values, the relative error, the reported 
 (and, for noisy points, the error in units of it), the warnings, the number of solves, the plans
 of the stages and the wall time of the fit. For a BSDF target it also prints the largest
 difference of ``f cos(theta_o)`` (1/sr) between the fitted and the hidden stack on the fit's own
-direction pairs, the criterion of issue 34 (1e-3). Not a test.
+direction pairs, the criterion of issue 34 (1e-3), and each case names the plan the hidden
+stack was solved on: a fit whose final plan differs from it fits through the difference of the
+discretisations. Not a test.
 
 Usage::
 
@@ -36,6 +38,7 @@ from headline import commit, machine  # noqa: E402
 
 import layersim  # noqa: E402
 from layersim.fit import direction_pairs  # noqa: E402
+from layersim.plan import make_plan  # noqa: E402
 
 #: Points of a noisy target, their relative noise, and the seed of the noise and directions.
 N_POINTS, NOISE, SEED = 3000, 0.02, 7
@@ -52,14 +55,22 @@ def _coat_medium() -> dict:
                       {"kind": "diffuse", "albedo": 0.5}]}
 
 
-def _aniso_conductor() -> dict:
-    return {"layer": [{"kind": "conductor", "ior": [0.2, 3.0], "roughness": [0.3, 0.15]}]}
+def _aniso_conductor(own_plan: bool = False) -> dict:
+    """A conductor of roughness (0.3, 0.15); with ``own_plan`` the template fixes the planner's
+    plan of the hidden stack (n 64, md 138), so that the fit runs in one stage on it."""
+    data = {"layer": [{"kind": "conductor", "ior": [0.2, 3.0], "roughness": [0.3, 0.15]}]}
+    if own_plan:
+        data["discretization"] = {"n": 64, "md": 138}
+    return data
 
 
 #: Free values of the coat-over-conductor cases: path in the scene dict -> bounds.
 COAT_CONDUCTOR_FREE = {(0, "ior"): (1.2, 1.9), (0, "roughness"): (0.1, 0.5),
                        (1, "ior", 0): (0.05, 1.0), (1, "ior", 1): (1.0, 5.0),
                        (1, "roughness"): (0.15, 0.6)}
+
+#: Free values of the anisotropic conductor: its two roughnesses.
+ANISO_FREE = {(0, "roughness", 0): (0.05, 0.5), (0, "roughness", 1): (0.05, 0.5)}
 
 #: name -> (hidden scene dict, free values {path: (lo, hi)}, target: "bsdf" or "points").
 CASES = {
@@ -72,8 +83,12 @@ CASES = {
                                                 (1, "albedo"): (0.5, 0.999)}, "bsdf"),
     "coat_hg_diffuse_tau_points": (_coat_medium(), {(0, "roughness"): (0.05, 0.5),
                                                     (1, "tau"): (0.5, 5.0)}, "points"),
-    "aniso_conductor": (_aniso_conductor(), {(0, "roughness", 0): (0.05, 0.5),
-                                             (0, "roughness", 1): (0.05, 0.5)}, "bsdf"),
+    "coat_hg_diffuse_tau_albedo": (_coat_medium(), {(0, "roughness"): (0.05, 0.5),
+                                                    (1, "tau"): (0.5, 5.0),
+                                                    (1, "albedo"): (0.5, 0.999)}, "bsdf"),
+    "aniso_conductor": (_aniso_conductor(), ANISO_FREE, "bsdf"),
+    "aniso_conductor_own_plan": (_aniso_conductor(own_plan=True), ANISO_FREE, "bsdf"),
+    "aniso_conductor_points": (_aniso_conductor(), ANISO_FREE, "points"),
 }
 
 
@@ -124,14 +139,16 @@ def _eval_gap(fitted_scene, hidden) -> float:
 
 def run_case(name: str) -> None:
     scene, free, kind = CASES[name]
-    hidden = layersim.solve(layersim.Scene.from_dict(scene))
+    hidden_scene = layersim.Scene.from_dict(scene)
+    hidden, plan = layersim.solve(hidden_scene), make_plan(hidden_scene)
     template, truth = _template(scene, free)
     target = hidden if kind == "bsdf" else _noisy_points(hidden)
     t0 = time.perf_counter()
     result = layersim.fit(template, target, progress=False)
     wall = time.perf_counter() - t0
     what = "solved BSDF" if kind == "bsdf" else f"{N_POINTS} points, {NOISE:.0%} noise and sigma"
-    print(f"{name}: target {what}; {len(result.history)} solves in {wall:.1f} s; plans "
+    print(f"{name}: target {what} (hidden stack solved on n={plan.n} md={plan.md}); "
+          f"{len(result.history)} solves in {wall:.1f} s; plans "
           + ", ".join(f"n={p['n']} md={p['md']} ({p['nfev']} evaluations)" for p in result.plans)
           + f"; rms residual {result.residual:.3g} {result.unit}")
     for pname, value in result.params.items():
