@@ -5,7 +5,8 @@ values are free (``{ fit = [lo, hi] }``, started at the midpoint of the bounds) 
 
 - the solved BSDF itself (``layersim.fit`` samples it on its 4608 direction pairs), or
 - 3000 point samples of it at random directions (mu_i, mu_o uniform in [0.1, 1], azimuths uniform)
-  with 2 % Gaussian noise on f and the stated sigma = 2 % of each reading.
+  with 2 % Gaussian noise on f and the stated sigma = 2 % of each reading (for one case also
+  with an absolute noise floor of 1e-3 1/sr, stated in sigma).
 
 Per case it prints the true and fitted values, the relative error, the reported standard error
 (and, for noisy points, the error in units of it), the warnings, the number of solves, the plans
@@ -42,6 +43,10 @@ from layersim.plan import make_plan  # noqa: E402
 
 #: Points of a noisy target, their relative noise, and the seed of the noise and directions.
 N_POINTS, NOISE, SEED = 3000, 0.02, 7
+#: The absolute noise floor (1/sr) of a "floor" target: a detector's dark noise. Without it the
+#: samples in the dark of a sharp lobe (f = 0 at a third of the anisotropic conductor's points)
+#: get sigma ~ 0, and any difference of discretisations there weighs without limit.
+FLOOR = 1e-3
 
 
 def _coat_conductor(coat_rough: float, base_rough: float) -> dict:
@@ -72,7 +77,8 @@ COAT_CONDUCTOR_FREE = {(0, "ior"): (1.2, 1.9), (0, "roughness"): (0.1, 0.5),
 #: Free values of the anisotropic conductor: its two roughnesses.
 ANISO_FREE = {(0, "roughness", 0): (0.05, 0.5), (0, "roughness", 1): (0.05, 0.5)}
 
-#: name -> (hidden scene dict, free values {path: (lo, hi)}, target: "bsdf" or "points").
+#: name -> (hidden scene dict, free values {path: (lo, hi)}, target: "bsdf", "points" or
+#: "floor" (points with the noise floor FLOOR added to the noise and to sigma)).
 CASES = {
     "coat0.3_conductor0.4": (_coat_conductor(0.3, 0.4), COAT_CONDUCTOR_FREE, "bsdf"),
     "coat0.15_conductor0.25": (_coat_conductor(0.15, 0.25), COAT_CONDUCTOR_FREE, "bsdf"),
@@ -89,6 +95,7 @@ CASES = {
     "aniso_conductor": (_aniso_conductor(), ANISO_FREE, "bsdf"),
     "aniso_conductor_own_plan": (_aniso_conductor(own_plan=True), ANISO_FREE, "bsdf"),
     "aniso_conductor_points": (_aniso_conductor(), ANISO_FREE, "points"),
+    "aniso_conductor_points_floor": (_aniso_conductor(), ANISO_FREE, "floor"),
 }
 
 
@@ -113,8 +120,9 @@ def _template(scene: dict, free: dict) -> tuple:
     return data, truth
 
 
-def _noisy_points(bsdf) -> tuple:
-    """``(wi, wo, f, sigma)``: N_POINTS random pairs, f with NOISE relative Gaussian noise."""
+def _noisy_points(bsdf, floor: float = 0.0) -> tuple:
+    """``(wi, wo, f, sigma)``: N_POINTS random pairs, f with NOISE relative Gaussian noise and,
+    with ``floor`` (1/sr), an absolute Gaussian noise of that deviation; sigma states both."""
     rng = np.random.default_rng(SEED)
     mu_i, mu_o = rng.uniform(0.1, 1.0, (2, N_POINTS))
     phi_i, phi_o = rng.uniform(0, 2 * np.pi, (2, N_POINTS))
@@ -126,7 +134,10 @@ def _noisy_points(bsdf) -> tuple:
     wi, wo = dirs(mu_i, phi_i), dirs(mu_o, phi_o)
     f = np.asarray(bsdf.eval(wi, wo)).reshape(N_POINTS) * \
         (1 + NOISE * rng.standard_normal(N_POINTS))
-    return wi, wo, f, NOISE * np.abs(f) + 1e-9
+    if not floor:
+        return wi, wo, f, NOISE * np.abs(f) + 1e-9
+    f = f + floor * rng.standard_normal(N_POINTS)
+    return wi, wo, f, np.hypot(NOISE * f, floor)
 
 
 def _eval_gap(fitted_scene, hidden) -> float:
@@ -142,11 +153,12 @@ def run_case(name: str) -> None:
     hidden_scene = layersim.Scene.from_dict(scene)
     hidden, plan = layersim.solve(hidden_scene), make_plan(hidden_scene)
     template, truth = _template(scene, free)
-    target = hidden if kind == "bsdf" else _noisy_points(hidden)
+    target = hidden if kind == "bsdf" else _noisy_points(hidden, FLOOR if kind == "floor" else 0)
     t0 = time.perf_counter()
     result = layersim.fit(template, target, progress=False)
     wall = time.perf_counter() - t0
-    what = "solved BSDF" if kind == "bsdf" else f"{N_POINTS} points, {NOISE:.0%} noise and sigma"
+    what = {"bsdf": "solved BSDF", "points": f"{N_POINTS} points, {NOISE:.0%} noise and sigma",
+            "floor": f"{N_POINTS} points, {NOISE:.0%} + {FLOOR:g} 1/sr noise and sigma"}[kind]
     print(f"{name}: target {what} (hidden stack solved on n={plan.n} md={plan.md}); "
           f"{len(result.history)} solves in {wall:.1f} s; plans "
           + ", ".join(f"n={p['n']} md={p['md']} ({p['nfev']} evaluations)" for p in result.plans)
@@ -155,7 +167,7 @@ def run_case(name: str) -> None:
         true, err = truth[pname], result.uncertainty[pname]
         line = (f"    {pname:<20} true {true:<7g} fitted {value:<10.6g} rel. error "
                 f"{(value - true) / true:+.2e}  std. error {err:.2g} ({err / abs(value):.2%})")
-        if kind == "points":
+        if kind != "bsdf":
             line += f"  error / std. error {(value - true) / err:+.2f}"
         print(line)
     if kind == "bsdf":
