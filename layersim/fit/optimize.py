@@ -5,7 +5,10 @@ Coarse to fine: a first stage solves on half the planner's ordinates and Fourier
 start scene), far from the optimum, where a rough residual suffices to move; the final stage
 solves on the planner's plan of the first stage's optimum, and its Jacobian gives the standard
 errors. Each stage keeps its discretisation fixed, so that the residuals are smooth in the
-parameters and finite differences see the physics, not a change of plan. A stage whose plan
+parameters and finite differences see the physics, not a change of plan. Where the final optimum
+needs more ordinates or orders than the plan it was found on (a narrower or more anisotropic lobe
+than the first stage's optimum), the final stage runs again from it on that optimum's plan, so
+that the result is never matched through a truncated plan. A stage whose plan
 turns out too coarse for a scene it visits (a narrower lobe, :class:`InfeasibleError`) is
 restarted from its best point on the plan of that scene. The optimiser is
 :func:`scipy.optimize.least_squares` (trust-region reflective, bounds, 2-point Jacobian).
@@ -20,7 +23,7 @@ import numpy as np
 from ..errors import InfeasibleError
 from ..plan import make_plan
 from ..solver import solve
-from .result import FitResult, correlation, covariance, diagnose
+from .result import FitResult, correlation, covariance, diagnose, misfit
 from .target import Target, as_target
 from .template import Template
 
@@ -160,6 +163,13 @@ def fit(template, target, *, coarse: bool = True, threads: int | None = None,
             final = k == len(stages) - 1
             res, fun, disc = _run_stage(template, target, disc, x, "final" if final else
                                         "coarse", history, bar, threads, final)
+            for _ in range(MAX_REPLANS if final else 0):
+                grown = _plan_of(template, res.x, disc)
+                if grown == disc:
+                    break
+                plans.append({**disc, "nfev": res.nfev})
+                res, fun, disc = _run_stage(template, target, grown, res.x, "final", history,
+                                            bar, threads, True)
             x = res.x
             plans.append({**disc, "nfev": res.nfev})
     return _result(template, res, history, plans, target.unit)
@@ -171,6 +181,7 @@ def _result(template: Template, res, history: list, plans: list, unit: str) -> F
     names = template.names
     warnings = diagnose(names, res.x, template.lo, template.hi, res.jac, cond, corr,
                         res.active_mask)
+    warnings += misfit(res.fun, unit)
     if res.status <= 0:
         warnings.append(f"the optimiser stopped before converging: {res.message}")
     return FitResult(scene=template.scene(res.x),

@@ -15,13 +15,17 @@ import numpy as np
 
 from ..scene import Scene
 
-__all__ = ["FitResult", "covariance", "diagnose"]
+__all__ = ["FitResult", "covariance", "diagnose", "misfit"]
 
 #: Condition number of the column-normalised Jacobian beyond which the parameters are called
 #: unidentifiable from the data (their combination is pinned, not each one).
 MAX_CONDITION = 1e6
 #: Correlation beyond which a pair of parameters is named as the cause.
 HIGH_CORRELATION = 0.99
+#: RMS of the residuals in standard deviations above which the stated sigmas and the model do
+#: not describe the data (an RMS chi of 1 is a fit within the noise; 2 is four times the
+#: variance the sigmas allow).
+MAX_CHI = 2.0
 
 
 @dataclass
@@ -129,3 +133,18 @@ def diagnose(names, x, lo, hi, jac, cond, corr, active) -> list:
                    f"{cond:.3g}): the data pin combinations of the parameters, not each one"
                    + ("; " + ", ".join(pairs) if pairs else ""))
     return out
+
+
+def misfit(residuals: np.ndarray, unit: str) -> list:
+    """A warning where measurements with stated standard deviations are fitted far outside them
+    (RMS chi above :data:`MAX_CHI`): the model cannot reach the data, or the sigmas are too small
+    (e.g. readings of 0 given a sigma relative to f; give them a floor)."""
+    if unit != "sigma (chi)" or residuals.size == 0:
+        return []
+    chi = float(np.sqrt(np.mean(np.square(residuals))))
+    if chi <= MAX_CHI:
+        return []
+    worst = float(np.max(np.abs(residuals)))
+    return [f"the residuals are {chi:.3g} standard deviations RMS (largest {worst:.3g}): the model "
+            "does not fit the data within the stated sigmas, or the sigmas are too small (readings "
+            "of 0 with a relative sigma need a floor); the uncertainties assume a fit within them"]
