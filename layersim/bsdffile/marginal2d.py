@@ -87,18 +87,24 @@ class Marginal2D:
         """``table[slice, index...]`` interpolated over the parameter corners."""
         return sum(w * table[(s,) + index] for s, w in corners)
 
+    def _cell(self, pos, corners):
+        """The grid cell of each point ``pos`` (n, 2) (clipped to the square): its column and
+        row ``i, j``, the fractions ``fx, fy`` within it and the corner values ``(v00, v10, v01,
+        v11)`` of the data interpolated over the parameter corners."""
+        pos = np.clip(np.asarray(pos, np.float64), 0.0, 1.0)
+        x, y = pos[:, 0] * (self.w - 1), pos[:, 1] * (self.h - 1)
+        i = np.minimum(x.astype(int), self.w - 2)
+        j = np.minimum(y.astype(int), self.h - 2)
+        mix = self._mix
+        corner = (mix(self.data, corners, (j, i)), mix(self.data, corners, (j, i + 1)),
+                  mix(self.data, corners, (j + 1, i)), mix(self.data, corners, (j + 1, i + 1)))
+        return i, j, x - i, y - j, corner
+
     # ---- evaluation -------------------------------------------------------------------
 
     def eval(self, pos, param=()) -> np.ndarray:
         """The (normalised, if so built) bilinear interpolant at ``pos`` (n, 2) = (x, y)."""
-        pos = np.clip(np.asarray(pos, np.float64), 0.0, 1.0)
-        c = self.corners(param)
-        x, y = pos[:, 0] * (self.w - 1), pos[:, 1] * (self.h - 1)
-        i = np.minimum(x.astype(int), self.w - 2)
-        j = np.minimum(y.astype(int), self.h - 2)
-        fx, fy = x - i, y - j
-        v00, v10 = self._mix(self.data, c, (j, i)), self._mix(self.data, c, (j, i + 1))
-        v01, v11 = self._mix(self.data, c, (j + 1, i)), self._mix(self.data, c, (j + 1, i + 1))
+        i, j, fx, fy, (v00, v10, v01, v11) = self._cell(pos, self.corners(param))
         return (1 - fy) * ((1 - fx) * v00 + fx * v10) + fy * ((1 - fx) * v01 + fx * v11)
 
     def sample(self, u, param=()):
@@ -130,15 +136,9 @@ class Marginal2D:
     def invert(self, pos, param=()):
         """Inverse of :meth:`sample`: the variates (n, 2) that map to ``pos`` (n, 2), and the
         density at ``pos``."""
-        pos = np.clip(np.asarray(pos, np.float64), 0.0, 1.0)
         c = self.corners(param)
         n = len(pos)
-        x, y = pos[:, 0] * (self.w - 1), pos[:, 1] * (self.h - 1)
-        i = np.minimum(x.astype(int), self.w - 2)
-        j = np.minimum(y.astype(int), self.h - 2)
-        fx, fy = x - i, y - j
-        v00, v10 = self._mix(self.data, c, (j, i)), self._mix(self.data, c, (j, i + 1))
-        v01, v11 = self._mix(self.data, c, (j + 1, i)), self._mix(self.data, c, (j + 1, i + 1))
+        i, j, fx, fy, (v00, v10, v01, v11) = self._cell(pos, c)
         c0, c1 = v00 + (v01 - v00) * fy, v10 + (v11 - v10) * fy
         pdf = c0 + (c1 - c0) * fx
         ux = _invert_segment(fx, 1.0 / (self.w - 1), c0, c1)
