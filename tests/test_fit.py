@@ -164,7 +164,7 @@ def test_bad_point_targets_are_refused_before_any_solve():
         layersim.fit(_template(), (wi, wi, np.ones(4), np.ones(3)))
     with pytest.raises(ValueError, match="sigma must be positive"):
         layersim.fit(_template(), (wi, wi, np.ones(4), np.zeros(4)))
-    with pytest.raises(ValueError, match="1 channel\\(s\\), the target 3"):
+    with pytest.raises(ValueError, match="1 channel\\(s\\), the target has 3"):
         layersim.fit(_template(), (wi, wi, np.ones((4, 3))))
 
 
@@ -182,7 +182,8 @@ def test_cli_refuses_a_bad_template_on_one_line(tmp_path, capsys):
     good.write_text('[[layer]]\nkind = "conductor"\nior = [0.2, 3.0]\n'
                     'roughness = { fit = [0.2, 0.5] }\n')
     assert main(["fit", str(good), str(tmp_path / "x.txt"), "-o", str(tmp_path / "o.toml")]) == 2
-    assert "a fit target is a saved BSDF (.lsim) or point measurements" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "a fit target is a saved BSDF (.lsim), a tabulated BSDF (.bsdf)" in err
 
 
 @pytest.mark.slow
