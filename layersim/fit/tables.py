@@ -32,6 +32,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..bsdffile.rawfile import read_bytes
 from ..errors import FileFormatError, InfeasibleError, SceneError
 
 __all__ = ["TableTarget", "MERL_THETA_MAX", "read_table"]
@@ -157,11 +158,7 @@ def read_table(path, wavelengths=None) -> object:
     path = Path(path)
     if path.suffix.lower() == ".binary":
         return _merl(path)
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(12)
-    except OSError as exc:
-        raise FileFormatError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    head = read_bytes(path, 12)
     if head.startswith(b"SCATFUN"):
         return _fourier(path)
     if head.startswith(b"tensor_file"):
