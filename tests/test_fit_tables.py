@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 
 import layersim
+from layersim.bsdffile import rgl_table
 from layersim.cli import main
 from layersim.errors import FileFormatError
 from layersim.fit import as_target, direction_pairs
+from layersim.fit.plot import plot_fit
 from layersim.fit.tables import MERL_THETA_MAX, TableTarget, read_table
 from layersim.layers.merl import half_diff, read_merl, write_merl
 
@@ -191,6 +193,8 @@ def test_a_stack_is_recovered_from_a_merl_file(tmp_path):
     print(f"fit from the MERL file: {time.perf_counter() - t0:.1f} s\n{result.summary()}")
     for name, value in result.params.items():
         assert value == pytest.approx(MERL_TRUTH[name], rel=0.01), name
+    plot_fit(tmp_path / "fit.png", result, target, read_table(path))   # NaN where no data
+    assert (tmp_path / "fit.png").stat().st_size > 10_000
 
 
 def test_wrong_channels_and_unreadable_files_are_refused(tmp_path, merl_file):
@@ -237,6 +241,15 @@ def test_rgl_channels_follow_the_file_and_the_template(tmp_path):
         as_target(tmp_path / "spectral.bsdf")
     target = as_target(tmp_path / "spectral.bsdf", wavelengths=(450.0, 550.0, 650.0))
     assert target.channels == 3 and np.all(target.f >= 0)
+    assert len(target.wi) == len(direction_pairs()[0])       # slices up to 89.9 degrees
+    # slices only up to 60 degrees: pairs with an elevation beyond are left out
+    table = rgl_table.read(tmp_path / "rgb.bsdf")
+    table.theta_i = table.theta_i * np.float32(np.radians(60.0) / table.theta_i.max())
+    table.write(tmp_path / "to60.bsdf")
+    target = as_target(tmp_path / "to60.bsdf")
+    cos60 = np.cos(np.radians(60.0))
+    assert 0 < len(target.wi) < len(direction_pairs()[0])
+    assert target.wi[:, 2].min() >= cos60 - 1e-6 and target.wo[:, 2].min() >= cos60 - 1e-6
 
 
 @pytest.mark.slow
