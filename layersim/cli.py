@@ -999,11 +999,13 @@ def cmd_render(args) -> int:
 
 def _add_fit(sub, quiet) -> None:
     sp = _subparser(sub, "fit", "fit the free values of a template ({ fit = [lo, hi] }) to a "
-                                "solved BSDF or point measurements by exact transport",
+                                "solved or tabulated BSDF or point measurements by exact "
+                                "transport",
                     parents=[quiet])
     sp.add_argument("template", help="scene file (.toml) with free values")
-    sp.add_argument("target", help="saved BSDF (.lsim) or point measurements (.npz or .csv; "
-                                   "layout in docs/conventions.md)")
+    sp.add_argument("target", help="saved BSDF (.lsim), tabulated BSDF (.bsdf: Fourier or "
+                                   "RGL), MERL file (.binary) or point measurements (.npz or "
+                                   ".csv; layouts in docs/conventions.md)")
     sp.add_argument("-o", "--output", required=True, help="fitted scene to write (.toml)")
     sp.add_argument("--plot", metavar="PNG", help="also draw the target against the fit")
     sp.set_defaults(func=cmd_fit)
@@ -1017,7 +1019,7 @@ def cmd_fit(args) -> int:
     out = _output(args.output, "-o")
     plot = _image(args.plot, "--plot") if args.plot else None
     template = Template(args.template)
-    raw = read_target(args.target)
+    raw = read_target(args.target, template.scene(template.start).wavelengths)
     target = as_target(raw)
     result = fit(template, target, progress=None if not args.quiet else False)
     out.write_text(dumps(result.scene.to_dict(), f"fitted by layersim fit to {args.target}"),
@@ -1025,7 +1027,7 @@ def cmd_fit(args) -> int:
     print(result.summary())
     print(f"wrote {out}")
     if plot:
-        plot_fit(plot, result, target, BSDF.load(raw) if isinstance(raw, Path) else None)
+        plot_fit(plot, result, target, None if isinstance(raw, tuple) else raw)
         print(f"wrote {plot}")
     return 0
 

@@ -90,6 +90,8 @@ def test_tensorfile_round_trip_and_bad_files(tmp_path):
         tensorfile.from_bytes(b"not a tensor file at all")
     with pytest.raises(FileFormatError, match="past the end"):
         tensorfile.from_bytes(data[:-4])
+    with pytest.raises(FileFormatError, match="missing.tensor: cannot read"):
+        tensorfile.read(tmp_path / "missing.tensor")
 
 
 @needs_mitsuba

@@ -10,7 +10,7 @@ import pytest
 import layersim
 from layersim.cli import main
 from layersim.errors import SceneError
-from layersim.fit import Template, direction_pairs
+from layersim.fit import Template, direction_pairs, noisy_points
 
 #: The hidden stack: a rough coat over a rough conductor.
 TRUTH = {"coat ior": 1.5, "coat roughness": 0.3, "eta": 0.2, "k": 3.0, "base roughness": 0.4}
@@ -58,16 +58,8 @@ def test_a_stack_is_recovered_from_its_solved_bsdf(hidden):
 
 @pytest.mark.slow
 def test_a_stack_is_recovered_from_noisy_points_within_its_uncertainty(hidden):
-    rng = np.random.default_rng(7)
-    n = 3000
-    mu_i, mu_o = rng.uniform(0.1, 1.0, (2, n))
-    phi_i, phi_o = rng.uniform(0, 2 * np.pi, (2, n))
-    def dirs(mu, phi):
-        s = np.sqrt(1 - mu * mu)
-        return np.stack([s * np.cos(phi), s * np.sin(phi), mu], axis=-1)
-    wi, wo = dirs(mu_i, phi_i), dirs(mu_o, phi_o)
-    f = np.asarray(hidden.eval(wi, wo)) * (1 + 0.02 * rng.standard_normal(n))
-    sigma = 0.02 * np.abs(f) + 1e-9         # what the instrument states: 2 % of each reading
+    n = 3000                # sigma: what the instrument states, 2 % of each reading
+    wi, wo, f, sigma = noisy_points(hidden, n=n, noise=0.02, seed=7)
     t0 = time.perf_counter()
     result = layersim.fit(_template(), (wi, wo, f, sigma))
     print(f"fit from {n} points: {time.perf_counter() - t0:.1f} s\n{result.summary()}")
@@ -164,7 +156,7 @@ def test_bad_point_targets_are_refused_before_any_solve():
         layersim.fit(_template(), (wi, wi, np.ones(4), np.ones(3)))
     with pytest.raises(ValueError, match="sigma must be positive"):
         layersim.fit(_template(), (wi, wi, np.ones(4), np.zeros(4)))
-    with pytest.raises(ValueError, match="1 channel\\(s\\), the target 3"):
+    with pytest.raises(ValueError, match="1 channel\\(s\\), the target has 3"):
         layersim.fit(_template(), (wi, wi, np.ones((4, 3))))
 
 
@@ -182,7 +174,8 @@ def test_cli_refuses_a_bad_template_on_one_line(tmp_path, capsys):
     good.write_text('[[layer]]\nkind = "conductor"\nior = [0.2, 3.0]\n'
                     'roughness = { fit = [0.2, 0.5] }\n')
     assert main(["fit", str(good), str(tmp_path / "x.txt"), "-o", str(tmp_path / "o.toml")]) == 2
-    assert "a fit target is a saved BSDF (.lsim) or point measurements" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "a fit target is a saved BSDF (.lsim), a tabulated BSDF (.bsdf)" in err
 
 
 @pytest.mark.slow
@@ -307,3 +300,29 @@ def test_the_final_stage_runs_again_where_its_optimum_needs_a_finer_plan():
     wi, wo = direction_pairs()
     gap = np.max(np.abs(_f_cos(layersim.solve(result.scene), wi, wo) - _f_cos(hidden, wi, wo)))
     assert gap < 1e-3, gap
+
+
+class _Flat:
+    """A BSDF of constant value per channel (1/sr): noisy_points needs only ``eval``."""
+
+    def __init__(self, values):
+        self.values = np.asarray(values, float)
+
+    def eval(self, wi, wo):
+        return np.broadcast_to(self.values, (len(wi),) + self.values.shape).squeeze()
+
+
+def test_noisy_points_carry_the_noise_they_state():
+    exact = noisy_points(_Flat(0.5), n=4000, noise=0.0, seed=3, mu_min=0.2)
+    wi, wo, f, sigma = exact
+    assert np.allclose(np.linalg.norm(wi, axis=1), 1) and np.allclose(np.linalg.norm(wo, axis=1), 1)
+    assert wi[:, 2].min() >= 0.2 and wo[:, 2].min() >= 0.2
+    assert np.all(f == 0.5) and np.all(sigma == 1e-9)
+    wi2, wo2, f2, sigma2 = noisy_points(_Flat(0.5), n=4000, noise=0.02, seed=3, mu_min=0.2)
+    assert np.array_equal(wi2, wi) and np.array_equal(wo2, wo)     # same seed, same pairs
+    assert np.std(f2 / 0.5 - 1) == pytest.approx(0.02, rel=0.05)
+    assert np.allclose(sigma2, 0.02 * np.abs(f2) + 1e-9)
+    *_, f3, sigma3 = noisy_points(_Flat([0.1, 0.2, 0.3]), n=4000, noise=0.02, floor=1e-2)
+    assert f3.shape == sigma3.shape == (4000, 3)
+    assert np.allclose(sigma3, np.hypot(0.02 * f3, 1e-2))
+    assert np.std(f3[:, 0] - 0.1) == pytest.approx(np.hypot(0.02 * 0.1, 1e-2), rel=0.05)

@@ -38,7 +38,7 @@ sys.path[:0] = [str(HERE.parent)]
 from headline import commit, machine  # noqa: E402
 
 import layersim  # noqa: E402
-from layersim.fit import direction_pairs  # noqa: E402
+from layersim.fit import direction_pairs, noisy_points  # noqa: E402
 from layersim.plan import make_plan  # noqa: E402
 
 #: Points of a noisy target, their relative noise, and the seed of the noise and directions.
@@ -120,26 +120,6 @@ def _template(scene: dict, free: dict) -> tuple:
     return data, truth
 
 
-def _noisy_points(bsdf, floor: float = 0.0) -> tuple:
-    """``(wi, wo, f, sigma)``: N_POINTS random pairs, f with NOISE relative Gaussian noise and,
-    with ``floor`` (1/sr), an absolute Gaussian noise of that deviation; sigma states both."""
-    rng = np.random.default_rng(SEED)
-    mu_i, mu_o = rng.uniform(0.1, 1.0, (2, N_POINTS))
-    phi_i, phi_o = rng.uniform(0, 2 * np.pi, (2, N_POINTS))
-
-    def dirs(mu, phi):
-        s = np.sqrt(1 - mu * mu)
-        return np.stack([s * np.cos(phi), s * np.sin(phi), mu], axis=-1)
-
-    wi, wo = dirs(mu_i, phi_i), dirs(mu_o, phi_o)
-    f = np.asarray(bsdf.eval(wi, wo)).reshape(N_POINTS) * \
-        (1 + NOISE * rng.standard_normal(N_POINTS))
-    if not floor:
-        return wi, wo, f, NOISE * np.abs(f) + 1e-9
-    f = f + floor * rng.standard_normal(N_POINTS)
-    return wi, wo, f, np.hypot(NOISE * f, floor)
-
-
 def _eval_gap(fitted_scene, hidden) -> float:
     """Largest |f cos(theta_o)| difference (1/sr) of the fitted and hidden stacks."""
     wi, wo = direction_pairs()
@@ -153,7 +133,8 @@ def run_case(name: str) -> None:
     hidden_scene = layersim.Scene.from_dict(scene)
     hidden, plan = layersim.solve(hidden_scene), make_plan(hidden_scene)
     template, truth = _template(scene, free)
-    target = hidden if kind == "bsdf" else _noisy_points(hidden, FLOOR if kind == "floor" else 0)
+    target = hidden if kind == "bsdf" else noisy_points(
+        hidden, N_POINTS, NOISE, FLOOR if kind == "floor" else 0.0, SEED)
     t0 = time.perf_counter()
     result = layersim.fit(template, target, progress=False)
     wall = time.perf_counter() - t0

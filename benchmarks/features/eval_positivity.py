@@ -47,8 +47,6 @@ import argparse
 import contextlib
 import datetime
 import os
-import platform
-import subprocess
 import sys
 import time
 from dataclasses import replace
@@ -56,10 +54,13 @@ from pathlib import Path
 
 import numpy as np
 
-import layersim
-import layersim.operators.fourier
-import layersim.operators.interpolation
-from layersim.kernels.projection import microfacet_values
+sys.path[:0] = [str(Path(__file__).resolve().parents[1])]
+from headline import commit, machine  # noqa: E402
+
+import layersim  # noqa: E402
+import layersim.operators.fourier  # noqa: E402
+import layersim.operators.interpolation  # noqa: E402
+from layersim.kernels.projection import microfacet_values  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENES = ROOT / "benchmarks" / "scenes"
@@ -339,15 +340,12 @@ def section_exact(n: int, seed: int) -> None:
 
 
 def header(argv: str) -> None:
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
-                                capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        commit = "unknown"
+    """The command, machine, date and commit of this output (``benchmarks/headline.py``)."""
+    device = os.environ.get("LAYERSIM_DEVICE", "cpu")
     print(f"# python benchmarks/features/eval_positivity.py {argv}")
-    print(f"# {platform.node()} ({platform.machine()}, {os.cpu_count()} cores), "
-          f"{datetime.date.today().isoformat()}, commit {commit}, "
-          f"LAYERSIM_DEVICE={os.environ.get('LAYERSIM_DEVICE', 'cpu')}")
+    print(f"# machine: {machine(device != 'cpu')}")
+    print(f"# date: {datetime.date.today().isoformat()}; commit: {commit()}; "
+          f"LAYERSIM_DEVICE={device}")
 
 
 def main() -> None:

@@ -29,8 +29,6 @@ from __future__ import annotations
 
 import datetime
 import os
-import platform
-import subprocess
 import sys
 import tempfile
 import time
@@ -38,8 +36,11 @@ from pathlib import Path
 
 import numpy as np
 
-import layersim
-from layersim.bsdffile import rgl
+sys.path[:0] = [str(Path(__file__).resolve().parents[1])]
+from headline import commit, machine  # noqa: E402
+
+import layersim  # noqa: E402
+from layersim.bsdffile import rgl  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 GOLD_RGB = [[0.143552, 3.98397], [0.377438, 2.38495], [1.43825, 1.60434]]
@@ -60,15 +61,12 @@ STACKS = {
 
 
 def header(argv: str) -> None:
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
-                                capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        commit = "unknown"
+    """The command, machine, date and commit of this output (``benchmarks/headline.py``)."""
+    device = os.environ.get("LAYERSIM_DEVICE", "cpu")
     print(f"# python benchmarks/features/rgl_export.py {argv}".rstrip())
-    print(f"# {platform.node()} ({platform.machine()}, {os.cpu_count()} cores), "
-          f"{datetime.date.today().isoformat()}, commit {commit}, "
-          f"LAYERSIM_DEVICE={os.environ.get('LAYERSIM_DEVICE', 'cpu')}")
+    print(f"# machine: {machine(device != 'cpu')}")
+    print(f"# date: {datetime.date.today().isoformat()}; commit: {commit()}; "
+          f"LAYERSIM_DEVICE={device}")
 
 
 def study(label: str, scene, resolutions, folder: Path) -> None:

@@ -21,6 +21,7 @@ from ..kernels import fourier_eval, fourier_eval2d
 from ..operators.operator import BLOCKS
 from .layout import (FLAG_BSDF, FLAG_COMPLEX, FLAG_EXTRAPOLATED, HEADER_SIZE, HEADER_V1,
                      HEADER_V2, MAGIC, U32, file_nodes, n_marginal, pair_maps)
+from .rawfile import read_bytes
 from .reading import coupled_operator, identify_grid, isotropic_operator
 from .v1 import layout_v1
 from .v2 import layout_v2
@@ -540,9 +541,4 @@ def export(bsdf: BSDF, path, version: int | None = None, alpha=(0.0, 0.0),
 
 def read(path) -> FourierTable:
     """Read and validate a ``.bsdf`` file (version 1 or 2)."""
-    path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise FileFormatError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    return FourierTable.from_bytes(data, source=str(path))
+    return FourierTable.from_bytes(read_bytes(path), source=str(path))

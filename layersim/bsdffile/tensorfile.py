@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FileFormatError
+from .rawfile import read_bytes
 
 MAGIC = b"tensor_file\0"
 VERSION = (1, 0)
@@ -110,9 +111,4 @@ def from_bytes(data: bytes, source: str = "tensor file") -> dict:
 
 def read(path) -> dict:
     """Read the fields of the tensor file at ``path``."""
-    path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise FileFormatError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    return from_bytes(data, source=str(path))
+    return from_bytes(read_bytes(path), source=str(path))

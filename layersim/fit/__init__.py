@@ -3,8 +3,9 @@ fit on solves of the adding equations, standard errors and correlations of the r
 
 from .optimize import fit
 from .result import FitResult
+from .synthetic import noisy_points
 from .target import Target, as_target, direction_pairs
 from .template import Parameter, Template
 
 __all__ = ["fit", "FitResult", "Template", "Parameter", "Target", "as_target",
-           "direction_pairs"]
+           "direction_pairs", "noisy_points"]

@@ -1,4 +1,6 @@
-"""Fit targets on disk: a saved BSDF (``.lsim``) or point measurements (``.npz``, ``.csv``).
+"""Fit targets on disk: a saved BSDF (``.lsim``), a tabulated BSDF (``.bsdf``: the Fourier
+format or the RGL tensor format), a MERL binary (``.binary``) (:mod:`.tables` for these
+three), or point measurements (``.npz``, ``.csv``).
 
 Point measurements (``docs/conventions.md``, "Fitting"):
 
@@ -15,6 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FileFormatError
+from ..solved.bsdf import BSDF
+from .tables import read_table
 
 __all__ = ["read_target"]
 
@@ -44,22 +48,28 @@ def _csv(path: Path) -> tuple:
     return a[:, 0:3], a[:, 3:6], a[:, 6:]
 
 
-def read_target(path) -> object:
-    """The fit target stored at ``path``: the path itself for a saved BSDF (``.lsim``), else
-    the tuple ``(wi, wo, f)`` or ``(wi, wo, f, sigma)`` of point measurements.
+def read_target(path, wavelengths=None) -> object:
+    """What the fit target file at ``path`` holds: a solved BSDF (``.lsim``, or a Fourier
+    ``.bsdf`` on nodes layersim knows), a :class:`~.tables.TableTarget` (other ``.bsdf``
+    files, MERL ``.binary``), or the tuple ``(wi, wo, f)`` or ``(wi, wo, f, sigma)`` of point
+    measurements. ``wavelengths``: see :func:`.tables.read_table`.
 
     Raises
     ------
     FileFormatError
-        An unknown suffix or a file without the layout of the module docstring.
+        An unknown suffix or a file without the layout of its format; the message names the
+        file.
     """
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".lsim":
-        return path
+        return BSDF.load(path)
+    if suffix in (".bsdf", ".binary"):
+        return read_table(path, wavelengths)
     if suffix == ".npz":
         return _npz(path)
     if suffix == ".csv":
         return _csv(path)
-    raise FileFormatError(f"{path}: a fit target is a saved BSDF (.lsim) or point measurements "
-                          f"(.npz or .csv), got {suffix or 'no suffix'}")
+    raise FileFormatError(f"{path}: a fit target is a saved BSDF (.lsim), a tabulated BSDF "
+                          "(.bsdf), a MERL file (.binary) or point measurements (.npz or "
+                          f".csv), got {suffix or 'no suffix'}")

@@ -116,8 +116,8 @@ def _run_stage(template, target, disc, x0, stage, history, bar, threads, final):
 def _check_channels(template: Template, target: Target) -> None:
     channels = template.scene(template.start).channels
     if channels != target.channels:
-        raise ValueError(f"fit: the template has {channels} channel(s), the target "
-                         f"{target.channels}")
+        raise ValueError(f"fit: the template has {channels} channel(s), "
+                         f"{target.source or 'the target'} has {target.channels}")
 
 
 def fit(template, target, *, coarse: bool = True, threads: int | None = None,
@@ -129,9 +129,12 @@ def fit(template, target, *, coarse: bool = True, threads: int | None = None,
     template : Template, dict or path
         A scene with free values ``{ fit = [lo, hi], start = x }`` (:mod:`.template`).
     target : BSDF, path or tuple
-        A solved BSDF, the path of a saved one (``.lsim``), or point measurements ``(wi, wo,
-        f)`` of shapes (N, 3), (N, 3), (N,) or (N, C) with f in 1/sr, optionally with the
-        standard deviations of f as a fourth array (:func:`.target.as_target`).
+        A solved BSDF; the path of a saved one (``.lsim``), of a tabulated BSDF (``.bsdf``:
+        Fourier or RGL format), of a MERL binary (``.binary``) or of point measurements
+        (``.npz``, ``.csv``) (:mod:`.files`, :mod:`.tables`); or point measurements ``(wi,
+        wo, f)`` of shapes (N, 3), (N, 3), (N,) or (N, C) with f in 1/sr, optionally with the
+        standard deviations of f as a fourth array (:func:`.target.as_target`). A spectral
+        RGL file is evaluated at the template's ``[stack] wavelengths``.
     coarse : bool
         Start with the coarse stage (module docstring).
     threads : int, optional
@@ -153,7 +156,7 @@ def fit(template, target, *, coarse: bool = True, threads: int | None = None,
     """
     from tqdm import tqdm
     template = template if isinstance(template, Template) else Template(template)
-    target = as_target(target)
+    target = as_target(target, template.scene(template.start).wavelengths)
     _check_channels(template, target)
     history, plans, x = [], [], template.start
     stages = _stages(template, coarse)

@@ -30,7 +30,7 @@ def _plane(theta_i: float, n: int = 181) -> tuple:
     return np.degrees(t), wi, wo
 
 
-def _slices(ax, target_bsdf: BSDF, fitted: BSDF) -> None:
+def _slices(ax, target_bsdf, fitted: BSDF) -> None:
     for k, th in enumerate(SLICE_THETA):
         t, wi, wo = _plane(th)
         for bsdf, style, who in ((target_bsdf, "-", "target"), (fitted, "--", "fit")):
@@ -52,10 +52,11 @@ def _scatter(ax, target: Target, fitted: BSDF) -> None:
     ax.set_ylabel("measured f cos theta_o (1/sr)")
 
 
-def plot_fit(path, result, target: Target, target_bsdf: BSDF | None = None) -> None:
+def plot_fit(path, result, target: Target, target_bsdf=None) -> None:
     """Write the picture of ``result`` (a :class:`~layersim.fit.FitResult`) against ``target``
     to ``path`` (any format matplotlib writes); ``target_bsdf`` is the target when it is a
-    solved BSDF (slices), None for point measurements (scatter)."""
+    solved BSDF or a tabulated file (:class:`~.tables.TableTarget`, NaN where it has no data)
+    (slices), None for point measurements (scatter)."""
     fitted = solve(result.scene)
     fig = Figure(figsize=(7, 5))
     FigureCanvasAgg(fig)

@@ -1,7 +1,8 @@
 """What a fit compares: the target as direction pairs and values of ``f cos(theta_o)``.
 
 A solved BSDF (or a saved ``.lsim``) is sampled on a fixed set of direction pairs
-(:func:`direction_pairs`); point measurements ``(wi, wo, f)`` are used as given. The residual of
+(:func:`direction_pairs`), a tabulated file (``.bsdf``, MERL; :mod:`.tables`) on those of them
+where the file has data; point measurements ``(wi, wo, f)`` are used as given. The residual of
 a fit is, at every pair and channel, ``(f_model - f_target) cos(theta_o)`` (1/sr times a
 cosine): the reflected radiance per unit incident irradiance, which weights each pair by what
 it carries and stays finite at grazing views. Measurements with their standard deviations,
@@ -19,6 +20,7 @@ import numpy as np
 
 from ..errors import LayersimError
 from ..solved.bsdf import BSDF
+from .tables import TableTarget
 
 __all__ = ["Target", "as_target", "direction_pairs"]
 
@@ -64,6 +66,8 @@ class Target:
         True for measurements (residual noise), False for a sampled BSDF.
     sigma : ndarray, shape (N, C), or None
         Standard deviations of ``f`` (1/sr), when the measurements come with them.
+    source : str
+        What the target is, for messages (empty: "the target").
     """
 
     wi: np.ndarray
@@ -71,6 +75,7 @@ class Target:
     f: np.ndarray
     points: bool
     sigma: np.ndarray | None = None
+    source: str = ""
 
     @property
     def channels(self) -> int:
@@ -130,28 +135,48 @@ def _points(wi, wo, f, sigma=None) -> Target:
     return Target(wi, wo, f, points=True, sigma=_sigma(sigma, f))
 
 
-def as_target(target) -> Target:
-    """A :class:`Target` from a solved BSDF, the path of a saved one (``.lsim``) or point
-    measurements ``(wi, wo, f)`` of shapes (N, 3), (N, 3), (N,) or (N, C), optionally with the
-    standard deviations of f, ``(wi, wo, f, sigma)``, sigma of the shape of f.
+def _table(table: TableTarget) -> Target:
+    """The pairs of :func:`direction_pairs` where ``table`` has data, and its values there."""
+    wi, wo = direction_pairs()
+    keep = table.valid(wi, wo)
+    if not np.any(keep):
+        raise LayersimError(f"fit target: {table.source} has no data on the pairs a fit "
+                            "compares (reflection above the surface, theta_i <= 75 degrees)")
+    wi, wo = wi[keep], wo[keep]
+    f = np.asarray(table.f(wi, wo), dtype=float).reshape(len(wi), -1)
+    if not np.all(np.isfinite(f)):
+        raise LayersimError(f"fit target: {table.source} holds a non-finite value")
+    return Target(wi, wo, f, points=False, source=table.source)
+
+
+def as_target(target, wavelengths=None) -> Target:
+    """A :class:`Target` from a solved BSDF, the path of a target file (:mod:`.files`: a saved
+    BSDF ``.lsim``, a tabulated ``.bsdf``, a MERL ``.binary``, points ``.npz`` or ``.csv``) or
+    point measurements ``(wi, wo, f)`` of shapes (N, 3), (N, 3), (N,) or (N, C), optionally
+    with the standard deviations of f, ``(wi, wo, f, sigma)``, sigma of the shape of f.
+    ``wavelengths`` (nm, one per channel): where a spectral RGL file is evaluated.
 
     Raises
     ------
     ValueError
         Arrays of the wrong shapes, directions below the surface, non-finite values.
     LayersimError
-        A path that is not a saved BSDF (``FileFormatError``), or a target of another type.
+        A file that cannot be read or is of no accepted kind (``FileFormatError``), or a
+        target of another type.
     """
     if isinstance(target, Target):
         return target
     if isinstance(target, (str, os.PathLike)):
-        target = BSDF.load(target)
+        from .files import read_target
+        target = read_target(target, wavelengths)
     if isinstance(target, BSDF):
         wi, wo = direction_pairs()
         f = np.asarray(target.eval(wi, wo), dtype=float).reshape(len(wi), -1)
         return Target(wi, wo, f, points=False)
+    if isinstance(target, TableTarget):
+        return _table(target)
     if isinstance(target, (tuple, list)) and len(target) in (3, 4):
         return _points(*target)
-    raise LayersimError("a fit target is a solved BSDF, the path of a saved one (.lsim) or "
-                        "point measurements (wi, wo, f) or (wi, wo, f, sigma), got "
-                        f"{type(target).__name__}")
+    raise LayersimError("a fit target is a solved BSDF, the path of a target file (.lsim, "
+                        ".bsdf, MERL .binary, .npz, .csv) or point measurements (wi, wo, f) "
+                        f"or (wi, wo, f, sigma), got {type(target).__name__}")

@@ -38,11 +38,13 @@ SCALES = (1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0)
 class MERLTable:
     """A measured BRDF: ``values[c, i, j, k]`` (1/sr, scaled, unmeasured samples 0) at the sample
     positions of the module docstring; ``source`` names the file; ``missing`` counts the
-    unmeasured samples."""
+    unmeasured samples; ``measured[i, j, k]`` (bool) is True where every channel was measured
+    (None: everywhere)."""
 
     values: np.ndarray
     source: str = ""
     missing: int = 0
+    measured: np.ndarray | None = None
 
     def eval(self, wi, wo) -> np.ndarray:
         """BRDF (1/sr) of unit directions (..., 3), both above the surface; shape (3, ...)."""
@@ -50,6 +52,15 @@ class MERLTable:
         out = _trilinear(self.values, u, v, w)
         up = (np.asarray(wi)[..., 2] > 0) & (np.asarray(wo)[..., 2] > 0)
         return np.where(up, out, 0.0)
+
+    def measured_at(self, wi, wo) -> np.ndarray:
+        """Whether the interpolation of :meth:`eval` at unit directions (..., 3) rests on
+        measured samples only (every corner of nonzero weight), bool (...)."""
+        if self.measured is None:
+            return np.ones(np.broadcast_shapes(np.shape(wi), np.shape(wo))[:-1], bool)
+        u, v, w = _index_coords(*half_diff(np.asarray(wi, float), np.asarray(wo, float)))
+        share = _trilinear(self.measured[None].astype(float), u, v, w)[0]
+        return share > 1.0 - 1e-9
 
     def packed(self, channel: int, dtype=np.float32) -> np.ndarray:
         """The values of one channel, flat (``[i, j, k]`` row-major), for the kernels."""
@@ -142,8 +153,9 @@ def read_merl(path, layer: int | None = None, kind: str | None = None,
     if not np.all(np.isfinite(values)):
         raise bad("non-finite values")
     missing = int(np.count_nonzero(values < 0))
+    measured = np.all(values >= 0, axis=0)
     values = np.maximum(values, 0.0) * np.asarray(SCALES)[:, None, None, None]
-    return MERLTable(values, source=str(path), missing=missing)
+    return MERLTable(values, source=str(path), missing=missing, measured=measured)
 
 
 def write_merl(path, brdf) -> None:
