@@ -70,7 +70,7 @@ def _stages(template: Template, coarse: bool, like=None) -> list:
     plan = make_plan(template.scene(template.start)) if last is None else None
     n, md = (plan.n, plan.md) if last is None else (last["n"], last["md"])
     first = {"n": max(_even(COARSE * n), MIN_COARSE_N), "md": max(int(COARSE * md), MIN_COARSE_MD)}
-    if not coarse or first["n"] >= n or (last is not None and 2 * first["n"] > n):
+    if not coarse or first["n"] >= n or (last is not None and MIN_COARSE_N > COARSE * n):
         return [last]
     return [first, last]
 
