@@ -126,3 +126,25 @@ def test_the_command_refuses_on_one_line_before_fitting(tmp_path, capsys, small_
 def test_a_template_without_fixed_layers_on_the_side_is_refused_by_the_api(small_stack):
     with pytest.raises(ValueError, match="no fixed layer below its last layer"):
         subtract_model(small_stack[0], {"layer": [SMALL_COAT, FREE_BASE]}, side="bottom")
+
+
+@pytest.mark.slow
+def test_an_unknown_coat_over_a_known_base_is_fitted_with_side_bottom():
+    """The known part below (a diffuse base of albedo 0.8), the coat's roughness free: the
+    unknown part is the coat, solved alone (transmissive, over the base's medium)."""
+    diffuse = {"kind": "diffuse", "albedo": 0.8}
+    stack = _solve([SMALL_COAT, diffuse], {"n": 24, "md": 8})
+    truth = _solve([SMALL_COAT], like=stack)
+    res = subtract_model(stack, {"layer": [dict(SMALL_COAT, roughness={"fit": [0.3, 0.7]}),
+                                           diffuse]}, side="bottom")
+    assert res.layers == (0,) and not res.base.opaque
+    assert res.fit.params["layer[0].roughness"] == pytest.approx(0.5, rel=1e-4)
+    assert _eval_error(res.base, truth) <= 1e-3
+
+
+def test_a_free_index_above_the_known_layers_is_refused(small_stack):
+    """The known base's operator depends on the index above it: a free coat index cannot be
+    fitted with the base as the known part."""
+    with pytest.raises(ValueError, match=r"layer\[0\].ior changes the index of the medium"):
+        subtract_model(small_stack[0], {"layer": [dict(SMALL_COAT, ior={"fit": [1.3, 1.7]}),
+                                                  BASE]}, side="bottom")
