@@ -148,3 +148,21 @@ def test_a_free_index_above_the_known_layers_is_refused(small_stack):
     with pytest.raises(ValueError, match=r"layer\[0\].ior changes the index of the medium"):
         subtract_model(small_stack[0], {"layer": [dict(SMALL_COAT, ior={"fit": [1.3, 1.7]}),
                                                   BASE]}, side="bottom")
+
+
+@pytest.mark.slow
+def test_a_base_outside_the_template_family_shows_in_the_residuals():
+    """A GGX conductor fitted with a Beckmann template (n 48): the nearest Beckmann base misses
+    by 26 % in eval over mu > 0.2, and the residuals say so, the re-adding residual (8e-2)
+    far above the plain subtraction's (1.4e-4), where the right family leaves both at
+    rounding."""
+    base = dict(BASE, distribution="ggx")
+    stack = _solve([COAT, base], {"n": 48, "md": 24})
+    truth = _solve([base], top_ior=1.5, like=stack)
+    res = subtract_model(stack, {"layer": [COAT, dict(FREE_BASE, distribution="beckmann")]},
+                         side="top", plain=True)
+    plain_residual = res.plain.info["subtract"]["residual_filled"]
+    print(f"rms {res.fit.residual:.3g}, re-adding {res.residual:.3g} (plain "
+          f"{plain_residual:.3g}), eval error {_eval_error(res.base, truth):.3g}")
+    assert _eval_error(res.base, truth) > 1e-2
+    assert res.fit.residual > 1e-3 and res.residual > 100 * plain_residual
