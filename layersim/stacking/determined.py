@@ -308,7 +308,8 @@ def assess(known: IsoOperator, recovered: IsoOperator, side: str, eps: float, ro
     ----------
     known, recovered : IsoOperator
         The known layer and the recovered one (rotational averages of anisotropic operators:
-        the estimate is made on the azimuthal mean).
+        the estimate is made on the azimuthal mean; the subtraction then replaces it, for its
+        final report, by one made in the coupled algebra, which the average under-reports).
     side : {"top", "bottom"}
         Where the known layer sits in the stack.
     eps : float
