@@ -48,18 +48,31 @@ def _even(n: float) -> int:
     return int(2 * np.ceil(n / 2))
 
 
-def _stages(template: Template, coarse: bool) -> list:
+def like_discretisation(like) -> dict:
+    """The discretisation (``n``, ``md``, quadrature rule and, if coupled, ``ms``) of a solved
+    BSDF, as ``[discretization]`` entries (what :func:`layersim.solve` with ``like=`` uses)."""
+    op = like.operators[0]
+    out = {"n": int(op.grid.n), "md": int(op.m), "quadrature": op.grid.rule}
+    ms = like.info.get("ms", getattr(op, "ms", None))
+    return out | ({"ms": int(ms)} if ms else {})
+
+
+def _stages(template: Template, coarse: bool, like=None) -> list:
     """The discretisations of the stages: ``[coarse, None]`` (None: plan at the stage's start),
-    or the template's own ``n``/``md`` for one stage when it fixes them."""
+    the template's own ``n``/``md`` for one stage when it fixes them, or with ``like`` (a solved
+    BSDF) ``[coarse, like's discretisation]``, the coarse stage at half of like's (none where
+    half would be below the floor: a coarser plan than the floor is refused by narrow lobes,
+    and the restart would then plan above like's)."""
     own = {k: v for k, v in template.data.get("discretization", {}).items() if k in ("n", "md")}
     if own:
         return [own]
-    plan = make_plan(template.scene(template.start))
-    first = {"n": max(_even(COARSE * plan.n), MIN_COARSE_N),
-             "md": max(int(COARSE * plan.md), MIN_COARSE_MD)}
-    if not coarse or first["n"] >= plan.n:
-        return [None]
-    return [first, None]
+    last = None if like is None else like_discretisation(like)
+    plan = make_plan(template.scene(template.start)) if last is None else None
+    n, md = (plan.n, plan.md) if last is None else (last["n"], last["md"])
+    first = {"n": max(_even(COARSE * n), MIN_COARSE_N), "md": max(int(COARSE * md), MIN_COARSE_MD)}
+    if not coarse or first["n"] >= n or (last is not None and MIN_COARSE_N > COARSE * n):
+        return [last]
+    return [first, last]
 
 
 class _Residuals:
@@ -121,7 +134,7 @@ def _check_channels(template: Template, target: Target) -> None:
 
 
 def fit(template, target, *, coarse: bool = True, threads: int | None = None,
-        progress: bool | None = None) -> FitResult:
+        progress: bool | None = None, like=None) -> FitResult:
     """Fit the free values of ``template`` to ``target`` by exact transport.
 
     Parameters
@@ -141,6 +154,10 @@ def fit(template, target, *, coarse: bool = True, threads: int | None = None,
         Threads of each solve.
     progress : bool, optional
         A progress bar on stderr (default: when stderr is a terminal).
+    like : BSDF, optional
+        Solve the final stage on this BSDF's discretisation (:func:`layersim.solve` ``like=``)
+        instead of the planner's: a BSDF target's own, so that the fit and the target share
+        their discretisation error (model-based subtraction, :mod:`.modelsub`).
 
     Returns
     -------
@@ -159,14 +176,14 @@ def fit(template, target, *, coarse: bool = True, threads: int | None = None,
     target = as_target(target, template.scene(template.start).wavelengths)
     _check_channels(template, target)
     history, plans, x = [], [], template.start
-    stages = _stages(template, coarse)
+    stages = _stages(template, coarse, like)
     with tqdm(desc="fit", unit="solve", disable=not (sys.stderr.isatty() if progress is None
                                                      else progress)) as bar:
         for k, disc in enumerate(stages):
             final = k == len(stages) - 1
             res, fun, disc = _run_stage(template, target, disc, x, "final" if final else
                                         "coarse", history, bar, threads, final)
-            for _ in range(MAX_REPLANS if final else 0):
+            for _ in range(MAX_REPLANS if final and like is None else 0):
                 grown = _plan_of(template, res.x, disc)
                 if grown == disc:
                     break
