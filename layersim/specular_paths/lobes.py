@@ -1,0 +1,134 @@
+"""The lobe of a specular path: the exit wave vector's deviation, linear in the slopes.
+
+At a facet of small slope ``sigma`` (horizontal components in the stack's frame), a propagation
+direction of horizontal wave vector ``p`` leaves with ``p + c sigma`` to first order:
+
+* reflection in gap ``a``: ``n_a d' = n_a d - 2 n_a (d.m) m`` gives ``c = 2 n_a mu_a``;
+* refraction from gap ``a`` to gap ``b``: the tangential wave vector is kept along the facet,
+  ``n_b d_b = n_a d_a - kappa m`` with ``kappa = n_b mu_b - n_a mu_a`` at zero slope, so
+  ``c = |n_a mu_a - n_b mu_b|``
+
+(the sign of ``c`` does not matter: slopes are even). Later events keep a deviation already
+made (flat faces keep ``p``), so a path's deviation is ``Delta p = sum_e c_e R_e diag(alpha_e)
+x_e`` over its near-specular events (``R_e`` the face's rotation, ``x_e`` unit-roughness slopes,
+Heitz 2014), whose density :mod:`.shape` gives: Belcour 2018's addition of the variances of
+narrow lobes (sec. 5, eq. 21-23), exact in shape as ``alpha -> 0`` up to the variation of the
+Fresnel and Smith terms across the lobe. The ``c_e`` are evaluated at the midpoint ``p_bar =
+(p_i + p_o) / 2``, which makes ``f`` reciprocal and is exact for one reflection (the
+half-vector slope is ``-(wi_h + wo_h) / (mu_i + mu_o)``). The density of ``p_o`` per unit area
+of wave vectors is that of ``Delta p``; since ``d^2 p = n^2 mu dOmega``, the BSDF of the path
+is ``f = E n_exit^2 density(Delta p)`` (radiance convention, ``docs/conventions.md``).
+
+The radial shape depends on the events' relative scales, which vary with ``|p|``: it is
+tabulated at :data:`P_NODES` values of ``|p|`` and interpolated linearly (a mixture of the two
+neighbouring shapes, which the sampler draws from exactly).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .shape import g_of_r, radial_shape, sample_t, shape_density
+
+__all__ = ["PathLobe", "P_NODES"]
+
+#: Values of ``|p|`` (over [0, the path's smallest gap index)) at which a shape is tabulated.
+P_NODES = 9
+
+
+class PathLobe:
+    """The lobe of one path with near-specular events ``rough`` (``(face, what, gap_a,
+    gap_b)``, :meth:`layersim.specular_paths.paths.Path.rough`) in a chain of gap indices
+    ``n``."""
+
+    def __init__(self, rough: list, n: tuple):
+        self.n = np.asarray(n, float)
+        self.events = rough
+        gaps = {g for _, _, a, b in rough for g in (a, b)}
+        self.p_max = min(self.n[g] for g in gaps) * (1.0 - 1e-9)
+        self.ggx = np.array([f.distribution == "ggx" for f, *_ in rough])
+        self.p_nodes = np.linspace(0.0, self.p_max * (1.0 - 1e-6), P_NODES)
+        self.h = np.stack([radial_shape(b, self.ggx) for b in self._beta(self.p_nodes)])
+
+    def _scales(self, pn: np.ndarray) -> np.ndarray:
+        """The ``c_e`` (Q, E) at ``|p|`` values ``pn`` (Q,)."""
+        mu = np.sqrt(np.clip(1.0 - (pn[:, None] / self.n[None, :]) ** 2, 0.0, 1.0))
+        out = []
+        for _, what, a, b in self.events:
+            if what == "R":
+                out.append(2.0 * self.n[a] * mu[:, a])
+            else:
+                out.append(np.abs(self.n[a] * mu[:, a] - self.n[b] * mu[:, b]))
+        return np.stack(out, axis=1)
+
+    def _beta(self, pn: np.ndarray) -> np.ndarray:
+        c = self._scales(pn)
+        tr = np.array([f.alpha_u ** 2 + f.alpha_v ** 2 for f, *_ in self.events])
+        m = c ** 2 * tr[None, :]
+        return np.sqrt(m / np.maximum(m.sum(axis=1, keepdims=True), 1e-300))
+
+    def matrix(self, p: np.ndarray) -> np.ndarray:
+        """The summed scale matrix ``M = sum_e c_e^2 R_e diag(alpha_e^2) R_e^T`` (Q, 2, 2)
+        at wave vectors ``p`` (Q, 2)."""
+        c = self._scales(np.linalg.norm(p, axis=1))
+        M = np.zeros((p.shape[0], 2, 2))
+        for e, (f, *_rest) in enumerate(self.events):
+            cr, sr = np.cos(f.rotation), np.sin(f.rotation)
+            R = np.array([[cr, -sr], [sr, cr]])
+            A = R @ np.diag([f.alpha_u ** 2, f.alpha_v ** 2]) @ R.T
+            M += (c[:, e] ** 2)[:, None, None] * A[None]
+        return M
+
+    def _mix(self, pn: np.ndarray):
+        x = np.clip(pn / self.p_nodes[-1], 0.0, 1.0) * (P_NODES - 1)
+        j = np.minimum(np.floor(x).astype(int), P_NODES - 2)
+        return j, x - j
+
+    def shape(self, pn: np.ndarray) -> np.ndarray:
+        """The interpolated shape tables (Q, T) at ``|p|`` = ``pn``."""
+        j, a = self._mix(pn)
+        return (1.0 - a)[:, None] * self.h[j] + a[:, None] * self.h[j + 1]
+
+    def density(self, dp: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Density (per unit area of wave vectors) of ``Delta p`` (Q, 2) for a lobe whose
+        scales are taken at ``p`` (Q, 2); 0 where ``|p|`` is beyond the path's gaps."""
+        pn = np.linalg.norm(p, axis=1)
+        M = self.matrix(p)
+        det = np.maximum(M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] ** 2, 1e-300)
+        inv = np.stack([M[:, 1, 1], -M[:, 0, 1], M[:, 0, 0]], axis=1) / det[:, None]
+        r2 = inv[:, 0] * dp[:, 0] ** 2 + 2 * inv[:, 1] * dp[:, 0] * dp[:, 1] \
+            + inv[:, 2] * dp[:, 1] ** 2
+        out = g_of_r(self.shape(pn), r2) / np.sqrt(det)
+        return np.where(pn < self.p_max, out, 0.0)
+
+    def whiten_root(self, p: np.ndarray) -> np.ndarray:
+        """``M^(1/2)`` (Q, 2, 2), mapping whitened coordinates to ``Delta p``."""
+        w, V = np.linalg.eigh(self.matrix(p))
+        return V @ (np.sqrt(np.maximum(w, 0.0))[:, :, None] * np.swapaxes(V, 1, 2))
+
+    def sample(self, p: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``Delta p`` (Q, 2) drawn from the lobe at ``p`` (Q, 2) with uniforms ``u`` (Q, 3):
+        the shape node by ``u[:, 0]`` (the mixture of :meth:`shape`), ``t`` by ``u[:, 1]``,
+        the azimuth by ``u[:, 2]``."""
+        j, a = self._mix(np.linalg.norm(p, axis=1))
+        j = j + (u[:, 0] < a)
+        t = sample_t(self.h[j], u[:, 1])
+        r = np.sqrt(t / (1.0 - t))
+        phi = 2.0 * np.pi * u[:, 2]
+        x = np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
+        return np.einsum("qij,qj->qi", self.whiten_root(p), x)
+
+    def nodes(self, p: np.ndarray, n_t: int, n_phi: int):
+        """Quadrature of the lobe at one ``p`` (2,): ``Delta p`` (K, 2) and weights (K,)
+        summing to 1 (midpoints in the shape's CDF and in the azimuth)."""
+        u = (np.arange(n_t) + 0.5) / n_t
+        t = sample_t(self.shape(np.array([np.linalg.norm(p)]))[0], u)
+        r = np.sqrt(t / (1.0 - t))
+        phi = (np.arange(n_phi) + 0.5) * 2.0 * np.pi / n_phi
+        x = np.stack([np.outer(r, np.cos(phi)).ravel(), np.outer(r, np.sin(phi)).ravel()], 1)
+        root = self.whiten_root(p[None, :])[0]
+        return x @ root.T, np.full(x.shape[0], 1.0 / x.shape[0])
+
+    def density_t(self, pn: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """``h(t)`` of the interpolated shape (for checks)."""
+        return shape_density(self.shape(pn), t)

@@ -1,0 +1,222 @@
+"""The BSDF of a chain as a sum over its specular paths (:mod:`.paths`, :mod:`.lobes`).
+
+Per path, for light from ``wi`` (horizontal wave vector of its propagation ``p_i = -n_in
+wi_h``) leaving toward ``wo`` (``p_o = n_out wo_h``):
+
+* no near-specular event: a delta (``specular``), leaving at ``p_o = p_i``;
+* one near-specular event: the exact microfacet BSDF of that face (Walter et al. 2007, eq. 20-21,
+  :func:`layersim.kernels.lobe.microfacet_reflection`) between the Snell images of ``wi`` and
+  ``wo`` in the gaps around it, times the smooth events' energies before it (at ``p_i``) and
+  after it (at ``p_o``), times ``n_out^2 / n_b^2`` (``n_b`` the index of the gap the event
+  leaves into; the density of ``p`` per ``d^2 p = n^2 mu dOmega``);
+* several: ``f = E(p_bar) n_out^2 density(p_o - p_i)`` (:class:`.lobes.PathLobe`).
+
+Energies (``albedo``, bins) are the path energies at ``p_i`` less the part of the lobe beyond the
+exit's horizon (``|p_o| >= n_out``), found with the lobe's quadrature nodes; for a path whose
+only near-specular event is its last one that part is already the event's single-scattering
+loss (``E_R``, ``E_T`` leave it out), so its nodes are renormalised instead.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..kernels.lobe import microfacet_reflection
+from .lobes import PathLobe
+from .paths import Events, enumerate_paths, face_energies
+
+__all__ = ["PathModel"]
+
+#: Quadrature of a lobe (``t`` nodes, azimuth nodes) for albedos and for bin energies.
+ALBEDO_NODES = (48, 48)
+BIN_NODES = (256, 256)
+
+
+class _Entry:
+    """A path with its lobe (None for a delta) and its near-specular step indices."""
+
+    def __init__(self, chain, path):
+        self.path = path
+        self.rough = path.rough(chain)
+        self.steps = [s for s, (e, _, what) in enumerate(path.steps)
+                      if what != "S" and not chain.elements[e].smooth]
+        self.lobe = PathLobe(self.rough, chain.n) if len(self.rough) > 1 else None
+        self.exact = len(self.rough) == 1
+        # only slabs after the single event: its E_R / E_T already leave out what it sends
+        # beyond the exit's horizon
+        self.last_exact = self.exact and all(w == "S" for _, _, w in path.steps[self.steps[0] + 1:])
+        if self.exact:
+            # the single event's lobe, for energies and sampling
+            self.lobe = PathLobe(self.rough, chain.n)
+
+
+class PathModel:
+    """The paths of ``chain`` (:class:`layersim.specular_paths.stack.Chain`) for light
+    entering at the top and, if the chain transmits, at the bottom."""
+
+    def __init__(self, chain, prune: float):
+        self.chain = chain
+        self.faces = face_energies(chain)
+        self.sets, self.entries = {}, {}
+        for top in ((True,) if chain.opaque else (True, False)):
+            ps = enumerate_paths(chain, self.faces, top, prune)
+            self.sets[top] = ps
+            self.entries[top] = [_Entry(chain, p) for p in ps.paths]
+
+    # ---- geometry ----------------------------------------------------------------------
+
+    def n_side(self, top: bool) -> float:
+        return self.chain.n[0] if top else self.chain.n[-1]
+
+    def p_in(self, wi: np.ndarray) -> np.ndarray:
+        """Horizontal wave vectors (Q, 2) of the propagation of light from ``wi`` (Q, 3)."""
+        n = np.where(wi[:, 2] > 0, self.n_side(True), self.n_side(False))
+        return -n[:, None] * wi[:, :2]
+
+    def p_out(self, wo: np.ndarray) -> np.ndarray:
+        n = np.where(wo[:, 2] > 0, self.n_side(True), self.n_side(False))
+        return n[:, None] * wo[:, :2]
+
+    def exit_direction(self, p: np.ndarray, top: bool) -> np.ndarray:
+        """Unit directions (Q, 3) leaving at the top or bottom with wave vectors ``p``; rows
+        beyond the horizon are (0, 0, 0)."""
+        n = self.n_side(top)
+        h = p / n
+        z2 = 1.0 - np.sum(h ** 2, axis=1)
+        ok = z2 > 0
+        z = np.sqrt(np.where(ok, z2, 0.0)) * (1.0 if top else -1.0)
+        return np.where(ok[:, None], np.concatenate([h, z[:, None]], axis=1), 0.0)
+
+    # ---- evaluation --------------------------------------------------------------------
+
+    def eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """``f(wi, wo)`` (Q, C) in 1/sr, deltas left out."""
+        out = np.zeros((wi.shape[0], self.chain.channels))
+        pi, po = self.p_in(wi), self.p_out(wo)
+        for top in self.entries:
+            for out_top in (True, False):
+                sel = ((wi[:, 2] > 0) == top) & ((wo[:, 2] > 0) == out_top) & (wi[:, 2] != 0) \
+                    & (wo[:, 2] != 0)
+                if sel.any():
+                    out[sel] = self._eval_block(top, out_top, pi[sel], po[sel])
+        return out
+
+    def _eval_block(self, top: bool, out_top: bool, pi, po) -> np.ndarray:
+        entries = [x for x in self.entries[top] if x.path.exit_top == out_top and x.rough]
+        out = np.zeros((pi.shape[0], self.chain.channels))
+        if not entries:
+            return out
+        pbar = 0.5 * (pi + po)
+        ev_mid = Events(self.chain, self.faces, pbar)
+        ev_in, ev_out = Events(self.chain, self.faces, pi), Events(self.chain, self.faces, po)
+        n_out = self.n_side(out_top)
+        for x in entries:
+            if x.exact:
+                out += self._exact(x, ev_in, ev_out, pi, po) * n_out ** 2 \
+                    / self.chain.n[x.path.gaps[x.steps[0] + 1]] ** 2
+            else:
+                dens = x.lobe.density(po - pi, pbar)
+                out += ev_mid.energy(x.path) * (n_out ** 2 * dens)[:, None]
+        return out
+
+    def _exact(self, x: _Entry, ev_in: Events, ev_out: Events, pi, po) -> np.ndarray:
+        """The single near-specular event's microfacet BSDF times the smooth events' energies
+        (Q, C)."""
+        s = x.steps[0]
+        e, down, what = x.path.steps[s]
+        face = self.chain.elements[e]
+        a, b = x.path.gaps[s], x.path.gaps[s + 1]
+        before = ev_in.energy(x.path, range(s))
+        after = ev_out.energy(x.path, range(s + 1, len(x.path.steps)))
+        na, nb = self.chain.n[a], self.chain.n[b]
+        mu_a, mu_b = ev_in.mu[a], ev_out.mu[b]
+        ok = ev_in.open[a] & ev_out.open[b]
+        up_after = down if what == "R" else not down      # travels up after the event
+        wi_l = np.concatenate([-pi / na, (mu_a if down else -mu_a)[:, None]], axis=1)
+        wo_l = np.concatenate([po / nb, (mu_b if up_after else -mu_b)[:, None]], axis=1)
+        if not down:                   # seen from below: mirror, relative index inverted
+            wi_l[:, 2], wo_l[:, 2] = -wi_l[:, 2], -wo_l[:, 2]
+        cr, sr = math.cos(face.rotation), math.sin(face.rotation)
+        frame = lambda w: np.stack([cr * w[:, 0] + sr * w[:, 1], -sr * w[:, 0] + cr * w[:, 1],
+                                    w[:, 2]], axis=1)
+        f = np.zeros((pi.shape[0], self.chain.channels))
+        for c, eta in enumerate(face.eta):
+            eta = complex(eta)
+            er = eta.real if (down or eta.imag > 0) else 1.0 / eta.real
+            f[ok, c] = microfacet_reflection(frame(wi_l[ok]), frame(wo_l[ok]), er, face.alpha_u,
+                                             face.alpha_v, face.distribution, eta.imag)
+        return f * before * after
+
+    # ---- energies ------------------------------------------------------------------------
+
+    def kept_fraction(self, x: _Entry, p: np.ndarray, nodes: tuple) -> np.ndarray:
+        """Share (Q,) of the lobe of ``x`` inside the exit's horizon, at wave vectors ``p``."""
+        n_out = self.n_side(x.path.exit_top)
+        out = np.empty(p.shape[0])
+        for q in range(p.shape[0]):
+            dp, w = x.lobe.nodes(p[q], *nodes)
+            out[q] = np.sum(w[np.sum((p[q] + dp) ** 2, axis=1) < n_out ** 2])
+        return out
+
+    def albedo(self, wi: np.ndarray):
+        """``(R, T)`` (Q, C) with the deltas, per incident direction."""
+        R = np.zeros((wi.shape[0], self.chain.channels))
+        T = np.zeros_like(R)
+        for top in self.entries:
+            sel = (wi[:, 2] > 0) == top
+            if not sel.any():
+                continue
+            p = self.p_in(wi[sel])
+            ev = Events(self.chain, self.faces, p)
+            for x in self.entries[top]:
+                e = ev.energy(x.path)
+                if x.rough and not x.last_exact:
+                    e = e * self.kept_fraction(x, p, ALBEDO_NODES)[:, None]
+                if x.path.exit_top == top:
+                    R[sel] += e
+                else:
+                    T[sel] += e
+        return R, T
+
+    def specular(self, wi: np.ndarray) -> dict:
+        """``{"top" | "bottom": (energy (Q, C), wo (Q, 3))}`` of the delta paths."""
+        p = self.p_in(wi)
+        out = {s: [np.zeros((wi.shape[0], self.chain.channels)), None] for s in ("top", "bottom")}
+        for side, top_exit in (("top", True), ("bottom", False)):
+            out[side][1] = self.exit_direction(p, top_exit)
+        for top in self.entries:
+            sel = (wi[:, 2] > 0) == top
+            if not sel.any():
+                continue
+            ev = Events(self.chain, self.faces, p[sel])
+            for x in self.entries[top]:
+                if not x.rough:
+                    out["top" if x.path.exit_top else "bottom"][0][sel] += ev.energy(x.path)
+        for side in out:
+            out[side][0][np.linalg.norm(out[side][1], axis=1) == 0] = 0.0
+        return {k: tuple(v) for k, v in out.items()}
+
+    def bins(self, wi: np.ndarray, mu_edges, phi_edges) -> dict:
+        """Energy (n_mu, n_phi, C) per bin of each side for one direction ``wi`` (3,)."""
+        top = wi[2] > 0
+        p = self.p_in(wi[None, :])
+        ev = Events(self.chain, self.faces, p)
+        shape = (mu_edges.size - 1, phi_edges.size - 1, self.chain.channels)
+        out = {"top": np.zeros(shape), "bottom": np.zeros(shape)}
+        for x in self.entries[top]:
+            e = ev.energy(x.path)[0]
+            if x.rough:
+                dp, w = x.lobe.nodes(p[0], *BIN_NODES)
+            else:
+                dp, w = np.zeros((1, 2)), np.ones(1)
+            wo = self.exit_direction(p[0] + dp, x.path.exit_top)
+            keep = np.linalg.norm(wo, axis=1) > 0
+            if x.last_exact and w[keep].sum() > 0:
+                w = w / w[keep].sum()
+            phi = np.arctan2(wo[keep, 1], wo[keep, 0]) % (2 * np.pi)
+            H, _, _ = np.histogram2d(np.abs(wo[keep, 2]), phi, bins=[mu_edges, phi_edges],
+                                     weights=w[keep])
+            out["top" if x.path.exit_top else "bottom"] += H[:, :, None] * e[None, None, :]
+        return out
