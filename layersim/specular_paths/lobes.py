@@ -118,17 +118,6 @@ class PathLobe:
         x = np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
         return np.einsum("qij,qj->qi", self.whiten_root(p), x)
 
-    def nodes(self, p: np.ndarray, n_t: int, n_phi: int):
-        """Quadrature of the lobe at one ``p`` (2,): ``Delta p`` (K, 2) and weights (K,)
-        summing to 1 (midpoints in the shape's CDF and in the azimuth)."""
-        u = (np.arange(n_t) + 0.5) / n_t
-        t = sample_t(self.shape(np.array([np.linalg.norm(p)]))[0], u)
-        r = np.sqrt(t / (1.0 - t))
-        phi = (np.arange(n_phi) + 0.5) * 2.0 * np.pi / n_phi
-        x = np.stack([np.outer(r, np.cos(phi)).ravel(), np.outer(r, np.sin(phi)).ravel()], 1)
-        root = self.whiten_root(p[None, :])[0]
-        return x @ root.T, np.full(x.shape[0], 1.0 / x.shape[0])
-
     def density_t(self, pn: np.ndarray, t: np.ndarray) -> np.ndarray:
         """``h(t)`` of the interpolated shape (for checks)."""
         return shape_density(self.shape(pn), t)
