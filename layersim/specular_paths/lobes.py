@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .shape import g_of_r, radial_shape, sample_t, shape_density
+from .shape import cumulative, g_of_r, radial_shape, sample_t
 
 __all__ = ["PathLobe", "P_NODES"]
 
@@ -49,6 +49,7 @@ class PathLobe:
         self.ggx = np.array([f.distribution == "ggx" for f, *_ in rough])
         self.p_nodes = np.linspace(0.0, self.p_max * (1.0 - 1e-6), P_NODES)
         self.h = np.stack([radial_shape(b, self.ggx) for b in self._beta(self.p_nodes)])
+        self.C = cumulative(self.h)
 
     def _scales(self, pn: np.ndarray) -> np.ndarray:
         """The ``c_e`` (Q, E) at ``|p|`` values ``pn`` (Q,)."""
@@ -84,22 +85,18 @@ class PathLobe:
         j = np.minimum(np.floor(x).astype(int), P_NODES - 2)
         return j, x - j
 
-    def shape(self, pn: np.ndarray) -> np.ndarray:
-        """The interpolated shape tables (Q, T) at ``|p|`` = ``pn``."""
-        j, a = self._mix(pn)
-        return (1.0 - a)[:, None] * self.h[j] + a[:, None] * self.h[j + 1]
-
     def density(self, dp: np.ndarray, p: np.ndarray) -> np.ndarray:
         """Density (per unit area of wave vectors) of ``Delta p`` (Q, 2) for a lobe whose
-        scales are taken at ``p`` (Q, 2); 0 where ``|p|`` is beyond the path's gaps."""
+        scales are taken at ``p`` (Q, 2): the mixture of the two shapes around ``|p|``; 0
+        where ``|p|`` is beyond the path's gaps."""
         pn = np.linalg.norm(p, axis=1)
         M = self.matrix(p)
         det = np.maximum(M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] ** 2, 1e-300)
-        inv = np.stack([M[:, 1, 1], -M[:, 0, 1], M[:, 0, 0]], axis=1) / det[:, None]
-        r2 = inv[:, 0] * dp[:, 0] ** 2 + 2 * inv[:, 1] * dp[:, 0] * dp[:, 1] \
-            + inv[:, 2] * dp[:, 1] ** 2
-        out = g_of_r(self.shape(pn), r2) / np.sqrt(det)
-        return np.where(pn < self.p_max, out, 0.0)
+        r2 = (M[:, 1, 1] * dp[:, 0] ** 2 - 2 * M[:, 0, 1] * dp[:, 0] * dp[:, 1]
+              + M[:, 0, 0] * dp[:, 1] ** 2) / det
+        j, a = self._mix(pn)
+        g = (1.0 - a) * g_of_r(self.h, r2, j) + a * g_of_r(self.h, r2, j + 1)
+        return np.where(pn < self.p_max, g / np.sqrt(det), 0.0)
 
     def whiten_root(self, p: np.ndarray) -> np.ndarray:
         """``M^(1/2)`` (Q, 2, 2), mapping whitened coordinates to ``Delta p``."""
@@ -112,12 +109,8 @@ class PathLobe:
         the azimuth by ``u[:, 2]``."""
         j, a = self._mix(np.linalg.norm(p, axis=1))
         j = j + (u[:, 0] < a)
-        t = sample_t(self.h[j], u[:, 1])
+        t = sample_t(self.h, self.C, j, u[:, 1])
         r = np.sqrt(t / (1.0 - t))
         phi = 2.0 * np.pi * u[:, 2]
         x = np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
         return np.einsum("qij,qj->qi", self.whiten_root(p), x)
-
-    def density_t(self, pn: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """``h(t)`` of the interpolated shape (for checks)."""
-        return shape_density(self.shape(pn), t)

@@ -102,6 +102,19 @@ class Events:
         return out
 
 
+    def energy_reversed(self, path: Path) -> np.ndarray:
+        """Energy (Q, C) of ``path`` travelled backwards (the path that
+        :func:`enumerate_paths` finds from its exit): each transmission met from the other
+        side, reflections and slab crossings as they are."""
+        out = np.ones((self.p.shape[0], self.chain.channels))
+        for s, (e, down, what) in enumerate(path.steps):
+            if what == "T":
+                out = out * self.step(e, not down, "T", path.gaps[s + 1])
+            else:
+                out = out * self.step(e, down, what, path.gaps[s])
+        return out
+
+
 def face_energies(chain) -> dict:
     """A :class:`FaceEnergies` per face element of ``chain``."""
     return {e: FaceEnergies(el) for e, el in enumerate(chain.elements) if isinstance(el, Face)}

@@ -26,7 +26,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from scipy.special import j0, k1, roots_legendre
+from scipy.special import j0, k1
 
 __all__ = ["T_NODES", "radial_shape", "shape_density", "sample_t", "g_of_r"]
 
@@ -34,7 +34,7 @@ __all__ = ["T_NODES", "radial_shape", "shape_density", "sample_t", "g_of_r"]
 #: the tails' limit ``sum of beta_e^2 over GGX events``.
 T_NODES = np.concatenate([np.linspace(0.0, 0.995, 200), [1.0]])
 
-#: Gauss-Legendre nodes of the Hankel integral on ``k`` in [0, 60]: the product of
+#: Gauss-Legendre nodes (60 panels) of the Hankel integral on ``k`` in [0, 60]: the product of
 #: characteristic functions is below ``exp(-60)`` there (``sum beta_e >= 1`` for GGX events,
 #: ``exp(-k^2 / 4)`` for Beckmann ones), and 6000 nodes resolve ``J0(k r)`` to ``r = 14``
 #: (135 periods) to 1e-12.
@@ -43,9 +43,12 @@ _K_MAX, _K_NODES = 60.0, 6000
 
 @functools.lru_cache(maxsize=1)
 def _hankel_kernel():
-    x, w = roots_legendre(_K_NODES)
-    k = 0.5 * _K_MAX * (x + 1.0)
-    w = 0.5 * _K_MAX * w
+    # composite Gauss-Legendre: 60 panels of 100 nodes (one rule of 6000 nodes costs seconds
+    # to build)
+    x, w = np.polynomial.legendre.leggauss(_K_NODES // 60)
+    width = _K_MAX / 60
+    k = ((np.arange(60)[:, None] + 0.5 * (x[None, :] + 1.0)) * width).ravel()
+    w = np.tile(0.5 * width * w, 60)
     t = T_NODES[:-1]
     r = np.sqrt(t / (1.0 - t))
     return k, j0(np.outer(r, k)) * (w * k)[None, :] / (2.0 * np.pi), r
@@ -84,37 +87,48 @@ def radial_shape(beta, ggx) -> np.ndarray:
     return h / np.trapezoid(h, T_NODES)
 
 
-def shape_density(h: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """``h(t)``, the density of ``t`` (piecewise linear); ``h`` (..., T) broadcast with ``t``."""
-    h = np.asarray(h, float)
+def _cell(t: np.ndarray):
+    """The node interval of each ``t`` and the fraction across it."""
     t = np.clip(np.asarray(t, float), 0.0, 1.0)
     i = np.clip(np.searchsorted(T_NODES, t, side="right") - 1, 0, T_NODES.size - 2)
-    a = (t - T_NODES[i]) / (T_NODES[i + 1] - T_NODES[i])
+    return i, (t - T_NODES[i]) / (T_NODES[i + 1] - T_NODES[i])
+
+
+def shape_density(h: np.ndarray, t: np.ndarray, rows=None) -> np.ndarray:
+    """``h(t)``, the density of ``t`` (piecewise linear): ``h`` one table (T,), or tables
+    (P, T) of which row ``rows[q]`` serves ``t[q]``."""
+    h = np.asarray(h, float)
+    i, a = _cell(t)
     if h.ndim == 1:
         return (1.0 - a) * h[i] + a * h[i + 1]
-    rows = np.arange(h.shape[0])
     return (1.0 - a) * h[rows, i] + a * h[rows, i + 1]
 
 
-def g_of_r(h: np.ndarray, r2: np.ndarray) -> np.ndarray:
-    """The radial density ``g`` (per unit area of whitened coordinates) at ``r^2``."""
-    t = r2 / (1.0 + r2)
-    return shape_density(h, t) * (1.0 - t) ** 2 / np.pi
-
-
-def sample_t(h: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """``t`` drawn with density ``h`` (rows of (Q, T), or one (T,)) from uniforms ``u`` (Q,):
-    the inverse of the piecewise quadratic CDF."""
-    h = np.atleast_2d(np.asarray(h, float))
-    u = np.asarray(u, float)
-    if h.shape[0] == 1:
-        h = np.broadcast_to(h, (u.size, h.shape[1]))
+def cumulative(h: np.ndarray) -> np.ndarray:
+    """The CDF of ``h`` (..., T) at the nodes (trapezoids: exact for piecewise linear)."""
     d = np.diff(T_NODES)
-    C = np.concatenate([np.zeros((h.shape[0], 1)),
-                        np.cumsum(0.5 * (h[:, 1:] + h[:, :-1]) * d, axis=1)], axis=1)
-    u = u * C[:, -1]
-    i = np.clip((C < u[:, None]).sum(axis=1) - 1, 0, d.size - 1)
-    rows = np.arange(h.shape[0])
+    c = np.cumsum(0.5 * (h[..., 1:] + h[..., :-1]) * d, axis=-1)
+    return np.concatenate([np.zeros(h.shape[:-1] + (1,)), c], axis=-1)
+
+
+def g_of_r(h: np.ndarray, r2: np.ndarray, rows=None) -> np.ndarray:
+    """The radial density ``g`` (per unit area of whitened coordinates) at ``r^2``
+    (tables and rows as :func:`shape_density`)."""
+    t = r2 / (1.0 + r2)
+    return shape_density(h, t, rows) * (1.0 - t) ** 2 / np.pi
+
+
+def sample_t(h: np.ndarray, C: np.ndarray, rows: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """``t`` drawn with density ``h[rows[q]]`` (tables (P, T), their CDFs ``C``
+    (:func:`cumulative`)) from uniforms ``u`` (Q,): the inverse of the piecewise quadratic
+    CDF."""
+    d = np.diff(T_NODES)
+    u = np.asarray(u, float) * C[rows, -1]
+    i = np.empty(u.shape, int)
+    for r in np.unique(rows):
+        sel = rows == r
+        i[sel] = np.searchsorted(C[r], u[sel], side="right") - 1
+    i = np.clip(i, 0, d.size - 1)
     h0, h1, di = h[rows, i], h[rows, i + 1], d[i]
     a = 0.5 * (h1 - h0) / di
     v = np.maximum(u - C[rows, i], 0.0)
