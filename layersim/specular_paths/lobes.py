@@ -19,7 +19,8 @@ half-vector slope is ``-(wi_h + wo_h) / (mu_i + mu_o)``). The density of ``p_o``
 of wave vectors is that of ``Delta p``; since ``d^2 p = n^2 mu dOmega``, the BSDF of the path
 is ``f = E n_exit^2 density(Delta p)`` (radiance convention, ``docs/conventions.md``).
 
-The radial shape depends on the events' relative scales, which vary with ``|p|``: it is
+For Beckmann events alone the sum is Gaussian, ``g(r) = exp(-r^2) / pi``, used in closed form.
+Otherwise the radial shape depends on the events' relative scales, which vary with ``|p|``: it is
 tabulated at :data:`P_NODES` values of ``|p|`` and interpolated linearly (a mixture of the two
 neighbouring shapes, which the sampler draws from exactly).
 """
@@ -50,6 +51,9 @@ class PathLobe:
         self.p_nodes = np.linspace(0.0, self.p_max * (1.0 - 1e-6), P_NODES)
         self.h = np.stack([radial_shape(b, self.ggx) for b in self._beta(self.p_nodes)])
         self.C = cumulative(self.h)
+        # Beckmann events only: the sum is exactly Gaussian, evaluated and drawn in closed
+        # form (the table, linear in t, is coarse in a Gaussian's far tail)
+        self.gaussian = not self.ggx.any()
 
     def _scales(self, pn: np.ndarray) -> np.ndarray:
         """The ``c_e`` (Q, E) at ``|p|`` values ``pn`` (Q,)."""
@@ -94,8 +98,11 @@ class PathLobe:
         det = np.maximum(M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] ** 2, 1e-300)
         r2 = (M[:, 1, 1] * dp[:, 0] ** 2 - 2 * M[:, 0, 1] * dp[:, 0] * dp[:, 1]
               + M[:, 0, 0] * dp[:, 1] ** 2) / det
-        j, a = self._mix(pn)
-        g = (1.0 - a) * g_of_r(self.h, r2, j) + a * g_of_r(self.h, r2, j + 1)
+        if self.gaussian:
+            g = np.exp(-r2) / np.pi
+        else:
+            j, a = self._mix(pn)
+            g = (1.0 - a) * g_of_r(self.h, r2, j) + a * g_of_r(self.h, r2, j + 1)
         return np.where(pn < self.p_max, g / np.sqrt(det), 0.0)
 
     def whiten_root(self, p: np.ndarray) -> np.ndarray:
@@ -107,10 +114,13 @@ class PathLobe:
         """``Delta p`` (Q, 2) drawn from the lobe at ``p`` (Q, 2) with uniforms ``u`` (Q, 3):
         the shape node by ``u[:, 0]`` (the mixture of :meth:`shape`), ``t`` by ``u[:, 1]``,
         the azimuth by ``u[:, 2]``."""
-        j, a = self._mix(np.linalg.norm(p, axis=1))
-        j = j + (u[:, 0] < a)
-        t = sample_t(self.h, self.C, j, u[:, 1])
-        r = np.sqrt(t / (1.0 - t))
+        if self.gaussian:
+            r = np.sqrt(-np.log1p(-np.minimum(u[:, 1], 1.0 - 1e-16)))
+        else:
+            j, a = self._mix(np.linalg.norm(p, axis=1))
+            j = j + (u[:, 0] < a)
+            t = sample_t(self.h, self.C, j, u[:, 1])
+            r = np.sqrt(t / (1.0 - t))
         phi = 2.0 * np.pi * u[:, 2]
         x = np.stack([r * np.cos(phi), r * np.sin(phi)], axis=1)
         return np.einsum("qij,qj->qi", self.whiten_root(p), x)

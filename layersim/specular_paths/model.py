@@ -25,6 +25,7 @@ import numpy as np
 from ..kernels.lobe import microfacet_reflection
 from .lobes import PathLobe
 from .paths import Events, enumerate_paths, face_energies
+from .binning import direction_bin, path_bins
 from .trace import trace_path
 
 __all__ = ["PathModel"]
@@ -35,11 +36,13 @@ BIN_NODES = 2 ** 16
 
 
 def _nodes_for(share: float, most: int) -> int:
-    """Sobol nodes for a path carrying ``share`` of the strongest path's energy: ``most``
-    down to a share of 1 %, 4096 below it. A GGX lobe's heavy tail makes the traced energy
+    """Sobol nodes for a path carrying ``share`` of the strongest path's energy: ``4 most``
+    down to a share of 10 %, ``most`` down to 1 %, 4096 below it. A GGX lobe's heavy tail makes the traced energy
     converge slowly (a glass interface of alpha 0.02 at 50 degrees: 1e-3 relative at 4096
     nodes, 3e-5 at 65536), so the strong paths take ``most`` and the faint ones, whose
     errors are then below 2e-5 of the incident power, the floor."""
+    if share >= 0.1:
+        return 4 * most
     return most if share >= 0.01 else min(most, 4096)
 
 
@@ -110,25 +113,27 @@ class PathModel:
         return out
 
     def _eval_block(self, top: bool, out_top: bool, pi, po) -> np.ndarray:
-        entries = [x for x in self.entries[top] if x.path.exit_top == out_top and x.rough]
         out = np.zeros((pi.shape[0], self.chain.channels))
-        if not entries:
-            return out
+        for x in self.entries[top]:
+            if x.path.exit_top == out_top and x.rough:
+                out += self.eval_path(x, pi, po)
+        return out
+
+    def eval_path(self, x: _Entry, pi: np.ndarray, po: np.ndarray) -> np.ndarray:
+        """``f`` (Q, C) of the path ``x`` from wave vectors ``pi`` to ``po`` (Q, 2)."""
+        n_out = self.n_side(x.path.exit_top)
+        if x.exact:
+            ev_in = Events(self.chain, self.faces, pi)
+            ev_out = Events(self.chain, self.faces, po)
+            return self._exact(x, ev_in, ev_out, pi, po) * n_out ** 2 \
+                / self.chain.n[x.path.gaps[x.steps[0] + 1]] ** 2
         pbar = 0.5 * (pi + po)
         ev_mid = Events(self.chain, self.faces, pbar)
-        ev_in, ev_out = Events(self.chain, self.faces, pi), Events(self.chain, self.faces, po)
-        n_out = self.n_side(out_top)
-        for x in entries:
-            if x.exact:
-                out += self._exact(x, ev_in, ev_out, pi, po) * n_out ** 2 \
-                    / self.chain.n[x.path.gaps[x.steps[0] + 1]] ** 2
-            else:
-                dens = x.lobe.density(po - pi, pbar)
-                # the geometric mean with the reversed path makes f reciprocal: a rough face
-                # transmits slightly differently from either side (single-scattering loss)
-                energy = np.sqrt(ev_mid.energy(x.path) * ev_mid.energy_reversed(x.path))
-                out += energy * (n_out ** 2 * dens)[:, None]
-        return out
+        dens = x.lobe.density(po - pi, pbar)
+        # the geometric mean with the reversed path makes f reciprocal: a rough face
+        # transmits slightly differently from either side (single-scattering loss)
+        energy = np.sqrt(ev_mid.energy(x.path) * ev_mid.energy_reversed(x.path))
+        return energy * (n_out ** 2 * dens)[:, None]
 
     def _exact(self, x: _Entry, ev_in: Events, ev_out: Events, pi, po) -> np.ndarray:
         """The single near-specular event's microfacet BSDF times the smooth events' energies
@@ -213,9 +218,10 @@ class PathModel:
         return {k: tuple(v) for k, v in out.items()}
 
     def bins(self, wi: np.ndarray, mu_edges, phi_edges) -> dict:
-        """Energy (n_mu, n_phi, C) per bin of each side for one direction ``wi`` (3,): each
-        delta in the bin of its direction, each traced node (:func:`.trace.trace_path`,
-        :data:`BIN_NODES` per path) in the bin of its exit direction."""
+        """Energy (n_mu, n_phi, C) per bin of each side for one direction ``wi`` (3,):
+        each delta in the bin of its direction, each path with lobes by
+        :func:`.binning.path_bins` (traced where its nodes are dense, ``eval`` integrated over
+        the bin elsewhere)."""
         top = bool(wi[2] > 0)
         p = self.p_in(wi[None, :])
         ev = Events(self.chain, self.faces, p)
@@ -223,20 +229,15 @@ class PathModel:
         out = {"top": np.zeros(shape), "bottom": np.zeros(shape)}
         energy = [ev.energy(x.path)[0].max() for x in self.entries[top]]
         for x, e in zip(self.entries[top], energy):
-            if x.rough:
-                # nodes in proportion to the path's share, so that faint paths cost little
-                count = _nodes_for(e / max(max(energy), 1e-300), BIN_NODES)
-                po, w = trace_path(self, x, p[0], count)
-                w = w / count
-            else:
-                po, w = p, ev.energy(x.path)
-            wo = self.exit_direction(po, x.path.exit_top)
-            keep = np.linalg.norm(wo, axis=1) > 0
-            # (+ 0.0: a direction along the normal has azimuth 0, not pi from -0.0)
-            phi = np.arctan2(wo[keep, 1] + 0.0, wo[keep, 0] + 0.0) % (2 * np.pi)
             side = out["top" if x.path.exit_top else "bottom"]
-            for c in range(self.chain.channels):
-                H, _, _ = np.histogram2d(np.abs(wo[keep, 2]), phi, bins=[mu_edges, phi_edges],
-                                         weights=w[keep, c])
-                side[:, :, c] += H
+            if x.rough:
+                share = e / max(max(energy), 1e-300)
+                side += path_bins(self, x, p[0], _nodes_for(share, BIN_NODES), mu_edges,
+                                  phi_edges)
+                continue
+            wo = self.exit_direction(p, x.path.exit_top)
+            if np.linalg.norm(wo) > 0:
+                i, j = direction_bin(wo[0], mu_edges, phi_edges)
+                if i is not None:
+                    side[i, j] += ev.energy(x.path)[0]
         return out
