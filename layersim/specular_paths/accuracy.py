@@ -27,8 +27,7 @@ def measured_error_line() -> str:
     if not MEASURED_ERROR:
         return "error against Monte Carlo: not measured"
     worst_r = max(v[0] for v in MEASURED_ERROR.values())
-    bins = ", ".join(f"{k} {100 * v[1]:.0f} %" for k, v in MEASURED_ERROR.items())
+    bins = ", ".join(f"{k} {100 * v[1]:.1f} %" for k, v in MEASURED_ERROR.items())
     return (f"measured against Monte Carlo (tests/test_specular_paths_walk.py, 1e7 paths, "
             f"0-70 deg): albedo within {worst_r:.1e}; populated 10 x 12 bins within 3 sigma, "
-            f"worst angle: {bins} (below 97 %: light trapped by total internal reflection "
-            "at 70 deg, lost by the paths)")
+            f"worst angle: {bins} (the causes of those below 97 %: KNOWN_SHORT there)")
