@@ -20,7 +20,8 @@ ROWS = {
                    {"kind": "dielectric", "ior": 1.0, "roughness": 0.01}],
     "coat over gold": [{"kind": "dielectric", "ior": 1.5, "roughness": 0.0},
                        {"kind": "conductor", "ior": GOLD, "roughness": 0.01}],
-    "Bati one lobe": [{"kind": "dielectric", "ior": 1.789, "roughness": 0.02}],
+    "Bati one lobe": [{"kind": "dielectric", "ior": 1.78916, "roughness": 0.02,
+                       "distribution": "ggx"}],
 }
 
 

@@ -24,7 +24,8 @@ STACKS = {
     "tinted lacquer": [{"kind": "dielectric", "ior": 1.5, "roughness": 0.02,
                         "distribution": "ggx"},
                        {"kind": "medium", "albedo": 0.0, "tau": [0.1, 0.4, 1.2]}],
-    "Bati one lobe": [{"kind": "dielectric", "ior": 1.789, "roughness": 0.02}],
+    "Bati one lobe": [{"kind": "dielectric", "ior": 1.78916, "roughness": 0.02,
+                       "distribution": "ggx"}],
 }
 MU_EDGES, PHI_EDGES = np.linspace(0, 1, 11), np.linspace(0, 2 * np.pi, 13)
 
