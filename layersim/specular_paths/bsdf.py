@@ -43,8 +43,13 @@ class SpecularPathsBSDF:
     """
 
     representation = "specular-paths"
-    boundary: dict = {}
+    #: Like :class:`layersim.solved.bsdf.BSDF` of an isotropic stack without smooth
+    #: boundaries kept out of operators (callers that ask get the plain answer).
     anisotropic = False
+
+    @property
+    def boundary(self) -> dict:
+        return {}
 
     def __init__(self, scene, plan=None, info: dict | None = None, prune: float = PRUNE):
         self.scene = scene

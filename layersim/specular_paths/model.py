@@ -23,9 +23,9 @@ import math
 import numpy as np
 
 from ..kernels.lobe import microfacet_reflection
+from .binning import direction_bin, path_bins
 from .lobes import PathLobe
 from .paths import Events, enumerate_paths, face_energies
-from .binning import direction_bin, path_bins
 from .trace import trace_path
 
 __all__ = ["PathModel"]
@@ -37,10 +37,10 @@ BIN_NODES = 2 ** 16
 
 def _nodes_for(share: float, most: int) -> int:
     """Sobol nodes for a path carrying ``share`` of the strongest path's energy: ``4 most``
-    down to a share of 10 %, ``most`` down to 1 %, 4096 below it. A GGX lobe's heavy tail makes the traced energy
-    converge slowly (a glass interface of alpha 0.02 at 50 degrees: 1e-3 relative at 4096
-    nodes, 3e-5 at 65536), so the strong paths take ``most`` and the faint ones, whose
-    errors are then below 2e-5 of the incident power, the floor."""
+    down to a share of 10 %, ``most`` down to 1 %, 4096 below it. A GGX lobe's heavy tail
+    makes the traced energy converge slowly (a glass interface of alpha 0.02 at 50 degrees:
+    1e-3 relative at 4096 nodes, 3e-5 at 65536), so the strong paths take many nodes and the
+    faint ones, whose errors are then below 2e-5 of the incident power, the floor."""
     if share >= 0.1:
         return 4 * most
     return most if share >= 0.01 else min(most, 4096)
@@ -54,11 +54,9 @@ class _Entry:
         self.rough = path.rough(chain)
         self.steps = [s for s, (e, _, what) in enumerate(path.steps)
                       if what != "S" and not chain.elements[e].smooth]
-        self.lobe = PathLobe(self.rough, chain.n) if len(self.rough) > 1 else None
         self.exact = len(self.rough) == 1
-        if self.exact:
-            # the single event's lobe, for energies and sampling
-            self.lobe = PathLobe(self.rough, chain.n)
+        # a single event's lobe serves sampling; eval uses its exact microfacet BSDF
+        self.lobe = PathLobe(self.rough, chain.n) if self.rough else None
 
 
 class PathModel:

@@ -45,6 +45,7 @@ class PathSampler:
         u = np.asarray(u, float)
         if u.shape[-1:] != (2,) or np.any((u < 0) | (u >= 1)) or not np.all(np.isfinite(u)):
             raise ValueError("u must be uniforms in [0, 1) of shape (..., 2)")
+        # u padded to three columns only to broadcast against wi (..., 3)
         wi, u = np.broadcast_arrays(wi, np.concatenate([u, u[..., :1]], axis=-1))
         return wi.reshape(-1, 3), wi.shape[:-1], u[..., :2].reshape(-1, 2)
 
