@@ -84,7 +84,8 @@ class PathLobe:
             M += (c[:, e] ** 2)[:, None, None] * A[None]
         return M
 
-    def _mix(self, pn: np.ndarray):
+    def mixture(self, pn: np.ndarray):
+        """The shape node below each ``|p|`` (Q,) and the weight of the node above it."""
         x = np.clip(pn / self.p_nodes[-1], 0.0, 1.0) * (P_NODES - 1)
         j = np.minimum(np.floor(x).astype(int), P_NODES - 2)
         return j, x - j
@@ -101,7 +102,7 @@ class PathLobe:
         if self.gaussian:
             g = np.exp(-r2) / np.pi
         else:
-            j, a = self._mix(pn)
+            j, a = self.mixture(pn)
             g = (1.0 - a) * g_of_r(self.h, r2, j) + a * g_of_r(self.h, r2, j + 1)
         return np.where(pn < self.p_max, g / np.sqrt(det), 0.0)
 
@@ -117,7 +118,7 @@ class PathLobe:
         if self.gaussian:
             r = np.sqrt(-np.log1p(-np.minimum(u[:, 1], 1.0 - 1e-16)))
         else:
-            j, a = self._mix(np.linalg.norm(p, axis=1))
+            j, a = self.mixture(np.linalg.norm(p, axis=1))
             j = j + (u[:, 0] < a)
             t = sample_t(self.h, self.C, j, u[:, 1])
             r = np.sqrt(t / (1.0 - t))

@@ -89,7 +89,7 @@ class PathSampler:
             if s.size == 0:
                 continue
             x = entries[j]
-            _, a = x.lobe._mix(np.linalg.norm(p[s], axis=1))
+            _, a = x.lobe.mixture(np.linalg.norm(p[s], axis=1))
             pick = v[s] < a
             v2 = np.where(pick, v[s] / np.maximum(a, 1e-300),
                           (v[s] - a) / np.maximum(1.0 - a, 1e-300))
