@@ -259,9 +259,13 @@ def cmd_solve(args) -> int:
     finally:
         bars.close()
     info = bsdf.info
-    _print_notes(info)
     _print_accuracy(info)
-    print(f"stack: {info['nnz']} nonzero coefficients, {info['memory_bytes'] / 2**20:.1f} MiB")
+    if "nnz" in info:
+        _print_notes(info)
+        print(f"stack: {info['nnz']} nonzero coefficients, "
+              f"{info['memory_bytes'] / 2**20:.1f} MiB")
+    else:
+        print(f"stack: specular paths ({repr(bsdf)})")
     print("albedo (energy fractions):")
     print(_albedo_table(bsdf, TABLE_ANGLES))
     bsdf.save(out)

@@ -46,6 +46,7 @@ from ..errors import FileFormatError, OperatorError
 from .isobsdf import IsoEvaluator
 from ..operators.operator import from_arrays
 from .sampling import sampler_for
+from ..specular_paths.bsdf import FORMAT_VERSION_PATHS, SpecularPathsBSDF
 
 FORMAT_VERSION = 1
 #: First bytes of a saved BSDF: a zip archive (numpy ``.npz``) of plain arrays.
@@ -438,10 +439,13 @@ class BSDF:
                     raise FileFormatError(f"{path}: a zip archive, but not a saved layersim "
                                           "BSDF (BSDF.save / 'layersim solve' write those)")
                 version = int(d["version"])
-                if version > FORMAT_VERSION_ANISO:
+                if version > FORMAT_VERSION_PATHS:
                     raise FileFormatError(f"{path}: format version {version} is newer than "
-                                          f"this layersim ({FORMAT_VERSION_ANISO}); upgrade "
+                                          f"this layersim ({FORMAT_VERSION_PATHS}); upgrade "
                                           "layersim")
+                if version == FORMAT_VERSION_PATHS:
+                    # a stack of specular paths: the scene that rebuilds them
+                    return SpecularPathsBSDF.from_arrays(d)
                 channels = range(int(d["channels"]))
                 ops = [from_arrays(d, prefix=f"c{c}_") for c in channels]
                 boundary = _read_boundary(d, prefix="c0_")

@@ -1,0 +1,110 @@
+"""The stacks that specular paths solve, as a chain of flat elements.
+
+A stack of flat interfaces (smooth, or near-specular: both roughnesses at most
+:data:`~layersim.solved.lobe.NEAR_SPECULAR_ALPHA`) and non-scattering media (albedo 0) is a
+list of elements, top to bottom: *faces* (interfaces) and *slabs* (media). Between elements
+lie *gaps*: gap ``g`` is above element ``g``; gap 0 is the medium above the stack and gap
+``K`` the one below it. Each gap has one real absolute index; a slab attenuates a crossing
+at cosine ``mu`` by ``exp(-tau / mu)`` per channel (Beer-Lambert; ``tau`` along the normal,
+``docs/conventions.md``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..errors import InfeasibleError
+from ..solved.lobe import NEAR_SPECULAR_ALPHA
+
+__all__ = ["Face", "Chain", "chain_of", "why_not"]
+
+
+@dataclass(frozen=True)
+class Face:
+    """An interface between gap ``g`` (above, index ``n_above``) and gap ``g + 1``.
+
+    ``eta`` (per channel) is the index below relative to the one above, complex ``eta + i k``
+    for a conductor (``k > 0``: it only reflects). ``alpha_u``, ``alpha_v``, ``rotation``
+    (radians) and ``distribution`` as :class:`layersim.layers.interface.Interface`."""
+
+    eta: tuple
+    alpha_u: float
+    alpha_v: float
+    distribution: str
+    rotation: float
+
+    @property
+    def smooth(self) -> bool:
+        return self.alpha_u == 0.0 and self.alpha_v == 0.0
+
+    @property
+    def conductor(self) -> bool:
+        return any(complex(e).imag > 0.0 for e in self.eta)
+
+
+@dataclass(frozen=True)
+class Chain:
+    """The elements of a stack (:class:`Face` or a slab's per-channel ``tau`` tuple), the
+    absolute index of every gap (``len(elements) + 1`` values) and the channel count."""
+
+    elements: tuple
+    n: tuple
+    channels: int
+
+    @property
+    def opaque(self) -> bool:
+        return any(isinstance(e, Face) and e.conductor for e in self.elements)
+
+    def rough_faces(self) -> list:
+        return [e for e in self.elements if isinstance(e, Face) and not e.smooth]
+
+
+def why_not(scene) -> str | None:
+    """Why ``scene`` is not a stack of flat interfaces and clear media (one line), or None
+    if it is one with at least one near-specular interface."""
+    mono = scene.channel(0)
+    rough = 0
+    for i, layer in enumerate(mono.layers):
+        if not layer.is_interface and not layer.opaque:          # a medium
+            if any(s.layers[i].albedo > 0.0 and s.layers[i].tau > 0.0
+                   for s in (scene.channel(c) for c in range(scene.channels))):
+                return f"layer {i} (medium) scatters (albedo > 0)"
+            continue
+        if not layer.is_interface:
+            return f"layer {i} ({layer.kind}) is not a flat interface"
+        if layer.ndf is not None or layer.film is not None:
+            return f"layer {i} ({layer.kind}) has a tabulated NDF or a film"
+        if max(layer.alpha_u, layer.alpha_v) > NEAR_SPECULAR_ALPHA:
+            return (f"layer {i} ({layer.kind}) is rougher than {NEAR_SPECULAR_ALPHA:g} on an "
+                    "axis")
+        if layer.energy_compensation != "none" or layer.shadowing != "separable":
+            return f"layer {i} ({layer.kind}) has energy compensation or correlated shadowing"
+        if not layer.opaque and len({s.layers[i].ior for s in
+                                               (scene.channel(c) for c in range(scene.channels))}) > 1:
+            # one index per gap: the horizontal wave vector is one for all channels
+            return f"layer {i} (dielectric) has a per-channel (dispersive) index"
+        rough += not layer.smooth
+    if rough == 0:
+        return "no interface is near-specular (all smooth)"
+    return None
+
+
+def chain_of(scene) -> Chain:
+    """The :class:`Chain` of ``scene`` (a stack for which :func:`why_not` is None)."""
+    why = why_not(scene)
+    if why is not None:
+        raise InfeasibleError(f"scene {scene.name!r} is not solved by specular paths: {why}")
+    monos = [scene.channel(c) for c in range(scene.channels)]
+    elements, n = [], [scene.top_ior]
+    for i, layer in enumerate(monos[0].layers):
+        if not layer.is_interface:
+            elements.append(tuple(float(m.layers[i].tau) for m in monos))
+            n.append(n[-1])
+            continue
+        eta = tuple(complex(m.relative_ior(i)) for m in monos)
+        elements.append(Face(eta, float(layer.alpha_u), float(layer.alpha_v),
+                             layer.distribution, float(layer.rotation)))
+        n.append(n[-1] * eta[0].real if eta[0].imag == 0.0 else n[-1])
+        if eta[0].imag > 0.0:
+            break
+    return Chain(tuple(elements), tuple(float(x) for x in n), scene.channels)
