@@ -20,16 +20,21 @@ Usage: python benchmarks/features/specular_paths_eval.py   (output: specular_pat
 
 from __future__ import annotations
 
+import datetime
 import math
-import platform
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-import layersim
-from layersim.specular_paths import SpecularPathsBSDF
-from layersim.specular_paths.paths import Events
-from layersim.specular_paths.trace import trace_path
+sys.path[:0] = [str(Path(__file__).resolve().parents[1])]
+from headline import commit, machine  # noqa: E402
+
+import layersim  # noqa: E402
+from layersim.specular_paths import SpecularPathsBSDF  # noqa: E402
+from layersim.specular_paths.paths import Events  # noqa: E402
+from layersim.specular_paths.trace import trace_path  # noqa: E402
 
 
 def _pane(alpha: float, dist: str) -> SpecularPathsBSDF:
@@ -83,8 +88,9 @@ def _row(bsdf, alpha: float, theta_deg: float) -> str:
 
 
 def main() -> None:
-    print(f"# {platform.node()} {platform.processor() or platform.machine()}, "
-          f"python benchmarks/features/specular_paths_eval.py")
+    print("# python benchmarks/features/specular_paths_eval.py")
+    print(f"# machine: {machine(False)}")
+    print(f"# date: {datetime.datetime.now():%Y-%m-%d %H:%M}; commit: {commit()}")
     for dist in ("beckmann", "ggx"):
         for alpha in (0.003, 0.01, 0.03):
             t0 = time.perf_counter()
