@@ -65,7 +65,7 @@ def why_not(scene) -> str | None:
     mono = scene.channel(0)
     rough = 0
     for i, layer in enumerate(mono.layers):
-        if not layer.is_interface and not layer.opaque:          # a medium
+        if layer.kind == "medium":
             if any(s.layers[i].albedo > 0.0 and s.layers[i].tau > 0.0
                    for s in (scene.channel(c) for c in range(scene.channels))):
                 return f"layer {i} (medium) scatters (albedo > 0)"
