@@ -101,7 +101,9 @@ def test_conductor_equivalence_class_follows_eq_8_to_10(r):
     # a perfectly specular lobe underneath a rough one (Bati et al. 2021 sec. 1)
     ([{"energy": 0.04, "roughness": 0.3}, {"energy": 0.1, "roughness": 0.0}],
      "lobe 2: field 'roughness'.*spread the layers above"),
-    ([{"energy": 0.3, "roughness": 0.45, "layers": 2}], "lobe 1: field 'energy'.*N1"),
+    # base given: no conductor is inferred (a conductor reaches this lobe)
+    ([{"energy": 0.3, "roughness": 0.45, "layers": 2, "base": "dielectric"}],
+     "lobe 1: field 'energy'.*N1"),
     ([{"energy": 0.6, "roughness": 0.1}, {"energy": 0.5, "roughness": 0.2}],
      "field 'energy'.*add up to 1.1"),
     ([{"energy": 0.1, "roughness": 0.1, "base": "conductor"}, {"energy": 0.1,
