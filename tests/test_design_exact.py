@@ -14,7 +14,7 @@ from layersim.statistical import parse_targets
 from layersim.statistical.design import designs
 from layersim.statistical.refine import refine
 from layersim.statistical.refine.mismatch import lobe_mismatch
-from layersim.statistical.refine.samples import (U_MAX, WO_MIN_Z, ggx_lobes,
+from layersim.statistical.refine.samples import (U_MAX, WO_MIN_Z, lobe_values,
                                                  lobe_directions)
 from layersim.statistical.refine.template import refine_template
 
@@ -67,7 +67,7 @@ def test_target_lobes_carry_their_energy():
     wo = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1).reshape(-1, 3)
     dw = (np.pi / 2 / 1200) * (2 * np.pi / 240) * np.sin(t).ravel()
     wi = np.array([math.sin(0.5), 0.0, math.cos(0.5)])
-    f = ggx_lobes(wi, wo, np.array([0.3, 0.1]), np.array([0.25, 0.0]))
+    f = lobe_values(wi, wo, np.array([0.3, 0.1]), np.array([0.25, 0.0]))
     assert np.sum(f[:, 0] * wo[:, 2] * dw) == pytest.approx(0.3, rel=2e-3)
     assert not np.any(f[:, 1])                                           # a delta: left out
 

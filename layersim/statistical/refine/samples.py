@@ -38,7 +38,6 @@ import math
 
 import numpy as np
 
-from ..lobes import _ggx_albedo
 from ..verify import direction
 
 __all__ = ["stage_samples", "lobe_directions", "floor_directions", "ANGLES", "POINTS",
@@ -85,17 +84,17 @@ def floor_directions(n: int = FLOOR_POINTS) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
 
 
-def ggx_lobes(wi: np.ndarray, wo: np.ndarray, energy, alpha) -> np.ndarray:
+def lobe_values(wi: np.ndarray, wo: np.ndarray, energy, alpha) -> np.ndarray:
     """Belcour's lobe (module docstring) of ``energy`` and ``alpha`` (each per channel, shape
     (C,)) at one ``wi`` (3,) and outgoing ``wo`` (m, 3): f in 1/sr, shape (m, C); a smooth
     channel (``alpha = 0``, a delta) is 0."""
-    from ...kernels.fgd import ggx_lobe
+    from ...kernels.fgd import ggx_albedo, ggx_lobe
     pairs = np.broadcast_to(wi, wo.shape)
     f = np.zeros((len(wo), len(energy)))
     for c, (e, a) in enumerate(zip(energy, alpha)):
         if a > 0.0 and e > 0.0:
-            f[:, c] = e * ggx_lobe(pairs, wo, float(a)) / _ggx_albedo(round(float(wi[2]), 12),
-                                                                    float(a))
+            f[:, c] = e * ggx_lobe(pairs, wo, float(a)) / float(ggx_albedo(float(wi[2]),
+                                                                             float(a)))
     return f
 
 
@@ -106,12 +105,12 @@ def wanted_lobe(targets, model, groups, k: int, theta: float, wo: np.ndarray) ->
     wi, channels = direction(theta), targets.channels
     t = targets.lobes[k]
     if theta == 0.0:
-        return ggx_lobes(wi, wo, np.broadcast_to(t.energy, (channels,)),
+        return lobe_values(wi, wo, np.broadcast_to(t.energy, (channels,)),
                          np.full(channels, t.roughness))
     f = np.zeros((len(wo), channels))
     for lobe in model.lobes(math.radians(theta)):
         if lobe.layer in groups[k]:
-            f += ggx_lobes(wi, wo, np.broadcast_to(lobe.energy, (channels,)),
+            f += lobe_values(wi, wo, np.broadcast_to(lobe.energy, (channels,)),
                            np.broadcast_to(lobe.roughness, (channels,)))
     return f
 

@@ -72,6 +72,29 @@ def _tau(tau):
     return _free(tau, 0.0, 3.0 * tau) if tau > 0.0 else tau
 
 
+def _free_medium(layer: dict, above: float, eta_max: float) -> tuple:
+    return {**layer, "tau": _tau(layer["tau"])}, above
+
+
+def _free_dielectric(layer: dict, above: float, eta_max: float) -> tuple:
+    if layer.get("roughness", 0.0) <= 0.0:
+        return layer, float(layer["ior"])
+    return ({**layer, "roughness": _factor(layer["roughness"], ROUGHNESS_FACTOR, ALPHA_MAX),
+             "ior": _dielectric_index(layer["ior"], above, eta_max)}, float(layer["ior"]))
+
+
+def _free_conductor(layer: dict, above: float, eta_max: float) -> tuple:
+    if layer.get("roughness", 0.0) <= 0.0:
+        return layer, above
+    return {**layer, "roughness": _factor(layer["roughness"], ROUGHNESS_FACTOR, ALPHA_MAX),
+            "ior": _conductor_index(layer["ior"])}, above
+
+
+#: Per kind of a designed layer: ``(layer, index above, eta_max) -> (template layer, index
+#: below)``.
+FREE = {"medium": _free_medium, "dielectric": _free_dielectric, "conductor": _free_conductor}
+
+
 def refine_template(data: dict, free, eta_max: float = 4.0) -> dict:
     """The template dict of the designed scene dict ``data`` (:class:`~layersim.statistical.
     design.Design`'s ``data``, or a cut of it), the parameters of the layers whose indices
@@ -79,18 +102,9 @@ def refine_template(data: dict, free, eta_max: float = 4.0) -> dict:
     out = copy.deepcopy(data)
     above = float(out.get("stack", {}).get("top_ior", 1.0))
     for i, layer in enumerate(out["layer"]):
-        kind, alpha = layer["kind"], layer.get("roughness", 0.0)
-        if i not in free:
-            pass
-        elif kind == "medium":
-            layer["tau"] = _tau(layer["tau"])
-        elif alpha > 0.0:
-            layer["roughness"] = _factor(alpha, ROUGHNESS_FACTOR, ALPHA_MAX)
-            layer["ior"] = (_dielectric_index(layer["ior"], above, eta_max)
-                            if kind == "dielectric" else _conductor_index(layer["ior"]))
-        if kind == "dielectric":
-            above = float(layer["ior"]["start"] if isinstance(layer["ior"], dict)
-                          else layer["ior"])
+        freed, below = FREE[layer["kind"]](layer, above, eta_max)
+        out["layer"][i] = freed if i in free else layer
+        above = below
     return out
 
 
