@@ -27,9 +27,9 @@ stated, and by :data:`OFF_NORMAL_WEIGHT` elsewhere. The model's lobes off the no
 exact transport of any stack (a GGX lobe without Fresnel carrying the model's energy): on
 "coat over rough dielectric", the statistical design's own top interface, whose normal-incidence
 lobe is exact to 3e-4 1/sr RMS, misses the model at 60 degrees by 4.6e-2; weighted as much, the
-off-normal points drew the fit off the targets at normal incidence. At 0.02 they weigh as much
-as the normal-incidence mismatch and keep what it leaves loose. The points' density follows the
-lobe, and so does the weight of its region.
+off-normal points drew the fit off the targets at normal incidence. At 0.02 they weigh about
+as much as the normal-incidence mismatch and hold what it leaves loose. The points' density
+follows the lobe, and so does the weight of its region.
 """
 
 from __future__ import annotations

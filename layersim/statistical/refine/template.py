@@ -11,9 +11,10 @@ Beer-Lambert media):
 - a rough conductor: ``k`` per channel within a factor 3 of its design value (``k <= 100``,
   the largest the designs use), and its roughness. ``eta`` stays: at a given reflectance it
   is the design's choice in the conductor's equivalence class (its edge tint, Bati et al.
-  2021 eq. 9-10), which the lobes at normal incidence barely see: freed too, eta and k of
-  "coat over copper-like conductor" came out with standard errors of 120 and 280 (eta 4.6,
-  k 23, correlated), eta at its bound in two channels, for 70 % more solves;
+  2021 eq. 9-10), which the lobes at normal incidence barely see: freed too (at the fit's
+  default tolerance), eta and k of "coat over copper-like conductor" came out with standard
+  errors of 120 and 280 (eta 4.6, k 23, correlated), eta at its bound in two channels, after
+  259 solves (57 with eta kept, at tolerance 1e-6);
 - roughness: within a factor 2 either way, below 1 (exact transport moves a 2-layer lobe's
   width from the coat to the base: within a factor 1.5, "rough gold-like conductor" ended with
   its coat and base roughnesses and the red k on their bounds, 10.6 % off in energy);
