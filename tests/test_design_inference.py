@@ -20,6 +20,7 @@ def kinds(design):
     return [layer["kind"] for layer in design.data["layer"]]
 
 
+@pytest.mark.slow
 def test_a_metal_coloured_lobe_gets_a_conductor_base_and_a_note_naming_the_bound():
     d = designs(METAL)[0]
     assert kinds(d) == ["conductor"]
@@ -43,7 +44,8 @@ def test_the_inferred_base_lies_under_the_coats_of_a_multi_lobe_target():
 
 @pytest.mark.parametrize("lobes", [
     [{"energy": 0.2, "roughness": 0.15}],                         # 1 layer
-    [{"energy": [0.2, 0.15, 0.1], "roughness": 0.15}],            # coloured: 2 layers
+    pytest.param([{"energy": [0.2, 0.15, 0.1], "roughness": 0.15}],   # coloured: 2 layers
+                 marks=pytest.mark.slow),
     [{"energy": 0.04, "roughness": 0.1}, {"energy": 0.06, "roughness": 0.3}],
 ])
 def test_a_lobe_a_dielectric_reaches_keeps_a_dielectric(lobes):
