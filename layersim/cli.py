@@ -349,37 +349,67 @@ def cmd_bench(args) -> int:
 MC_VERIFY_PATHS = 1_000_000
 
 
+def _design_options(args):
+    """The checked options of ``layersim design``: the output path and image (or None)."""
+    if args.plot and args.no_verify:
+        raise ValueError("--plot draws the exact solve's lobes: drop --no-verify")
+    if args.exact and args.no_verify:
+        raise ValueError("--exact fits the design by exact solves: drop --no-verify")
+    if args.candidates < 1:
+        raise ValueError(f"--candidates must be >= 1, got {args.candidates}")
+    out = _output(args.output, "-o") if args.output else None
+    return out, _image(args.plot, "--plot") if args.plot else None
+
+
+def _verify_design(targets, best, image):
+    """Print the statistical design's verification (exact solve, else Monte Carlo)."""
+    from .statistical import report
+    from .statistical.verify import montecarlo_solve, verify
+    reference = "exact"
+    try:
+        result = verify(best)
+    except LayersimError as exc:
+        print(f"exact solve refused ({exc}); verifying against Monte Carlo "
+              f"({MC_VERIFY_PATHS:.0e} paths per direction)")
+        result = verify(best, solve=montecarlo_solve(MC_VERIFY_PATHS, backend="auto"))
+        reference = "Monte Carlo"
+    print("verification of candidate 1 at normal incidence:")
+    print("\n".join(report.verification_lines(targets, result, reference)))
+    if image:
+        report.plot_lobes(targets, best, result, image)
+        print(f"wrote {image}")
+
+
+def _refine_design(args, targets, best, image):
+    """Print the exact refinement of ``best`` and return the refined design."""
+    from .statistical import report
+    from .statistical.refine import refine
+    result = refine(best, targets, progress=False if args.quiet else None)
+    print("exact refinement of candidate 1 (lobes at normal incidence, exact transport):")
+    print("\n".join(report.refinement_lines(targets, result)))
+    if image:
+        report.plot_lobes(targets, result.refined, {"exact_solve": solve}, image)
+        print(f"wrote {image}")
+    return result.refined
+
+
 def cmd_design(args) -> int:
     from .statistical import report
     from .statistical.design import designs
     from .statistical.targets import parse_targets
-    from .statistical.verify import montecarlo_solve, verify
     targets = parse_targets(args.targets)
-    if args.plot and args.no_verify:
-        raise ValueError("--plot draws the exact solve's lobes: drop --no-verify")
-    if args.candidates < 1:
-        raise ValueError(f"--candidates must be >= 1, got {args.candidates}")
-    out = _output(args.output, "-o") if args.output else None
-    image = _image(args.plot, "--plot") if args.plot else None
+    out, image = _design_options(args)
     found = designs(args.targets)
     for i, d in enumerate(found[:args.candidates]):
         print(f"candidate {i + 1} of {len(found)} (class position {d.choice}):")
         print("\n".join(report.stack_lines(d)))
     best = found[0]
-    if not args.no_verify:
-        reference = "exact"
-        try:
-            result = verify(best)
-        except LayersimError as exc:
-            print(f"exact solve refused ({exc}); verifying against Monte Carlo "
-                  f"({MC_VERIFY_PATHS:.0e} paths per direction)")
-            result = verify(best, solve=montecarlo_solve(MC_VERIFY_PATHS, backend="auto"))
-            reference = "Monte Carlo"
-        print("verification of candidate 1 at normal incidence:")
-        print("\n".join(report.verification_lines(targets, result, reference)))
-        if image:
-            report.plot_lobes(targets, best, result, image)
-            print(f"wrote {image}")
+    for note in best.notes:
+        print(f"note: {note}")
+    if args.exact:
+        best = _refine_design(args, targets, best, image)
+    elif not args.no_verify:
+        _verify_design(targets, best, image)
     if out:
         out.write_text(best.toml())
         print(f"wrote {out} (layersim solve {out})")
@@ -723,7 +753,8 @@ command exits with status 2, as 'layersim solve' would refuse it.""",
     "design": """examples:
   layersim design targets.toml -o stack.toml       # prints stacks and verification
   layersim design targets.toml --no-verify         # statistical model only
-  layersim design targets.toml --plot lobes.png""",
+  layersim design targets.toml --plot lobes.png
+  layersim design targets.toml --exact -o stack.toml  # refined by exact fits""",
     "bench": """examples:
   layersim bench --out bench-quick --quick
   layersim bench --out bench --stability --backend warp-cuda --backend opencl
@@ -868,7 +899,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_bench)
 
     sp = _subparser(sub, "design", "inverse design (Bati et al. 2021): stacks whose "
-                                   "lobes at normal incidence match target lobes")
+                                   "lobes at normal incidence match target lobes", [quiet])
     sp.add_argument("targets", help="targets file (TOML: [[lobe]] energy, roughness, layers, "
                                     "base)")
     sp.add_argument("-o", "--output", help="write the preferred stack as a scene file (TOML)")
@@ -876,6 +907,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--candidates", type=int, default=3, help="how many candidate stacks to "
                                                              "print (default 3)")
     sp.add_argument("--no-verify", action="store_true", help="skip the exact solve")
+    sp.add_argument("--exact", action="store_true", help="refine the design by exact fits to "
+                    "the target lobes, report both designs (-o writes the refined one)")
     sp.set_defaults(func=cmd_design)
 
     src_help = "scene (.toml, solved on the fly), saved BSDF (.lsim) or .bsdf file"

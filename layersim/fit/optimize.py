@@ -35,6 +35,8 @@ DIFF_STEP = 1e-6
 #: The coarse stage's fraction of the planner's ordinates and orders, and its floor.
 COARSE = 0.5
 MIN_COARSE_N, MIN_COARSE_MD = 32, 8
+#: Tolerances (scipy's ftol, xtol and gtol) of the final stage by default and of the coarse one.
+FINAL_TOL, COARSE_TOL = 1e-10, 1e-5
 #: Restarts of a stage on a finer plan before giving up.
 MAX_REPLANS = 3
 
@@ -106,7 +108,7 @@ def _plan_of(template, x, disc=None) -> dict:
     return out
 
 
-def _run_stage(template, target, disc, x0, stage, history, bar, threads, final):
+def _run_stage(template, target, disc, x0, stage, history, bar, threads, tol):
     """Least squares over one stage; returns scipy's result, the residual function and the
     discretisation it ended on."""
     from scipy.optimize import least_squares
@@ -116,8 +118,7 @@ def _run_stage(template, target, disc, x0, stage, history, bar, threads, final):
         try:
             res = least_squares(fun, x0, bounds=(template.lo, template.hi), jac="2-point",
                                 diff_step=DIFF_STEP, x_scale="jac", method="trf",
-                                ftol=1e-10 if final else 1e-5, xtol=1e-10 if final else 1e-5,
-                                gtol=1e-10 if final else 1e-5)
+                                ftol=tol, xtol=tol, gtol=tol)
             return res, fun, disc
         except _Replan as exc:
             x0 = np.clip(fun.best[1], template.lo, template.hi)
@@ -134,7 +135,7 @@ def _check_channels(template: Template, target: Target) -> None:
 
 
 def fit(template, target, *, coarse: bool = True, threads: int | None = None,
-        progress: bool | None = None, like=None) -> FitResult:
+        progress: bool | None = None, like=None, tol: float = FINAL_TOL) -> FitResult:
     """Fit the free values of ``template`` to ``target`` by exact transport.
 
     Parameters
@@ -158,6 +159,9 @@ def fit(template, target, *, coarse: bool = True, threads: int | None = None,
         Solve the final stage on this BSDF's discretisation (:func:`layersim.solve` ``like=``)
         instead of the planner's: a BSDF target's own, so that the fit and the target share
         their discretisation error (model-based subtraction, :mod:`.modelsub`).
+    tol : float
+        Tolerance of the final stage on the cost, the step and the gradient (scipy's ``ftol``,
+        ``xtol``, ``gtol``); the coarse stage stops at the larger of it and 1e-5.
 
     Returns
     -------
@@ -182,14 +186,15 @@ def fit(template, target, *, coarse: bool = True, threads: int | None = None,
         for k, disc in enumerate(stages):
             final = k == len(stages) - 1
             res, fun, disc = _run_stage(template, target, disc, x, "final" if final else
-                                        "coarse", history, bar, threads, final)
+                                        "coarse", history, bar, threads,
+                                        tol if final else max(tol, COARSE_TOL))
             for _ in range(MAX_REPLANS if final and like is None else 0):
                 grown = _plan_of(template, res.x, disc)
                 if grown == disc:
                     break
                 plans.append({**disc, "nfev": res.nfev})
                 res, fun, disc = _run_stage(template, target, grown, res.x, "final", history,
-                                            bar, threads, True)
+                                            bar, threads, tol)
             x = res.x
             plans.append({**disc, "nfev": res.nfev})
     return _result(template, res, history, plans, target.unit)
