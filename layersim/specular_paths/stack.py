@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..errors import InfeasibleError
+from ..layers.registry import kind_of
 from ..solved.lobe import NEAR_SPECULAR_ALPHA
 
 __all__ = ["Face", "Chain", "chain_of", "why_not"]
@@ -65,9 +66,9 @@ def why_not(scene) -> str | None:
     mono = scene.channel(0)
     rough = 0
     for i, layer in enumerate(mono.layers):
-        if layer.kind == "medium":
-            if any(s.layers[i].albedo > 0.0 and s.layers[i].tau > 0.0
-                   for s in (scene.channel(c) for c in range(scene.channels))):
+        if kind_of(layer).walk_role == "slab":          # a medium: (tau, albedo, g)
+            if any(kind_of(x).walk_slab(x)[1] > 0.0 and kind_of(x).walk_slab(x)[0] > 0.0
+                   for x in (scene.channel(c).layers[i] for c in range(scene.channels))):
                 return f"layer {i} (medium) scatters (albedo > 0)"
             continue
         if not layer.is_interface:
