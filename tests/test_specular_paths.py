@@ -107,7 +107,7 @@ def test_a_pane_of_smooth_faces_has_the_closed_form_reflectance():
 def test_a_two_event_beckmann_chain_is_its_gaussian(pane):
     """The lobe of the pane's straight-through path (two Beckmann refractions, c = |n_a mu_a -
     n_b mu_b| each) is the Gaussian of the summed variances, and eval is E n_out^2 times it."""
-    x = next(e for e in pane.model.entries[True]
+    x = next(e for e in pane.model.models[0].entries[True]
              if len(e.rough) == 2 and not e.path.exit_top)
     p = np.array([[0.2, 0.1]])
     mu0, mu1 = math.sqrt(1 - 0.05), math.sqrt(1 - 0.05 / 2.25)
@@ -156,7 +156,7 @@ def test_reciprocity(which, frosted, pane):
             "lacquer": SpecularPathsBSDF(_scene(_d(1.5, 0.02),
                                                 {"kind": "medium", "albedo": 0, "tau": 0.4}))
             }[which]
-    n = bsdf.chain.n
+    n = bsdf.chains[0].n
     rng = np.random.default_rng(3)
     wi = _dir(30.0)
     for wo0, n_o in ((np.array([-wi[0], -wi[1], wi[2]]), n[0]),

@@ -55,7 +55,7 @@ def _strong(model, p) -> list:
 def _row(bsdf, alpha: float, theta_deg: float) -> str:
     t = math.radians(theta_deg)
     wi = np.array([math.sin(t) * math.cos(0.3), math.sin(t) * math.sin(0.3), math.cos(t)])
-    m = bsdf.model
+    m = bsdf.model.models[0]     # one index per gap: one group of channels
     p = m.p_in(wi[None])[0]
     mu0, mu1 = math.cos(t), math.sqrt(1 - math.sin(t) ** 2 / 2.25)
     width = math.hypot(1, 1) * abs(mu0 - 1.5 * mu1) * alpha

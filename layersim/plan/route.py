@@ -12,9 +12,8 @@ from __future__ import annotations
 from ..errors import InfeasibleError
 from ..specular_paths import why_not
 from ..specular_paths.accuracy import measured_error_line
-from ..specular_paths.model import PathModel
+from ..specular_paths.channels import ChannelModels
 from ..specular_paths.paths import PRUNE
-from ..specular_paths.stack import chain_of
 from .model import LayerPlan, Plan
 
 __all__ = ["FOURIER_MAX_BYTES", "wants_paths", "paths_plan"]
@@ -50,8 +49,7 @@ def paths_plan(scene, why: str) -> Plan:
     """The plan of a stack solved by specular paths: one line per layer, the paths' count,
     the pruned energy and the measured error; ``why`` says why the Fourier basis is not
     used."""
-    chain = chain_of(scene)
-    model = PathModel(chain, PRUNE)
+    models = ChannelModels(scene, PRUNE)
     layers = []
     for i, layer in enumerate(scene.channel(0).layers):
         what = "near-specular face" if layer.is_interface and not layer.smooth else \
@@ -60,18 +58,25 @@ def paths_plan(scene, why: str) -> Plan:
     notes = [f"specular paths ({why}): every path keeps the horizontal wave vector; lobes of "
              "several near-specular events add in slope space (docs/method.md, \"Specular "
              "paths\")"]
-    for top, ps in model.sets.items():
-        lobes = sum(1 for x in model.entries[top] if x.rough)
-        notes.append(f"lit from the {'top' if top else 'bottom'}: {len(ps.paths)} paths "
-                     f"({lobes} with lobes), pruned energy at most {ps.pruned.max():.1e} of "
-                     f"the incident power (cut below {PRUNE:g})")
+    if len(models.groups) > 1:
+        notes.append(f"per-channel indices: {len(models.groups)} groups of channels "
+                     f"{models.groups}, each with its own paths (a path's horizontal wave "
+                     "vector differs per channel)")
+    counts, pruned = models.path_counts(), models.pruned()
+    for side, count in counts.items():
+        lobes = sum(1 for m in models.models for x in m.entries[side == "top"] if x.rough)
+        notes.append(f"lit from the {side}: {count} paths ({lobes} with lobes), pruned energy "
+                     f"at most {pruned[side]:.1e} of the incident power (cut below "
+                     f"{PRUNE:g})")
     notes.append(measured_error_line())
     return Plan(rule="none", n=0, md=0, representation="specular-paths", layers=layers,
-                notes=notes, memory_bytes=_memory(model), seconds=None)
+                notes=notes, memory_bytes=sum(_memory(m) for m in models.models),
+                seconds=None)
 
 
 def _memory(model) -> int:
-    """Bytes the paths hold: the shape tables and the energy tables (a bound)."""
+    """Bytes the paths of one :class:`~layersim.specular_paths.model.PathModel` hold: the
+    shape tables and the energy tables (a bound)."""
     shapes = sum(x.lobe.h.nbytes for xs in model.entries.values() for x in xs if x.lobe)
     return int(shapes + 129 * 16 * 8 * 4 * max(1, len(model.faces)) * model.chain.channels)
 

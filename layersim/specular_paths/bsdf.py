@@ -17,10 +17,8 @@ import numpy as np
 
 from ..solved.directions import bin_edges, direction_pairs, unit_directions
 from ..solved.sampling import Sample
+from .channels import ChannelModels
 from .paths import PRUNE
-from .model import PathModel
-from .sampler import PathSampler
-from .stack import chain_of
 
 __all__ = ["SpecularPathsBSDF", "FORMAT_VERSION_PATHS"]
 
@@ -40,6 +38,9 @@ class SpecularPathsBSDF:
     plan : layersim.plan.Plan or None
     info : dict
         Scene name, timings, path counts and pruned energy (saved with the BSDF).
+    model : layersim.specular_paths.channels.ChannelModels
+        The paths, one model per group of channels sharing their indices (one group unless
+        a dielectric's index differs per channel).
     """
 
     representation = "specular-paths"
@@ -55,25 +56,27 @@ class SpecularPathsBSDF:
         self.scene = scene
         self.plan = plan
         self.prune = float(prune)
-        self.chain = chain_of(scene)
-        self.model = PathModel(self.chain, self.prune)
+        self.model = ChannelModels(scene, self.prune)
         self.info = dict(info or {})
         self.info.setdefault("scene", scene.name)
         self.info["representation"] = self.representation
-        self.info["paths"] = {("top" if k else "bottom"): len(v.paths)
-                              for k, v in self.model.sets.items()}
-        self.info["pruned"] = {("top" if k else "bottom"): float(v.pruned.max())
-                               for k, v in self.model.sets.items()}
+        self.info["paths"] = self.model.path_counts()
+        self.info["pruned"] = self.model.pruned()
         self.lobes = [{} for _ in range(self.channels)]
         self._sampler = None
 
     @property
     def channels(self) -> int:
-        return self.chain.channels
+        return self.model.channels
+
+    @property
+    def chains(self) -> list:
+        """The chain of each group of channels (:attr:`model`)."""
+        return [m.chain for m in self.model.models]
 
     @property
     def opaque(self) -> bool:
-        return self.chain.opaque
+        return self.model.opaque
 
     def _out(self, x: np.ndarray, shape: tuple) -> np.ndarray:
         """(Q, C) results in the caller's shape (a trailing channel axis for RGB)."""
@@ -129,14 +132,18 @@ class SpecularPathsBSDF:
         out = self.model.bins(wi, mu_edges, phi_edges)
         return {k: (v[..., 0] if self.channels == 1 else v) for k, v in out.items()}
 
-    def sampler(self) -> PathSampler:
+    def sampler(self):
+        """:meth:`ChannelModels.sampler`, built once."""
         if self._sampler is None:
-            self._sampler = PathSampler(self)
+            self._sampler = self.model.sampler()
         return self._sampler
 
     def sample(self, wi, u) -> Sample:
         """Draw ``wo`` (:class:`layersim.specular_paths.sampler.PathSampler`): a path by its
-        energy, then a direction from its lobe; deltas are not sampled."""
+        energy, then a direction from its lobe; deltas are not sampled. Where the indices
+        differ per channel, a direction from the mixture of the channels' lobes (each channel
+        weighing equally, :class:`layersim.specular_paths.sampler.ChannelMixtureSampler`),
+        ``pdf`` that mixture's density and the weights ``f cos / pdf`` per channel."""
         return self.sampler().sample(wi, u)
 
     def pdf(self, wi, wo) -> np.ndarray:

@@ -9,6 +9,13 @@ draw beyond the exit's horizon is an invalid sample (``docs/conventions.md``). T
 uniforms of ``u`` are stretched over the four choices by rescaling: the part of ``u[0]``
 within the chosen path's interval picks the shape node of the mixture and, rescaled again,
 the azimuth; ``u[1]`` gives the radius.
+
+Where the indices differ per channel (one model per group of channels,
+:mod:`.channels`), :class:`ChannelMixtureSampler` draws from the mixture of the groups'
+samplers, each channel weighing equally (group ``g`` of ``C_g`` of the ``C`` channels chosen
+with probability ``C_g / C`` by the first part of ``u[0]``, the rest rescaled for its
+sampler); ``pdf`` is that mixture's density and the weights are ``f cos / pdf`` per channel
+(a channel's lobe drawn for another channel gives it a small weight, not a bias).
 """
 
 from __future__ import annotations
@@ -19,15 +26,20 @@ from ..solved.directions import unit_directions
 from ..solved.sampling import Sample
 from .paths import Events
 
-__all__ = ["PathSampler"]
+__all__ = ["PathSampler", "ChannelMixtureSampler"]
 
 
 class PathSampler:
-    """Sampler of a :class:`layersim.specular_paths.bsdf.SpecularPathsBSDF`."""
+    """Sampler of the paths of one :class:`layersim.specular_paths.model.PathModel` (a stack
+    whose indices are one for all channels)."""
 
-    def __init__(self, bsdf):
-        self.bsdf = bsdf
-        self.model = bsdf.model
+    def __init__(self, model):
+        self.model = model
+        self.channels = model.chain.channels
+        self.opaque = model.chain.opaque
+
+    def _eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        return self.model.eval(wi, wo)
 
     def _probabilities(self, top: bool, p: np.ndarray):
         """The sampled paths' entries and their probabilities (Q, P) at ``p`` (Q, 2)."""
@@ -53,25 +65,32 @@ class PathSampler:
         wi, shape, u = self._rows(wi, u)
         Q = wi.shape[0]
         wo = np.zeros((Q, 3))
-        live = (wi[:, 2] != 0) & ~((wi[:, 2] < 0) & self.bsdf.opaque)
-        for top in self.model.entries:
-            sel = np.flatnonzero(live & ((wi[:, 2] > 0) == top))
-            if sel.size:
-                wo[sel] = self._draw(top, wi[sel], u[sel])
+        live = (wi[:, 2] != 0) & ~((wi[:, 2] < 0) & self.opaque)
+        wo[live] = self._directions(wi[live], u[live])
         ok = np.linalg.norm(wo, axis=1) > 0
         pdf = np.zeros(Q)
-        weight = np.zeros((Q, self.bsdf.channels))
+        weight = np.zeros((Q, self.channels))
         if ok.any():
             pdf[ok] = self._pdf(wi[ok], wo[ok])
-            f = self.model.eval(wi[ok], wo[ok])
+            f = self._eval(wi[ok], wo[ok])
             good = pdf[ok] > 0
             weight[np.flatnonzero(ok)[good]] = f[good] * (np.abs(wo[ok][good, 2])
                                                           / pdf[ok][good])[:, None]
         bad = pdf <= 0
         wo[bad], pdf[bad], weight[bad] = 0.0, 0.0, 0.0
-        w = weight[:, 0].reshape(shape) if self.bsdf.channels == 1 \
-            else weight.reshape(shape + (self.bsdf.channels,))
+        w = weight[:, 0].reshape(shape) if self.channels == 1 \
+            else weight.reshape(shape + (self.channels,))
         return Sample(wo.reshape(shape + (3,)), w, pdf.reshape(shape))
+
+    def _directions(self, wi: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Drawn directions (Q, 3) for rows ``wi`` (Q, 3) that light can enter; (0, 0, 0)
+        where none is drawn."""
+        wo = np.zeros((wi.shape[0], 3))
+        for top in self.model.entries:
+            sel = np.flatnonzero((wi[:, 2] > 0) == top)
+            if sel.size:
+                wo[sel] = self._draw(top, wi[sel], u[sel])
+        return wo
 
     def _draw(self, top: bool, wi: np.ndarray, u: np.ndarray) -> np.ndarray:
         p = self.model.p_in(wi)
@@ -121,3 +140,35 @@ class PathSampler:
                 d = x.lobe.density(po - p, p) * n_out ** 2 * np.abs(wo[sel, 2])
                 out[sel] += np.where(side, P[:, j] * d, 0.0)
         return out
+
+
+class ChannelMixtureSampler(PathSampler):
+    """Sampler of a :class:`layersim.specular_paths.channels.ChannelModels` of several groups:
+    the mixture of the groups' :class:`PathSampler`, group ``g`` with probability ``C_g /
+    C`` (each channel's lobes weigh equally); weights ``f cos / pdf`` per channel with ``f``
+    of every channel and ``pdf`` the mixture's."""
+
+    def __init__(self, models):
+        self.models = models
+        self.channels = models.channels
+        self.opaque = models.opaque
+        self.parts = [PathSampler(m) for m in models.models]
+        self.share = np.array([len(g) for g in models.groups], float) / models.channels
+
+    def _eval(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        return self.models.eval(wi, wo)
+
+    def _directions(self, wi: np.ndarray, u: np.ndarray) -> np.ndarray:
+        edges = np.concatenate([[0.0], np.cumsum(self.share)])
+        g = np.minimum(np.searchsorted(edges, u[:, 0], side="right") - 1, len(self.parts) - 1)
+        # the part of u[0] within the chosen group's interval, rescaled, serves its sampler
+        v = np.clip((u[:, 0] - edges[g]) / self.share[g], 0.0, 1.0 - 1e-16)
+        wo = np.zeros((wi.shape[0], 3))
+        for j, part in enumerate(self.parts):
+            s = np.flatnonzero(g == j)
+            if s.size:
+                wo[s] = part._directions(wi[s], np.stack([v[s], u[s, 1]], axis=1))
+        return wo
+
+    def _pdf(self, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        return sum(w * part._pdf(wi, wo) for w, part in zip(self.share, self.parts))

@@ -6,7 +6,10 @@ list of elements, top to bottom: *faces* (interfaces) and *slabs* (media). Betwe
 lie *gaps*: gap ``g`` is above element ``g``; gap 0 is the medium above the stack and gap
 ``K`` the one below it. Each gap has one real absolute index; a slab attenuates a crossing
 at cosine ``mu`` by ``exp(-tau / mu)`` per channel (Beer-Lambert; ``tau`` along the normal,
-``docs/conventions.md``).
+``docs/conventions.md``). Where a dielectric's index differs per channel (dispersion), the
+channels are split into groups sharing every gap's index (:func:`channel_groups`), each with
+its own chain: the horizontal wave vector a path keeps is one per group, and the paths of
+different channels never interact.
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ from ..errors import InfeasibleError
 from ..layers.registry import kind_of
 from ..solved.lobe import NEAR_SPECULAR_ALPHA
 
-__all__ = ["Face", "Chain", "chain_of", "why_not"]
+__all__ = ["Face", "Chain", "chain_of", "channel_groups", "why_not"]
 
 
 @dataclass(frozen=True)
@@ -80,22 +83,40 @@ def why_not(scene) -> str | None:
                     "axis")
         if layer.energy_compensation != "none" or layer.shadowing != "separable":
             return f"layer {i} ({layer.kind}) has energy compensation or correlated shadowing"
-        if not layer.opaque and len({s.layers[i].ior for s in
-                                               (scene.channel(c) for c in range(scene.channels))}) > 1:
-            # one index per gap: the horizontal wave vector is one for all channels
-            return f"layer {i} (dielectric) has a per-channel (dispersive) index"
         rough += not layer.smooth
     if rough == 0:
         return "no interface is near-specular (all smooth)"
     return None
 
 
-def chain_of(scene) -> Chain:
-    """The :class:`Chain` of ``scene`` (a stack for which :func:`why_not` is None)."""
+def chain_of(scene, channels=None) -> Chain:
+    """The :class:`Chain` of ``scene`` (a stack for which :func:`why_not` is None) for the
+    channel indices ``channels`` (default all), which must share every gap's index
+    (:func:`channel_groups`)."""
     why = why_not(scene)
     if why is not None:
         raise InfeasibleError(f"scene {scene.name!r} is not solved by specular paths: {why}")
-    monos = [scene.channel(c) for c in range(scene.channels)]
+    channels = tuple(range(scene.channels)) if channels is None else tuple(channels)
+    chains = {c: _chain(scene, (c,)) for c in channels}
+    if len({chains[c].n for c in channels}) > 1:
+        raise InfeasibleError(f"scene {scene.name!r}: channels {channels} have different "
+                              "indices (one chain per group of channel_groups)")
+    return _chain(scene, channels)
+
+
+def channel_groups(scene) -> list:
+    """The channels of ``scene`` (a stack for which :func:`why_not` is None) grouped by their
+    gaps' indices, in order of first appearance: one group of all channels unless a
+    dielectric's index differs per channel."""
+    groups: dict = {}
+    for c in range(scene.channels):
+        groups.setdefault(_chain(scene, (c,)).n, []).append(c)
+    return [tuple(g) for g in groups.values()]
+
+
+def _chain(scene, channels: tuple) -> Chain:
+    """The chain of the channels ``channels``, with the gap indices of the first of them."""
+    monos = [scene.channel(c) for c in channels]
     elements, n = [], [scene.top_ior]
     for i, layer in enumerate(monos[0].layers):
         if not layer.is_interface:
@@ -108,4 +129,4 @@ def chain_of(scene) -> Chain:
         n.append(n[-1] * eta[0].real if eta[0].imag == 0.0 else n[-1])
         if eta[0].imag > 0.0:
             break
-    return Chain(tuple(elements), tuple(float(x) for x in n), scene.channels)
+    return Chain(tuple(elements), tuple(float(x) for x in n), len(channels))
