@@ -50,6 +50,20 @@ def _even(n: float) -> int:
     return int(2 * np.ceil(n / 2))
 
 
+def fourier_plan(scene):
+    """The planner's plan of ``scene``, refused where it routes the stack to specular paths
+    (:mod:`layersim.specular_paths`): the fit's stages are Fourier discretisations (``n``,
+    ``md``), which such a stack does not have."""
+    plan = make_plan(scene)
+    if plan.representation == "specular-paths":
+        raise InfeasibleError(
+            f"fit: scene {scene.name!r} is solved as specular paths (near-specular interfaces "
+            "and clear media), which fit does not take: its stages refine a Fourier "
+            "discretisation; free the roughnesses above 0.03 or give the template a rough "
+            "or scattering layer")
+    return plan
+
+
 def like_discretisation(like) -> dict:
     """The discretisation (``n``, ``md``, quadrature rule and, if coupled, ``ms``) of a solved
     BSDF, as ``[discretization]`` entries (what :func:`layersim.solve` with ``like=`` uses)."""
@@ -69,7 +83,7 @@ def _stages(template: Template, coarse: bool, like=None) -> list:
     if own:
         return [own]
     last = None if like is None else like_discretisation(like)
-    plan = make_plan(template.scene(template.start)) if last is None else None
+    plan = fourier_plan(template.scene(template.start)) if last is None else None
     n, md = (plan.n, plan.md) if last is None else (last["n"], last["md"])
     first = {"n": max(_even(COARSE * n), MIN_COARSE_N), "md": max(int(COARSE * md), MIN_COARSE_MD)}
     if not coarse or first["n"] >= n or (last is not None and MIN_COARSE_N > COARSE * n):
@@ -101,7 +115,7 @@ class _Residuals:
 
 
 def _plan_of(template, x, disc=None) -> dict:
-    plan = make_plan(template.scene(x))
+    plan = fourier_plan(template.scene(x))
     out = {"n": plan.n, "md": plan.md}
     if disc:            # a restart never coarsens the stage
         out = {k: max(out[k], disc[k]) for k in out}

@@ -128,10 +128,11 @@ def refine(design, targets, *, threads: int | None = None, progress: bool | None
     Raises
     ------
     InfeasibleError
-        Where the solver refuses the design (its plan, checked before any fit).
+        Where the solver refuses the design, or solves it as specular paths, which the fits
+        do not take (its plan, checked before any fit).
     """
-    from ...plan import make_plan
-    make_plan(design.scene)
+    from ...fit.optimize import fourier_plan
+    fourier_plan(design.scene)
     model, solve = StatisticalBSDF(design.scene), _memo_solve(threads)
     data, fits = copy.deepcopy(design.data), []
     if discretization:
