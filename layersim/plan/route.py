@@ -64,7 +64,8 @@ def paths_plan(scene, why: str) -> Plan:
         lobes = sum(1 for x in model.entries[top] if x.rough)
         notes.append(f"lit from the {'top' if top else 'bottom'}: {len(ps.paths)} paths "
                      f"({lobes} with lobes), pruned energy at most {ps.pruned.max():.1e} of "
-                     f"the incident power (cut below {PRUNE:g})")
+                     f"the incident power at the probes' wave vectors (cut below {PRUNE:g}); "
+                     f"{len(ps.frontier)} cut branches carried on by a walk over the faces")
     notes.append(measured_error_line())
     return Plan(rule="none", n=0, md=0, representation="specular-paths", layers=layers,
                 notes=notes, memory_bytes=_memory(model), seconds=None)

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..kernels.fresnel import fresnel
-from ..kernels.lobe import sample_reflection
+from ..kernels.lobe import refraction, sample_reflection
 from ..kernels.pointwise import smith_g1
 from .stack import Face
 from .trace import trace_path
@@ -78,13 +78,6 @@ def _to_face(w: np.ndarray, rotation: float, sign: float = 1.0) -> np.ndarray:
     return np.stack([c * w[:, 0] + s * w[:, 1], -s * w[:, 0] + c * w[:, 1], w[:, 2]], axis=1)
 
 
-def _refract(wi: np.ndarray, m: np.ndarray, c: np.ndarray, eta: float) -> np.ndarray:
-    """Refracted directions (N, 3) of ``wi`` about ``m`` (``c = wi.m``), relative index
-    ``eta``; rows under total internal reflection are meaningless (their weight is 0)."""
-    s = np.clip(1.0 - (1.0 - c ** 2) / eta ** 2, 0.0, None)
-    return -wi / eta + m * (c / eta - np.sqrt(s))[:, None]
-
-
 def rough_event(face: Face, p, na, nb, down: bool, u):
     """One walker event at a near-specular face met from above (``down``) or below by wave
     vectors ``p`` (N, 2) from a gap of index ``na`` into one of ``nb``, uniforms ``u`` (N, 4).
@@ -104,7 +97,7 @@ def rough_event(face: Face, p, na, nb, down: bool, u):
         return p_of(r, na, face.rotation), np.ones(len(p), bool), F * g1(r, 1.0)[:, None]
     er = eta[0].real if down else 1.0 / eta[0].real
     refl = u[:, 3] < fresnel(c, er)
-    t = _refract(wi, m, c, er)
+    t = refraction(wi, m, er)
     wo = np.where(refl[:, None], r, t)
     factor = np.where(refl, g1(r, 1.0), g1(t, -1.0))
     p_new = p_of(wo, np.where(refl, na, nb), face.rotation)
