@@ -64,10 +64,13 @@ def paths_plan(scene, why: str) -> Plan:
                      "vector differs per channel)")
     counts, pruned = models.path_counts(), models.pruned()
     for side, count in counts.items():
-        lobes = sum(1 for m in models.models for x in m.entries[side == "top"] if x.rough)
+        top = side == "top"
+        lobes = sum(1 for m in models.models for x in m.entries[top] if x.rough)
+        cut = sum(len(m.sets[top].frontier) for m in models.models)
         notes.append(f"lit from the {side}: {count} paths ({lobes} with lobes), pruned energy "
-                     f"at most {pruned[side]:.1e} of the incident power (cut below "
-                     f"{PRUNE:g})")
+                     f"at most {pruned[side]:.1e} of the incident power at the probes' wave "
+                     f"vectors (cut below {PRUNE:g}); {cut} cut branches carried on by a walk "
+                     "over the faces")
     notes.append(measured_error_line())
     return Plan(rule="none", n=0, md=0, representation="specular-paths", layers=layers,
                 notes=notes, memory_bytes=sum(_memory(m) for m in models.models),

@@ -13,7 +13,10 @@ wi_h``) leaving toward ``wo`` (``p_o = n_out wo_h``):
   geometric mean of the path's energy and that of the path travelled backwards (reciprocity).
 
 Energies (``albedo``, bins) of paths with near-specular events are traced exactly along each
-path (:mod:`.trace`); delta paths carry their energy at ``p_i``.
+path (:mod:`.trace`); delta paths carry their energy at ``p_i``. The light of the branches that
+enumeration cuts (trapped by total internal reflection after a slope deviation, among others)
+is carried on by :mod:`.continuation` and adds to the albedos and bins; ``eval`` and the
+sampler leave it out (below 1e-3 of the incident power, docs/method.md).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import numpy as np
 
 from ..kernels.lobe import microfacet_reflection
 from .binning import direction_bin, path_bins
+from .continuation import continue_frontier, exit_bins
 from .lobes import PathLobe
 from .paths import Events, enumerate_paths, face_energies
 from .trace import trace_path
@@ -171,7 +175,8 @@ class PathModel:
     def albedo(self, wi: np.ndarray):
         """``(R, T)`` (Q, C) with the deltas, per incident direction: the delta paths'
         energies at ``p_i`` and the traced energies of the others (:func:`.trace.trace_path`,
-        :data:`ALBEDO_NODES` nodes) that leave inside the exit's horizon."""
+        :data:`ALBEDO_NODES` nodes) that leave inside the exit's horizon, and the light of the
+        cut branches (:func:`.continuation.continue_frontier`)."""
         R = np.zeros((wi.shape[0], self.chain.channels))
         T = np.zeros_like(R)
         for q in range(wi.shape[0]):
@@ -190,6 +195,9 @@ class PathModel:
                     R[q] += e
                 else:
                     T[q] += e
+            ex = continue_frontier(self, top, p[0])
+            R[q] += ex.w[ex.top == top].sum(axis=0)
+            T[q] += ex.w[ex.top != top].sum(axis=0)
         return R, T
 
     def _inside(self, po: np.ndarray, w: np.ndarray, top: bool) -> np.ndarray:
@@ -219,7 +227,8 @@ class PathModel:
         """Energy (n_mu, n_phi, C) per bin of each side for one direction ``wi`` (3,):
         each delta in the bin of its direction, each path with lobes by
         :func:`.binning.path_bins` (traced where its nodes are dense, ``eval`` integrated over
-        the bin elsewhere)."""
+        the bin elsewhere), the cut branches' light by its walked exits
+        (:func:`.continuation.continue_frontier`)."""
         top = bool(wi[2] > 0)
         p = self.p_in(wi[None, :])
         ev = Events(self.chain, self.faces, p)
@@ -238,4 +247,5 @@ class PathModel:
                 i, j = direction_bin(wo[0], mu_edges, phi_edges)
                 if i is not None:
                     side[i, j] += ev.energy(x.path)[0]
-        return out
+        cut = exit_bins(self, continue_frontier(self, top, p[0]), mu_edges, phi_edges)
+        return {k: out[k] + cut[k] for k in out}

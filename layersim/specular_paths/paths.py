@@ -11,7 +11,11 @@ n_g^2)``, and ``exp(-tau / mu_g)`` per slab crossing); a path through a gap wher
 
 The tree of paths is walked depth first and a branch is cut where its energy falls below
 :data:`PRUNE` of the incident power at every probe direction; what the cut branches carry is
-summed and reported (:attr:`PathSet.pruned`), never lumped into the kept paths.
+summed and reported (:attr:`PathSet.pruned`), never lumped into the kept paths. Each cut
+branch is kept as a *frontier prefix* (:attr:`PathSet.frontier`): its steps up to the cut,
+from which :mod:`.continuation` carries its light on (a branch's central energy bounds what it
+carries only at the probes' exact wave vectors: a slope deviation beyond a critical angle
+traps light whose energy stays near 1 per bounce while the central energy falls as ``R^k``).
 """
 
 from __future__ import annotations
@@ -56,12 +60,15 @@ class Path:
 
 @dataclass
 class PathSet:
-    """The paths kept for light entering at the top or bottom, and the energy of the cut
-    branches (an upper bound on all that their continuations carry), the largest over the
-    probe directions, per channel (C,)."""
+    """The paths kept for light entering at the top or bottom, the central energy of the cut
+    branches (at the probes' wave vectors), the largest over the probe directions, per channel
+    (C,), and the cut branches themselves: ``frontier`` holds ``(prefix, down)`` pairs, the
+    prefix a :class:`Path` whose last gap is where the branch was cut (``exit_top`` unused,
+    False) and ``down`` its direction of travel there."""
 
     paths: list
     pruned: np.ndarray
+    frontier: list
 
 
 class Events:
@@ -138,6 +145,7 @@ def enumerate_paths(chain, faces: dict, start_top: bool, prune: float = PRUNE) -
     ev = Events(chain, faces, probe_wave_vectors(chain.n[gap0]))
     pruned = np.zeros((ev.p.shape[0], chain.channels))
     paths: list = []
+    frontier: list = []
     one = np.ones((ev.p.shape[0], chain.channels))
     stack = [((), (gap0,), start_top, one)]
     while stack:
@@ -156,6 +164,8 @@ def enumerate_paths(chain, faces: dict, start_top: bool, prune: float = PRUNE) -
                 continue
             if w2.max() < prune or len(steps) >= MAX_STEPS:
                 pruned += w2
+                frontier.append((Path(steps + ((e, down, what),), gaps + (ng,), start_top,
+                                      False), nd))
                 continue
             stack.append((steps + ((e, down, what),), gaps + (ng,), nd, w2))
-    return PathSet(paths, pruned.max(axis=0))
+    return PathSet(paths, pruned.max(axis=0), frontier)
