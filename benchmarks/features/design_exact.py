@@ -6,7 +6,7 @@ transport lobe of each design at normal incidence (energy per channel; roughness
 roughness that fits the lobe, layersim/statistical/verify.py), the largest relative errors of
 each design's exact lobes against the targets, and the refinement's exact solves and wall time.
 Sets whose statistical design the solver refuses (near-specular interfaces inside a stack need
-more memory than it may plan), or whose solve the plan estimates above MAX_SOLVE seconds (a
+more memory than it may plan) or solves as specular paths (which the fits do not take), or whose solve the plan estimates above MAX_SOLVE seconds (a
 refinement takes some 30-80 solves), are listed as skipped with the reason. Not a test.
 
 Usage: python benchmarks/features/design_exact.py [max_solve_seconds] [SET ...]   (default 0.6)
@@ -47,6 +47,9 @@ def skip_reason(design, targets, max_solve: float) -> str | None:
         plan = make_plan(design.scene)
     except layersim.LayersimError as exc:
         return f"the solver refuses the statistical design ({exc})"
+    if plan.representation == "specular-paths":
+        return ("the solver takes the statistical design as specular paths (near-specular "
+                "interfaces and clear media), which the exact fits do not take")
     seconds = plan.seconds["total"]
     if seconds > max_solve:
         return (f"one solve takes about {seconds:.1f} s by the plan's estimate (n = {plan.n}, "
