@@ -65,9 +65,10 @@ class Chain:
 
 def why_not(scene) -> str | None:
     """Why ``scene`` is not a stack of flat interfaces and clear media (one line), or None
-    if it is one with at least one near-specular interface."""
+    if it is one (all of its interfaces smooth or near-specular; an all-smooth stack is a sum
+    of delta paths, which the plan takes where the Fourier basis cannot: a smooth dielectric
+    inside the stack)."""
     mono = scene.channel(0)
-    rough = 0
     for i, layer in enumerate(mono.layers):
         if kind_of(layer).walk_role == "slab":          # a medium: (tau, albedo, g)
             if any(kind_of(x).walk_slab(x)[1] > 0.0 and kind_of(x).walk_slab(x)[0] > 0.0
@@ -83,9 +84,6 @@ def why_not(scene) -> str | None:
                     "axis")
         if layer.energy_compensation != "none" or layer.shadowing != "separable":
             return f"layer {i} ({layer.kind}) has energy compensation or correlated shadowing"
-        rough += not layer.smooth
-    if rough == 0:
-        return "no interface is near-specular (all smooth)"
     return None
 
 
