@@ -63,11 +63,11 @@ def test_frosted_glass_agrees_with_the_walk():
 
 
 #: Where the 1e7-path comparison falls short of 97 % of bins within 3 sigma, the measured
-#: fraction (a regression bound) and why: at 70 degrees part of the pane's lobes crosses a
-#: critical angle inside (the coat over gold: 32 of 33 bins) after a slope deviation and is trapped by total internal reflection;
-#: the walk lets it leak out into grazing bins, where the kept paths' sparse bins take their
-#: linearised lobes' integrals, which hold none of it (docs/method.md, "Specular paths"; the
-#: light of the cut branches is carried by layersim.specular_paths.continuation).
+#: fraction (a regression bound) and why: at 70 degrees part of the lobes crosses a critical
+#: angle inside the pane or the coat after a slope deviation and is trapped by total internal
+#: reflection; the walk lets it leak out into grazing bins, where the kept paths' sparse bins
+#: take their linearised lobes' integrals, which hold none of it (docs/method.md, "Specular
+#: paths"; the light of the cut branches is carried by layersim.specular_paths.continuation).
 KNOWN_SHORT = {("glass pane", 70): 0.78, ("coat over gold", 70): 0.96}
 
 

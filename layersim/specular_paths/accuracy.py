@@ -4,9 +4,9 @@
 comparison at 1e7 paths per direction, incidence 0, 30, 60 and 70 degrees, 10 x 12 bins per
 side, warp-cpu, seed 11; ``pytest -m slow -s tests/test_specular_paths_walk.py`` on the 2-core
 VM), the largest albedo difference and the smallest fraction of populated bins within 3 sigma
-(the stacks below 97 %: the glass pane and the coat at 70 degrees, whose light trapped by total internal
-reflection leaves through grazing bins that its kept paths give the linearised lobe;
-``KNOWN_SHORT`` in the test says more).
+(the stacks below 97 %: the glass pane and the coat at 70 degrees, whose light trapped by
+total internal reflection leaves through grazing bins that their kept paths give the
+linearised lobe; ``KNOWN_SHORT`` in the test says more).
 """
 
 from __future__ import annotations
