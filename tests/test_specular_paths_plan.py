@@ -91,3 +91,22 @@ def test_command_line_plan_solve_and_export(tmp_path, capsys):
     assert main(["export", str(out), "-o", str(tmp_path / "x.bsdf")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "specular paths" in err[0] and "Traceback" not in err[0]
+
+
+@pytest.mark.slow
+def test_a_stack_whose_paths_multiply_is_refused_with_the_reason():
+    """The design of Bati et al.'s Fig. 14b in its clear channel (a smooth coat over a 2.47
+    face, a clear slab and a face into 1.02: near its critical angle the light bounces back
+    and forth; 15 s, the Fourier plan weighed twice) has over 1000 paths
+    above the pruning: the plan gives the reason in a note and falls back to the Fourier
+    plan's refusal (in one raised line with both reasons) instead of building them."""
+    scene = layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.50007, "roughness": 0.0},
+        {"kind": "dielectric", "ior": 2.46809, "roughness": 0.0279721, "distribution": "ggx"},
+        {"kind": "medium", "albedo": 0.0, "tau": 0.0},
+        {"kind": "dielectric", "ior": 1.01918, "roughness": 0.0107202, "distribution": "ggx"}]})
+    plan = make_plan(scene, refuse=False)
+    assert plan.representation != "specular-paths" and plan.refused
+    assert any("1000 paths" in n for n in plan.notes)
+    with pytest.raises(layersim.LayersimError, match="specular paths: light entering"):
+        make_plan(scene)

@@ -81,7 +81,14 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
     if wants_paths(scene):
         why = fourier_unaffordable(try_fourier(fourier_plan, scene))
         if why is not None:
-            return paths_plan(scene, why)
+            try:
+                return paths_plan(scene, why)
+            except InfeasibleError as exc:
+                if refuse:
+                    raise InfeasibleError(f"{why}, and {exc}") from None
+                plan = fourier_plan(scene, refuse)
+                plan.notes.append(str(exc))
+                return plan
     return fourier_plan(scene, refuse)
 
 

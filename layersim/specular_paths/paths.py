@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InfeasibleError
 from .energies import FaceEnergies
 from .stack import Face
 
@@ -33,6 +34,13 @@ __all__ = ["Path", "PathSet", "Events", "enumerate_paths", "PRUNE", "probe_wave_
 PRUNE = 1e-7
 #: Longest path kept (steps); a branch cut here counts as pruned.
 MAX_STEPS = 400
+#: Most branches weighed per side: where faces reflect nearly all of the light back and forth
+#: (near a critical angle), the paths above :data:`PRUNE` multiply with every bounce, and the
+#: stack is refused rather than enumerated for hours (a path's bins cost a quadrature each).
+MAX_BRANCHES = 10_000
+#: Most paths kept per side (each gets its lobe's shape table and, per incident direction, a
+#: quadrature): a glass pane keeps 34, a smooth coat over gold 28.
+MAX_PATHS = 1_000
 
 
 @dataclass(frozen=True)
@@ -148,8 +156,17 @@ def enumerate_paths(chain, faces: dict, start_top: bool, prune: float = PRUNE) -
     frontier: list = []
     one = np.ones((ev.p.shape[0], chain.channels))
     stack = [((), (gap0,), start_top, one)]
+    weighed = 0
     while stack:
         steps, gaps, down, w = stack.pop()
+        weighed += 1
+        if weighed > MAX_BRANCHES or len(paths) > MAX_PATHS:
+            raise InfeasibleError(
+                f"specular paths: light entering at the {'top' if start_top else 'bottom'} "
+                f"splits into more than {MAX_PATHS} paths or {MAX_BRANCHES} branches above "
+                f"{prune:g} of the incident power (faces that reflect nearly all of it back "
+                "and forth, e.g. near a critical angle); use layersim.montecarlo for this "
+                "stack")
         g = gaps[-1]
         if (down and g == K) or (not down and g == 0):
             paths.append(Path(steps, gaps, start_top, not down))
