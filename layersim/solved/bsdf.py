@@ -41,7 +41,7 @@ import numpy as np
 
 from ..aniso.bsdf import AnisoEvaluator
 from .boundary import BoundaryEvaluator
-from .directions import bin_edges, direction_pairs, unit_directions
+from .directions import bin_arguments, direction_pairs, incident_directions
 from ..errors import FileFormatError, OperatorError
 from .isobsdf import IsoEvaluator
 from ..operators.operator import from_arrays
@@ -328,13 +328,7 @@ class BSDF:
     # ---- energy ------------------------------------------------------------------------
 
     def _incident(self, wi):
-        wi = unit_directions("wi", wi)
-        if np.any(wi[..., 2] == 0):
-            raise ValueError("wi lies on the horizon (wi.z == 0): no light enters")
-        if self.opaque and np.any(wi[..., 2] < 0):
-            raise ValueError("this stack is opaque (its base is a conductor or diffuse layer): "
-                             "light cannot arrive from below (wi.z < 0)")
-        return wi
+        return incident_directions(wi, self.opaque, "a conductor or diffuse layer")
 
     def albedo(self, wi):
         """Energy fractions ``(R, T)`` of a beam arriving from ``wi``: R leaves on the side it
@@ -374,11 +368,7 @@ class BSDF:
             added to the bin that holds its direction (mirror or straight-through).
         """
         wi = self._incident(wi)
-        if wi.shape != (3,):
-            raise ValueError(f"bin_energies takes one incident direction of shape (3,), got "
-                             f"{wi.shape}")
-        mu_edges = bin_edges("mu_edges", mu_edges, 0.0, 1.0)
-        phi_edges = bin_edges("phi_edges", phi_edges, 0.0, 2.0 * np.pi)
+        mu_edges, phi_edges = bin_arguments(wi, mu_edges, phi_edges)
         return self._per_channel(lambda c: self.evaluator(c).bins(wi, mu_edges, phi_edges))
 
     # ---- persistence -------------------------------------------------------------------

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..solved.directions import bin_edges, direction_pairs, unit_directions
+from ..solved.directions import bin_arguments, direction_pairs, incident_directions
 from ..solved.sampling import Sample
 from .channels import ChannelModels
 from .paths import PRUNE
@@ -83,13 +83,7 @@ class SpecularPathsBSDF:
         return x[:, 0].reshape(shape) if self.channels == 1 else x.reshape(shape + (x.shape[1],))
 
     def _incident(self, wi) -> np.ndarray:
-        wi = unit_directions("wi", wi)
-        if np.any(wi[..., 2] == 0):
-            raise ValueError("wi lies on the horizon (wi.z == 0): no light enters")
-        if self.opaque and np.any(wi[..., 2] < 0):
-            raise ValueError("this stack is opaque (its base is a conductor): light cannot "
-                             "arrive from below (wi.z < 0)")
-        return wi
+        return incident_directions(wi, self.opaque, "a conductor")
 
     def eval(self, wi, wo) -> np.ndarray:
         """BSDF value ``f(wi, wo)`` in 1/sr without the cosine (radiance convention), deltas
@@ -124,11 +118,7 @@ class SpecularPathsBSDF:
         (as :meth:`layersim.solved.bsdf.BSDF.bin_energies`; each lobe by its quadrature
         nodes, each delta in the bin of its direction)."""
         wi = self._incident(wi)
-        if wi.shape != (3,):
-            raise ValueError(f"bin_energies takes one incident direction of shape (3,), got "
-                             f"{wi.shape}")
-        mu_edges = bin_edges("mu_edges", mu_edges, 0.0, 1.0)
-        phi_edges = bin_edges("phi_edges", phi_edges, 0.0, 2.0 * np.pi)
+        mu_edges, phi_edges = bin_arguments(wi, mu_edges, phi_edges)
         out = self.model.bins(wi, mu_edges, phi_edges)
         return {k: (v[..., 0] if self.channels == 1 else v) for k, v in out.items()}
 
