@@ -1,7 +1,7 @@
-"""The light of the branches that path enumeration cuts (layersim.specular_paths.continuation):
-its walk's face events against the faces' directional energies, no change where nothing is
-trapped, conservation in a lossless pane at grazing incidence, and the grazing bins of the
-glass pane at 70 degrees against the Monte Carlo walk."""
+"""The light of the walked branches (layersim.specular_paths.frontier, .continuation): its
+walk's face events against the faces' directional energies, walking or tracing the faint
+branches alike where nothing is trapped, conservation in a lossless pane at grazing incidence,
+and the glass pane's bins at 70 degrees against the Monte Carlo walk."""
 
 import math
 
@@ -11,6 +11,7 @@ import pytest
 import layersim
 import layersim.montecarlo as mc
 from layersim.specular_paths import SpecularPathsBSDF
+from layersim.specular_paths import frontier
 from layersim.specular_paths import model as path_model
 from layersim.specular_paths.continuation import (Exits, continue_frontier, exit_bins,
                                                   rough_event, standard_error)
@@ -60,46 +61,61 @@ def test_a_walk_event_has_the_face_energies(down, theta):
 
 
 @pytest.mark.slow
-def test_nothing_changes_where_nothing_is_trapped(pane, monkeypatch):
-    """At 30 degrees the cut branches carry below 1e-6 of the power: bins and albedos stay
-    those of the kept paths alone within 1e-6."""
+def test_walking_the_faint_branches_changes_nothing_where_nothing_is_trapped(pane, monkeypatch):
+    """At 30 degrees nothing is trapped: walking the branches below WALK_BELOW (the default)
+    or tracing every kept path (WALK_BELOW 0) gives the same albedos within 4 standard errors
+    of the walk plus 2e-5 (the tracing's quadrature), and the same bins within 4 standard
+    errors plus 1e-6."""
     wi = _wi(30.0)
+    model = pane.model.models[0]
+    p = model.p_in(wi[None])[0]
+    kept = len(frontier.split(model, True, p)[0])
+    ex = continue_frontier(model, True, p)
+    se_albedo = math.sqrt(float(np.sum(ex.w ** 2)))
+    se = standard_error(model, ex, MU_EDGES, PHI_EDGES)
     R, T = pane.albedo(wi)
     bins = pane.bin_energies(wi, MU_EDGES, PHI_EDGES)
-    _without_continuation(monkeypatch)
+    monkeypatch.setattr(frontier, "WALK_BELOW", 0.0)
+    assert len(frontier.split(model, True, p)[0]) > kept, "the test would not test it"
     R0, T0 = pane.albedo(wi)
     bins0 = pane.bin_energies(wi, MU_EDGES, PHI_EDGES)
-    assert abs(R - R0) < 1e-6 and abs(T - T0) < 1e-6
+    print(f"R {R:.6f} / {R0:.6f}, T {T:.6f} / {T0:.6f} +- {se_albedo:.1e}")
+    assert abs(R - R0) <= 4 * se_albedo + 2e-5 and abs(T - T0) <= 4 * se_albedo + 2e-5
     for side in bins:
-        assert np.max(np.abs(bins[side] - bins0[side])) < 1e-6
+        assert np.all(np.abs(bins[side] - bins0[side]) <= 4 * se[side][..., 0] + 1e-6), side
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("theta", [70.0, 75.0, 80.0])
-def test_a_lossless_pane_conserves_energy_at_grazing_incidence(pane, theta, monkeypatch):
-    """R + T = 1 within 4 standard errors of the continuation (and the single-scattering
-    loss, below 2e-5 here), while the kept paths alone lose over 10 of them."""
+def test_a_lossless_pane_keeps_the_walks_energy_at_grazing_incidence(pane, theta, monkeypatch):
+    """R + T of the pane (its faces lose only the single-scattering share of light that stays
+    trapped for hundreds of grazing bounces: 2e-4 at 75 degrees, 9e-4 at 80) equals the
+    2e6-path walk's within 4 standard errors of both (plus 2e-5, the tracing's quadrature),
+    while the traced paths alone (the walked
+    branches' light dropped) fall short by over 10 of the continuation's."""
     wi = _wi(theta)
     ex = continue_frontier(pane.model.models[0], True, pane.model.models[0].p_in(wi[None])[0])
     se = math.sqrt(float(np.sum(ex.w ** 2)))
     R, T = pane.albedo(wi)
-    print(f"{theta} deg: R + T - 1 = {R + T - 1:.2e}, continuation {ex.w.sum():.2e} "
-          f"+- {se:.1e}")
-    assert abs(R + T - 1.0) <= 4 * se + 2e-5
+    res = mc.simulate(layersim.Scene.from_dict({"layer": PANE}), wi, 2_000_000,
+                      backend="warp-cpu", seed=7)
+    # the walk's lost share and its own standard error (R and T are anticorrelated)
+    lost, se_walk = float(res.absorbed), float(res.absorbed_stderr)
+    print(f"{theta} deg: 1 - R - T = {1 - R - T:.2e} +- {se:.1e}, walk {lost:.2e} +- "
+          f"{se_walk:.1e}, continuation {ex.w.sum():.2e}")
+    assert abs(1.0 - R - T - lost) <= 4 * math.hypot(se, se_walk) + 2e-5
     _without_continuation(monkeypatch)
     R0, T0 = pane.albedo(wi)
     assert 1.0 - (R0 + T0) > 10 * se
 
 
 @pytest.mark.slow
-def test_the_glass_pane_grazing_bins_agree_with_the_walk(pane, monkeypatch):
+def test_the_glass_pane_bins_agree_with_the_walk_at_70_degrees(pane, monkeypatch):
     """Glass pane at 70 degrees against a 1e6-path walk (warp-cpu), sigma the walk's and the
-    continuation's standard errors together: the grazing bins (``|cos| < 0.1``, the mirror
-    azimuth) were beyond 3 sigma without the continuation; now the bottom one and every
-    other bin is within 3 sigma and the top one is nearer. The top one stays short
-    (measured 5.5 sigma): :func:`layersim.specular_paths.binning.path_bins` gives a sparse
-    bin of a kept path the integral of its linearised lobe, which holds none of the light
-    that leaves there after being trapped for a few bounces (docs/method.md)."""
+    continuation's standard errors together: without the walked branches' light the grazing
+    bins (``|cos| < 0.1``, the mirror azimuth) are beyond 3 sigma; with it every bin of both
+    sides is within 3 sigma (the top grazing bin stayed 5.5 sigma short while the trapped light
+    of kept paths was traced instead, docs/method.md)."""
     wi = _wi(70.0)
     scene = layersim.Scene.from_dict({"layer": PANE})
     res = mc.simulate(scene, wi, 1_000_000, mu_edges=MU_EDGES, phi_edges=PHI_EDGES,
@@ -123,10 +139,7 @@ def test_the_glass_pane_grazing_bins_agree_with_the_walk(pane, monkeypatch):
     zero = {k: np.zeros_like(v) for k, v in se.items()}
     before = z(pane.bin_energies(wi, MU_EDGES, PHI_EDGES), zero)
     print(f"grazing bins z: top {before['top'][0, 6]:.1f} -> {after['top'][0, 6]:.1f}, "
-          f"bottom {before['bottom'][0, 6]:.1f} -> {after['bottom'][0, 6]:.1f}")
+          f"bottom {before['bottom'][0, 6]:.1f} -> {after['bottom'][0, 6]:.1f}; largest "
+          f"{max(after['top'].max(), after['bottom'].max()):.1f}")
     assert before["top"][0, 6] > 3.0 and before["bottom"][0, 6] > 3.0
-    assert after["bottom"][0, 6] <= 3.0
-    assert after["top"][0, 6] < before["top"][0, 6] - 1.0
-    others = after["top"].copy()
-    others[0, 6] = 0.0
-    assert others.max() <= 3.0 and after["bottom"].max() <= 3.0
+    assert after["top"].max() <= 3.0 and after["bottom"].max() <= 3.0

@@ -13,6 +13,8 @@ from ..errors import InfeasibleError
 from ..specular_paths import why_not
 from ..specular_paths.accuracy import measured_error_line
 from ..specular_paths.channels import ChannelModels
+from ..specular_paths.continuation import WALKERS
+from ..specular_paths.frontier import WALK_BELOW
 from ..specular_paths.paths import PRUNE
 from .model import LayerPlan, Plan
 
@@ -69,8 +71,9 @@ def paths_plan(scene, why: str) -> Plan:
         cut = sum(len(m.sets[top].frontier) for m in models.models)
         notes.append(f"lit from the {side}: {count} paths ({lobes} with lobes), pruned energy "
                      f"at most {pruned[side]:.1e} of the incident power at the probes' wave "
-                     f"vectors (cut below {PRUNE:g}); {cut} cut branches carried on by a walk "
-                     "over the faces")
+                     f"vectors (cut below {PRUNE:g}); {cut} cut branches, and at each incidence "
+                     f"the branches below {WALK_BELOW:g} there, carried on by a walk over the "
+                     f"faces ({WALKERS:.0e} walkers)")
     notes.append(measured_error_line())
     return Plan(rule="none", n=0, md=0, representation="specular-paths", layers=layers,
                 notes=notes, memory_bytes=sum(_memory(m) for m in models.models),

@@ -1,9 +1,10 @@
-"""Bin energies of one specular path: traced where its quadrature nodes are dense, ``eval``
+"""Bin energies of one specular path: traced where its quadrature nodes are dense, its BSDF
 integrated over the bin where they are sparse.
 
 The traced nodes of :func:`.trace.trace_path` resolve the core of a lobe, but a bin in its far
 tail (a GGX lobe's ``r^-4`` tail reaches bins 0.1 away) receives few of them: there the bin's
-energy is the integral of the path's own ``f |mu| dOmega`` over the bin (Gauss-Legendre in
+energy is the integral of the path's ``f |mu| dOmega`` over the bin (``f`` with each event's
+far tail exact, :func:`.tails.tail_f`; Gauss-Legendre in
 ``|cos theta_o|`` and ``phi_o``, :data:`BIN_RULE` and twice as many nodes per axis), which is
 smooth away from the core, wherever the two rules agree (:data:`AGREE`). A bin is traced if it
 holds at least :data:`DENSE` nodes or its rules disagree (a lobe's flank crosses it).
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .tails import tail_f
 from .trace import trace_path
 
 __all__ = ["path_bins", "direction_bin", "DENSE", "BIN_RULE"]
@@ -68,7 +70,7 @@ def _integrated(model, x, p, cells, mu_edges, phi_edges, rule: int) -> np.ndarra
     n = model.n_side(x.path.exit_top)
     po = n * np.stack([st * np.cos(phi), st * np.sin(phi)], axis=-1).reshape(-1, 2)
     pi = np.broadcast_to(p, po.shape)
-    f = model.eval_path(x, pi, po) * (mu * w).reshape(-1, 1)
+    f = tail_f(model, x, pi, po) * (mu * w).reshape(-1, 1)
     return f.reshape(cells.shape[0], -1, f.shape[-1]).sum(axis=1)
 
 

@@ -14,13 +14,15 @@ wi_h``) leaving toward ``wo`` (``p_o = n_out wo_h``):
 
 Energies (``albedo``, bins) of paths with near-specular events are traced exactly along each
 path (:mod:`.trace`); delta paths carry their energy at ``p_i``. The light of the branches that
-enumeration cuts (trapped by total internal reflection after a slope deviation, among others)
-is carried on by :mod:`.continuation` and adds to the albedos and bins; ``eval`` and the
-sampler leave it out (below 1e-3 of the incident power, docs/method.md).
+enumeration cuts, and at each incidence of those whose central energy there is low (trapped by
+total internal reflection after a slope deviation, among others; :mod:`.frontier`), is carried
+on by the walk of :mod:`.continuation` and adds to the albedos and bins; ``eval`` and the
+sampler leave out what enumeration cuts (below 1e-3 of the incident power, docs/method.md).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -28,6 +30,7 @@ import numpy as np
 from ..kernels.lobe import microfacet_reflection
 from .binning import direction_bin, path_bins
 from .continuation import continue_frontier, exit_bins
+from .frontier import split
 from .lobes import PathLobe
 from .paths import Events, enumerate_paths, face_energies
 from .trace import trace_path
@@ -61,6 +64,12 @@ class _Entry:
         self.exact = len(self.rough) == 1
         # a single event's lobe serves sampling; eval uses its exact microfacet BSDF
         self.lobe = PathLobe(self.rough, chain.n) if self.rough else None
+        self._n = chain.n
+
+    @functools.cached_property
+    def singles(self) -> list:
+        """Each near-specular event's lobe alone (:mod:`.tails`), built when first asked."""
+        return [PathLobe([r], self._n) for r in self.rough]
 
 
 class PathModel:
@@ -127,8 +136,7 @@ class PathModel:
         if x.exact:
             ev_in = Events(self.chain, self.faces, pi)
             ev_out = Events(self.chain, self.faces, po)
-            return self._exact(x, ev_in, ev_out, pi, po) * n_out ** 2 \
-                / self.chain.n[x.path.gaps[x.steps[0] + 1]] ** 2
+            return self.single_event(x.path, x.steps[0], ev_in, ev_out, pi, po)
         pbar = 0.5 * (pi + po)
         ev_mid = Events(self.chain, self.faces, pbar)
         dens = x.lobe.density(po - pi, pbar)
@@ -137,15 +145,16 @@ class PathModel:
         energy = np.sqrt(ev_mid.energy(x.path) * ev_mid.energy_reversed(x.path))
         return energy * (n_out ** 2 * dens)[:, None]
 
-    def _exact(self, x: _Entry, ev_in: Events, ev_out: Events, pi, po) -> np.ndarray:
-        """The single near-specular event's microfacet BSDF times the smooth events' energies
-        (Q, C)."""
-        s = x.steps[0]
-        e, down, what = x.path.steps[s]
+    def single_event(self, path, s: int, ev_in: Events, ev_out: Events, pi, po) -> np.ndarray:
+        """``f`` (Q, C) of ``path`` with its step ``s`` the only deviating event: that face's
+        microfacet BSDF times the energies of the steps before it at ``pi`` and after it at
+        ``po`` (``ev_in``, ``ev_out``), times ``n_out^2 / n_b^2``. Exact for a path with one
+        near-specular event; for several, the term of :mod:`.tails`."""
+        e, down, what = path.steps[s]
         face = self.chain.elements[e]
-        a, b = x.path.gaps[s], x.path.gaps[s + 1]
-        before = ev_in.energy(x.path, range(s))
-        after = ev_out.energy(x.path, range(s + 1, len(x.path.steps)))
+        a, b = path.gaps[s], path.gaps[s + 1]
+        before = ev_in.energy(path, range(s))
+        after = ev_out.energy(path, range(s + 1, len(path.steps)))
         na, nb = self.chain.n[a], self.chain.n[b]
         mu_a, mu_b = ev_in.mu[a], ev_out.mu[b]
         ok = ev_in.open[a] & ev_out.open[b]
@@ -163,7 +172,7 @@ class PathModel:
             er = eta.real if (down or eta.imag > 0) else 1.0 / eta.real
             f[ok, c] = microfacet_reflection(frame(wi_l[ok]), frame(wo_l[ok]), er, face.alpha_u,
                                              face.alpha_v, face.distribution, eta.imag)
-        return f * before * after
+        return f * before * after * (self.n_side(path.exit_top) / self.chain.n[b]) ** 2
 
     # ---- energies ------------------------------------------------------------------------
 
@@ -176,15 +185,16 @@ class PathModel:
         """``(R, T)`` (Q, C) with the deltas, per incident direction: the delta paths'
         energies at ``p_i`` and the traced energies of the others (:func:`.trace.trace_path`,
         :data:`ALBEDO_NODES` nodes) that leave inside the exit's horizon, and the light of the
-        cut branches (:func:`.continuation.continue_frontier`)."""
+        walked branches (:func:`.frontier.split`, :func:`.continuation.continue_frontier`)."""
         R = np.zeros((wi.shape[0], self.chain.channels))
         T = np.zeros_like(R)
         for q in range(wi.shape[0]):
             top = bool(wi[q, 2] > 0)
             p = self.p_in(wi[q:q + 1])
             ev = Events(self.chain, self.faces, p)
-            energy = [ev.energy(x.path)[0].max() for x in self.entries[top]]
-            for x, e0 in zip(self.entries[top], energy):
+            entries, prefixes = split(self, top, p[0])
+            energy = [ev.energy(x.path)[0].max() for x in entries]
+            for x, e0 in zip(entries, energy):
                 if x.rough:
                     count = _nodes_for(e0 / max(max(energy), 1e-300), ALBEDO_NODES)
                     po, w = trace_path(self, x, p[0], count)
@@ -195,7 +205,7 @@ class PathModel:
                     R[q] += e
                 else:
                     T[q] += e
-            ex = continue_frontier(self, top, p[0])
+            ex = continue_frontier(self, top, p[0], prefixes)
             R[q] += ex.w[ex.top == top].sum(axis=0)
             T[q] += ex.w[ex.top != top].sum(axis=0)
         return R, T
@@ -226,16 +236,17 @@ class PathModel:
     def bins(self, wi: np.ndarray, mu_edges, phi_edges) -> dict:
         """Energy (n_mu, n_phi, C) per bin of each side for one direction ``wi`` (3,):
         each delta in the bin of its direction, each path with lobes by
-        :func:`.binning.path_bins` (traced where its nodes are dense, ``eval`` integrated over
-        the bin elsewhere), the cut branches' light by its walked exits
+        :func:`.binning.path_bins` (traced where its nodes are dense, its BSDF integrated over
+        the bin elsewhere), the walked branches' light (:func:`.frontier.split`) by its exits
         (:func:`.continuation.continue_frontier`)."""
         top = bool(wi[2] > 0)
         p = self.p_in(wi[None, :])
         ev = Events(self.chain, self.faces, p)
         shape = (mu_edges.size - 1, phi_edges.size - 1, self.chain.channels)
         out = {"top": np.zeros(shape), "bottom": np.zeros(shape)}
-        energy = [ev.energy(x.path)[0].max() for x in self.entries[top]]
-        for x, e in zip(self.entries[top], energy):
+        entries, prefixes = split(self, top, p[0])
+        energy = [ev.energy(x.path)[0].max() for x in entries]
+        for x, e in zip(entries, energy):
             side = out["top" if x.path.exit_top else "bottom"]
             if x.rough:
                 share = e / max(max(energy), 1e-300)
@@ -247,5 +258,5 @@ class PathModel:
                 i, j = direction_bin(wo[0], mu_edges, phi_edges)
                 if i is not None:
                     side[i, j] += ev.energy(x.path)[0]
-        cut = exit_bins(self, continue_frontier(self, top, p[0]), mu_edges, phi_edges)
+        cut = exit_bins(self, continue_frontier(self, top, p[0], prefixes), mu_edges, phi_edges)
         return {k: out[k] + cut[k] for k in out}
