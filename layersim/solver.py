@@ -22,6 +22,7 @@ from .ingredients.aniso_microfacet import AnisoProjectionStats
 from .ingredients.microfacet import ProjectionStats
 from .kernels.runtime import device_for
 from .layers import OperatorJob, kind_of
+from .layers.brushed import projected_scene
 from .operators.operator import IsoOperator, Operator, common_representation
 from .outofcore import memory
 from .outofcore.workspace import Workspace
@@ -49,8 +50,8 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
 def _lobes(plan: Plan, mono: Scene) -> dict:
     """The near-specular lobes that the BSDF of the one-channel scene ``mono`` evaluates
     (:attr:`BSDF.lobes`): under a smooth boundary the plan's (a near-specular coat); else those
-    the top layer's kind evaluates in place of its operator (a near-specular conductor alone:
-    :meth:`layersim.layers.LayerKind.evaluated_lobes`)."""
+    the top layer's kind evaluates in place of its operator (a near-specular conductor alone, a
+    brushed coat's direct reflection: :meth:`layersim.layers.LayerKind.evaluated_lobes`)."""
     if plan.boundary:
         return dict(plan.lobes)
     return kind_of(mono.layers[0]).evaluated_lobes(plan, mono, 0)
@@ -292,7 +293,9 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
     stats = AnisoProjectionStats() if plan.representation == "anisotropic" \
         else ProjectionStats()
     used = [lp for lp in plan.layers if lp.action != "left out"]
-    monos = [scene.channel(c) for c in range(scene.channels)]
+    # the layers as projected (a brushed top coat raised, layersim.layers.brushed)
+    projected = projected_scene(scene)[0]
+    monos = [projected.channel(c) for c in range(scene.channels)]
     cache = _OperatorCache([[(mono.layers[lp.index], mono.ior_above(lp.index)) for lp in used]
                             for mono in monos])
     memory.release()                # the plan's temporaries

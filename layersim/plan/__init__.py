@@ -44,7 +44,7 @@ from .budget import (MD_LOWER_PER_INV_ALPHA, estimate_bytes, estimate_seconds, l
                      refuse_below_lower_bound, refuse_over_limit, refuse_over_time)
 from .cost import ingredients
 from .coupling import choose_ms, needed_ms
-from .layers import scale_media, survey_layers
+from .layers import scale_media, survey_projected
 from .model import LayerPlan, Plan
 from .ordinates import DEFAULT_RULE, N_MAX, N_MIN, N_PER_WIDTH, SNELL_N_FACTOR, choose_grid
 from .orders import MD_MAX, THETA_FULL, choose_md, interface_lengths, truncation_notes
@@ -77,7 +77,9 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
     rule = disc.quadrature or DEFAULT_RULE
     notes: list[str] = []
     overridden: dict = {}
-    survey = survey_layers(scene)
+    # a brushed top coat is projected raised (layersim.layers.brushed): every size below is
+    # that of the projected scene
+    survey, scene = survey_projected(scene)
     layers = survey.layers
     ms_needed = needed_ms(layers, survey.left_out, notes)
     anisotropic = ms_needed > 0
@@ -102,7 +104,8 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
                     else 0, layers=layers, left_out=survey.left_out, notes=notes,
                     memory_bytes=memory, overridden=overridden,
                     representation=representation, refused=str(exc), boundary=survey.boundary,
-                    lobes=survey.lobes, near_specular=survey.near_specular)
+                    lobes=survey.lobes, near_specular=survey.near_specular,
+                    brushed=survey.brushed)
     theta_full = disc.theta_full or THETA_FULL
     lengths = interface_lengths(grid, mono, layers, theta_full)
     md_needed = max([survey.media_orders] + [lp.orders for lp, _ in lengths])
@@ -125,7 +128,7 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
                 notes=notes, memory_bytes=memory, seconds=seconds, work=work,
                 overridden=overridden, representation=representation, refused=refused,
                 boundary=survey.boundary, lobes=survey.lobes,
-                near_specular=survey.near_specular)
+                near_specular=survey.near_specular, brushed=survey.brushed)
 
 
 def with_hints(exc: InfeasibleError, hints: list) -> InfeasibleError:

@@ -42,6 +42,10 @@ class Plan:
     #: :class:`layersim.solved.lobe.NearSpecularLobe`, and the layer indices they stand for.
     lobes: dict = field(default_factory=dict)
     near_specular: tuple = ()
+    #: A brushed top coat projected with its narrow roughness raised (its own reflection left
+    #: out, evaluated as its exact lobe; :mod:`layersim.layers.brushed`): ``{"floor",
+    #: "alpha_u", "alpha_v"}``, or None.
+    brushed: dict | None = None
 
     @property
     def grid(self) -> Grid:
