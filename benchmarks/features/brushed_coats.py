@@ -97,7 +97,8 @@ def compare(bsdf, results: list) -> tuple[float, float, bool]:
               f"{' '.join(f'{x:+.5f} ({x / s:+.1f} se)' for x, s in zip(d, se))} "
               f"{'ok' if within else 'OVER'}; bins {z.size}: {100 * frac:.1f} % <= 3 sigma, "
               f"max {z.max():.1f}", flush=True)
-        worst_d, worst_f, ok = max(worst_d, float(np.abs(d).max())), min(worst_f, frac), ok and within
+        worst_d, worst_f = max(worst_d, float(np.abs(d).max())), min(worst_f, frac)
+        ok = ok and within
     return worst_d, worst_f, ok
 
 
