@@ -175,3 +175,22 @@ def test_the_issues_coat_over_gold_agrees_with_the_walk():
         assert abs(float(bsdf.albedo(wi)[0]) - res.reflectance) < 3e-3
         z = res.z_scores("top", bsdf.bin_energies(wi, mu, phi)["top"])
         assert np.mean(z <= 3.0) >= 0.8
+
+
+@pytest.mark.slow
+def test_sampling_and_the_saved_file_carry_the_lobe(tmp_path):
+    """``sample`` draws the exact lobe mixed with the rest (its mean weight is the albedo, to
+    about 4 standard errors of 20000 samples; lobe samples below the horizon are invalid, weight
+    0), and a saved BSDF evaluates the same after loading."""
+    bsdf = _coarse(0.6)
+    path = bsdf.save(tmp_path / "brushed.lsim") or tmp_path / "brushed.lsim"
+    loaded = layersim.BSDF.load(path)
+    assert loaded.lobes == bsdf.lobes
+    wi = np.tile(_dirs(1, 6), (20000, 1))
+    s = loaded.sample(wi, np.random.default_rng(7).random((20000, 2)))
+    v = s.valid
+    assert v.mean() > 0.95
+    np.testing.assert_allclose(s.pdf[v], loaded.pdf(wi[v], s.wo[v]), rtol=1e-6)
+    assert abs(s.weight.mean() - float(loaded.albedo(wi[0])[0])) < 1e-2
+    wo = _dirs(50, 8)
+    np.testing.assert_array_equal(loaded.eval(wi[:50], wo), bsdf.eval(wi[:50], wo))
