@@ -18,8 +18,12 @@ incidence), and each solve's wall time and plan memory. The walks (those of
 ``brushed_coats.py``, same scenes and seeds) are cached in ``out/brushed_walks/<case>_<paths>.npz``
 so that a repeated run costs only the solves.
 
-Usage: python benchmarks/features/brushed_richardson.py [paths] [backend] [case indices]
-(default 1e6, warp-cpu, "0,3"; indices into ``brushed_coats.CASES``)
+With ``shared`` every floor is solved on the discretisation (n, md) of the lowest floor's
+solve (``layersim.solve(..., like=...)``): the planner's n, md and ms jump with the floor, and
+their discretisation error is not smooth in it.
+
+Usage: python benchmarks/features/brushed_richardson.py [paths] [backend] [case indices] [shared]
+(default 1e6, warp-cpu, "0,3", own discretisation per floor; indices into ``brushed_coats.CASES``)
 """
 
 from __future__ import annotations
@@ -109,13 +113,14 @@ def walks(k: int, sc, paths: int, backend: str) -> list:
     return load_walks(path)
 
 
-def solve_outputs(sc, floor: float) -> tuple[list, float, float, str]:
-    """Albedos and top bin energies at every incidence of the route solved at ``floor``; the
-    solve's wall seconds, its plan memory (GiB) and its plan (n, md, ms)."""
+def solve_outputs(sc, floor: float, like=None) -> tuple[list, float, float, str, object]:
+    """Albedos and top bin energies at every incidence of the route solved at ``floor`` (on
+    the discretisation of the BSDF ``like`` if given); the solve's wall seconds, its plan
+    memory (GiB), its plan (n, md, ms) and the BSDF."""
     saved, brushed.BRUSHED_FLOOR = brushed.BRUSHED_FLOOR, floor   # read when the plan is made
     try:
         t0 = time.perf_counter()
-        bsdf = layersim.solve(sc)
+        bsdf = layersim.solve(sc, like=like)
         seconds = time.perf_counter() - t0
     finally:
         brushed.BRUSHED_FLOOR = saved
@@ -123,7 +128,7 @@ def solve_outputs(sc, floor: float) -> tuple[list, float, float, str]:
     out = [(np.atleast_1d(bsdf.albedo(bc.unit(t))[0]).astype(float),
             np.asarray(bsdf.bin_energies(bc.unit(t), bc.MU_EDGES, bc.PHI_EDGES)["top"], float))
            for t in bc.INCIDENCE]
-    return out, seconds, p.memory_bytes / 2**30, f"n={p.n} md={p.md} ms={p.ms}"
+    return out, seconds, p.memory_bytes / 2**30, f"n={p.n} md={p.md} ms={p.ms}", bsdf
 
 
 def combine(outputs: list, w) -> list:
@@ -148,14 +153,18 @@ def verdict(outputs: list, results: list) -> tuple[str, bool]:
     return " | ".join(parts), ok
 
 
-def run_case(k: int, paths: int, backend: str) -> None:
+def run_case(k: int, paths: int, backend: str, shared: bool) -> None:
+    """Case ``k`` at every floor and variant; with ``shared``, every floor is solved on the
+    discretisation (n, md) of the lowest floor's solve, so that only the roughness varies."""
     label, rough, eta, rot, gold = bc.CASES[k]
     sc = bc.scene(rough, eta, rot, gold)
-    print(f"## case {k}: {label}", flush=True)
+    print(f"## case {k}: {label}{'; every floor on the discretisation of floor ' if shared else ''}"
+          f"{f'{min(FLOORS):g}' if shared else ''}", flush=True)
     results = walks(k, sc, paths, backend)
-    solved, cost = {}, {}
-    for f in FLOORS:
-        solved[f], sec, gib, plan = solve_outputs(sc, f)
+    solved, cost, like = {}, {}, None
+    for f in sorted(FLOORS):
+        solved[f], sec, gib, plan, bsdf = solve_outputs(sc, f, like)
+        like = bsdf if shared else None
         cost[f] = (sec, gib)
         print(f"  solve floor {f:g}: {plan}, plan {gib:.2f} GiB, {sec:.1f} s wall", flush=True)
     v0 = min(rough) ** 2
@@ -175,13 +184,14 @@ def main() -> None:
     paths = int(float(sys.argv[1])) if len(sys.argv) > 1 else 1_000_000
     backend = sys.argv[2] if len(sys.argv) > 2 else "warp-cpu"
     cases = [int(c) for c in (sys.argv[3] if len(sys.argv) > 3 else "0,3").split(",")]
+    shared = len(sys.argv) > 4 and sys.argv[4] == "shared"
     print(f"# {paths:.3g} paths per direction, backend {backend}, {platform.node()}; incidence "
           f"{', '.join(f'{t:g}' for t in bc.INCIDENCE)} deg (phi 20 deg); bar: albedo within "
           f"max({ALBEDO_SE:g} se, {ALBEDO_ABS:g}) and >= {100 * BIN_FRACTION:g} % of populated "
           f"10 x 12 top bins <= 3 sigma at every incidence ('*' marks an incidence that misses)",
           flush=True)
     for k in cases:
-        run_case(k, paths, backend)
+        run_case(k, paths, backend, shared)
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
     print(f"# peak RSS of this process {rss:.2f} GiB", flush=True)
 
