@@ -75,6 +75,17 @@ def _pdf_kernel(wi: wp.array(dtype=wp.vec3d), wo: wp.array(dtype=wp.vec3d), au: 
     out[q] = sampling.vndf_pdf(wi[q], m, au, av, dist) / (wp.float64(4.0) * wp.dot(wo[q], m))
 
 
+@wp.kernel
+def _refract_kernel(wi: wp.array(dtype=wp.vec3d), m: wp.array(dtype=wp.vec3d), eta: wp.float64,
+                    wt: wp.array(dtype=wp.vec3d)):
+    q = wp.tid()
+    t, ok = sampling.refract(wi[q], m[q], eta)
+    zero = wp.float64(0.0)
+    wt[q] = wp.vec3d(zero, zero, zero)
+    if ok:
+        wt[q] = t
+
+
 def _vec(a) -> wp.array:
     return wp.array(np.ascontiguousarray(a, dtype=np.float64).reshape(-1, 3), dtype=wp.vec3d,
                     device=device_for("cpu"))
@@ -149,3 +160,17 @@ def reflection_pdf(wi, wo, alpha_u: float, alpha_v: float, distribution: str) ->
                           int(physics.DISTRIBUTION_CODES[distribution])],
                   outputs=[out], device=dev)
     return out.numpy()
+
+
+def refraction(wi, m, eta: float) -> np.ndarray:
+    """Directions (Q, 3) refracted from ``wi`` (Q, 3, pointing away from the boundary)
+    through microfacet normals ``m`` (Q, 3) of relative index ``eta``
+    (:func:`sampling.refract`, the walk's own); (0, 0, 0) under total internal reflection."""
+    ensure_init()
+    wi = np.asarray(wi, float).reshape(-1, 3)
+    dev = device_for("cpu")
+    wt = wp.zeros(wi.shape[0], dtype=wp.vec3d, device=dev)
+    if wi.shape[0]:
+        wp.launch(_refract_kernel, dim=wi.shape[0], inputs=[_vec(wi), _vec(m), float(eta)],
+                  outputs=[wt], device=dev)
+    return wt.numpy()

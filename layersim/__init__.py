@@ -9,6 +9,7 @@ Public entry points (see docs/conventions.md)::
     layersim.export(bsdf, path, format="rgl")     # RGL file (Mitsuba 3 / pbrt-v4), reflection
     stack = layersim.add(top, bottom); layer = layersim.subtract(stack, known, side="top")
     result = layersim.fit(template, target)      # free values { fit = [lo, hi] }
+    base = layersim.subtract_model(stack, template, side="top").base   # subtraction by a fit
     layersim.statistical.lobes(scene, theta_i); layersim.design(targets)   # Bati et al. 2021
 """
 from .errors import LayersimError, SceneError, InfeasibleError, OperatorError, FileFormatError
@@ -21,7 +22,7 @@ from . import bsdffile
 from .bsdffile import FourierTable, export
 from .solver import solve, add
 from .stacking.subtract import subtract
-from .fit import fit, FitResult
+from .fit import fit, FitResult, subtract_model
 
 __version__ = "0.1.0"
 

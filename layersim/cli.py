@@ -14,6 +14,7 @@
     layersim eval SRC --wi X,Y,Z --wo X,Y,Z     print f(wi, wo) (per channel for RGB)
     layersim plot SRC (--wi THETA,PHI | --blocks) [-o F.png]   draw slices or operator blocks
     layersim subtract STACK KNOWN --side top|bottom [-o FILE] [--eps EPS] [--noise NOISE]
+    layersim subtract STACK [KNOWN] --side top|bottom --model TEMPLATE [-o FILE]
                                      recover the unknown layer of a solved two-layer stack
     layersim fit TEMPLATE TARGET -o FITTED.toml [--plot F.png] [--quiet]
                                      fit a template's free values to a BSDF or measurements
@@ -258,9 +259,13 @@ def cmd_solve(args) -> int:
     finally:
         bars.close()
     info = bsdf.info
-    _print_notes(info)
     _print_accuracy(info)
-    print(f"stack: {info['nnz']} nonzero coefficients, {info['memory_bytes'] / 2**20:.1f} MiB")
+    if "nnz" in info:
+        _print_notes(info)
+        print(f"stack: {info['nnz']} nonzero coefficients, "
+              f"{info['memory_bytes'] / 2**20:.1f} MiB")
+    else:
+        print(f"stack: specular paths ({repr(bsdf)})")
     print("albedo (energy fractions):")
     print(_albedo_table(bsdf, TABLE_ANGLES))
     bsdf.save(out)
@@ -344,37 +349,67 @@ def cmd_bench(args) -> int:
 MC_VERIFY_PATHS = 1_000_000
 
 
+def _design_options(args):
+    """The checked options of ``layersim design``: the output path and image (or None)."""
+    if args.plot and args.no_verify:
+        raise ValueError("--plot draws the exact solve's lobes: drop --no-verify")
+    if args.exact and args.no_verify:
+        raise ValueError("--exact fits the design by exact solves: drop --no-verify")
+    if args.candidates < 1:
+        raise ValueError(f"--candidates must be >= 1, got {args.candidates}")
+    out = _output(args.output, "-o") if args.output else None
+    return out, _image(args.plot, "--plot") if args.plot else None
+
+
+def _verify_design(targets, best, image):
+    """Print the statistical design's verification (exact solve, else Monte Carlo)."""
+    from .statistical import report
+    from .statistical.verify import montecarlo_solve, verify
+    reference = "exact"
+    try:
+        result = verify(best)
+    except LayersimError as exc:
+        print(f"exact solve refused ({exc}); verifying against Monte Carlo "
+              f"({MC_VERIFY_PATHS:.0e} paths per direction)")
+        result = verify(best, solve=montecarlo_solve(MC_VERIFY_PATHS, backend="auto"))
+        reference = "Monte Carlo"
+    print("verification of candidate 1 at normal incidence:")
+    print("\n".join(report.verification_lines(targets, result, reference)))
+    if image:
+        report.plot_lobes(targets, best, result, image)
+        print(f"wrote {image}")
+
+
+def _refine_design(args, targets, best, image):
+    """Print the exact refinement of ``best`` and return the refined design."""
+    from .statistical import report
+    from .statistical.refine import refine
+    result = refine(best, targets, progress=False if args.quiet else None)
+    print("exact refinement of candidate 1 (lobes at normal incidence, exact transport):")
+    print("\n".join(report.refinement_lines(targets, result)))
+    if image:
+        report.plot_lobes(targets, result.refined, {"exact_solve": solve}, image)
+        print(f"wrote {image}")
+    return result.refined
+
+
 def cmd_design(args) -> int:
     from .statistical import report
     from .statistical.design import designs
     from .statistical.targets import parse_targets
-    from .statistical.verify import montecarlo_solve, verify
     targets = parse_targets(args.targets)
-    if args.plot and args.no_verify:
-        raise ValueError("--plot draws the exact solve's lobes: drop --no-verify")
-    if args.candidates < 1:
-        raise ValueError(f"--candidates must be >= 1, got {args.candidates}")
-    out = _output(args.output, "-o") if args.output else None
-    image = _image(args.plot, "--plot") if args.plot else None
+    out, image = _design_options(args)
     found = designs(args.targets)
     for i, d in enumerate(found[:args.candidates]):
         print(f"candidate {i + 1} of {len(found)} (class position {d.choice}):")
         print("\n".join(report.stack_lines(d)))
     best = found[0]
-    if not args.no_verify:
-        reference = "exact"
-        try:
-            result = verify(best)
-        except LayersimError as exc:
-            print(f"exact solve refused ({exc}); verifying against Monte Carlo "
-                  f"({MC_VERIFY_PATHS:.0e} paths per direction)")
-            result = verify(best, solve=montecarlo_solve(MC_VERIFY_PATHS, backend="auto"))
-            reference = "Monte Carlo"
-        print("verification of candidate 1 at normal incidence:")
-        print("\n".join(report.verification_lines(targets, result, reference)))
-        if image:
-            report.plot_lobes(targets, best, result, image)
-            print(f"wrote {image}")
+    for note in best.notes:
+        print(f"note: {note}")
+    if args.exact:
+        best = _refine_design(args, targets, best, image)
+    elif not args.no_verify:
+        _verify_design(targets, best, image)
     if out:
         out.write_text(best.toml())
         print(f"wrote {out} (layersim solve {out})")
@@ -585,24 +620,67 @@ def cmd_plot(args) -> int:
 # --- subtracting equations (layersim.subtract) ---------------------------------------------
 
 def cmd_subtract(args) -> int:
+    if args.model:
+        return _subtract_model(args)
+    if args.known is None:
+        raise ValueError("subtract: KNOWN (the solved known layer) is required without --model")
     out = _output(args.output if args.output else
                   f"{Path(args.stack).stem}-minus-{Path(args.known).stem}.lsim", "-o")
     stack = BSDF.load(args.stack)
     known = BSDF.load(args.known)
     result = subtract(stack, known, side=args.side, eps=args.eps, noise=args.noise)
+    _print_plain(result)
+    print("albedo of the recovered layer (energy fractions):")
+    print(_albedo_table(result, TABLE_ANGLES))
+    infos = result.info["subtract"]
+    _warn_energy(result, infos if isinstance(infos, list) else [infos])
+    _warn_hidden(known, args.side)
+    result.save(out)
+    print(f"wrote {out} (reload with layersim.BSDF.load)")
+    return 0
+
+
+def _print_plain(result: BSDF, prefix: str = "") -> None:
+    """What the plain subtraction chose and what the stack determines, per channel."""
     infos = result.info["subtract"]
     for c, info in enumerate(infos if isinstance(infos, list) else [infos]):
-        tag = f"channel {c}: " if isinstance(infos, list) else ""
+        tag = prefix + (f"channel {c}: " if isinstance(infos, list) else "")
         print(f"{tag}eps = {info['eps']:.3g} ({info['method']}); noise level "
               f"{info['noise']:.3g} ({info['noise_source']}); re-adding residual "
               f"{info['residual']:.3g}; visible {100 * info['visible']:.0f} % of the angular "
               f"components; largest R + T {info['energy_max']:.4f}")
         print(f"{tag}{determined.describe(info['determined'])}")
-    print("albedo of the recovered layer (energy fractions):")
-    print(_albedo_table(result, TABLE_ANGLES))
-    _warn_energy(result, infos if isinstance(infos, list) else [infos])
-    _warn_hidden(known, args.side)
-    result.save(out)
+
+
+def _subtract_model(args) -> int:
+    """``layersim subtract STACK [KNOWN] --model TEMPLATE``: layersim.subtract_model."""
+    from .fit import Template, subtract_model
+    stem = Path(args.known).stem if args.known else Path(args.model).stem
+    out = _output(args.output if args.output else
+                  f"{Path(args.stack).stem}-minus-{stem}.lsim", "-o")
+    if args.eps is not None or args.noise is not None:
+        if args.known is None:
+            raise ValueError("subtract: --eps and --noise set the plain subtraction, which "
+                             "--model runs only beside KNOWN")
+    stack = BSDF.load(args.stack)
+    known = BSDF.load(args.known) if args.known else None
+    res = subtract_model(stack, Template(args.model), side=args.side, known=known,
+                         progress=None if not args.quiet else False)
+    layers = ", ".join(map(str, res.layers))
+    print(f"model-based subtraction: layers {layers} of {args.model} fitted to {args.stack}")
+    print(res.fit.summary())
+    print(f"model: re-adding residual {res.residual:.3g} (relative L2 of the known layers added "
+          "to the fitted base against the stack, energy basis)")
+    if res.plain is not None:
+        print("plain subtraction of KNOWN, for comparison:")
+        _print_plain(res.plain, "  plain: ")
+        infos = res.plain.info["subtract"]
+        worst = max(i["residual_filled"] for i in (infos if isinstance(infos, list) else
+                                                   [infos]))
+        print(f"  plain: re-adding residual of the filled result {worst:.3g}")
+    print("albedo of the fitted base (energy fractions):")
+    print(_albedo_table(res.base, TABLE_ANGLES))
+    res.base.save(out)
     print(f"wrote {out} (reload with layersim.BSDF.load)")
     return 0
 
@@ -675,7 +753,8 @@ command exits with status 2, as 'layersim solve' would refuse it.""",
     "design": """examples:
   layersim design targets.toml -o stack.toml       # prints stacks and verification
   layersim design targets.toml --no-verify         # statistical model only
-  layersim design targets.toml --plot lobes.png""",
+  layersim design targets.toml --plot lobes.png
+  layersim design targets.toml --exact -o stack.toml  # refined by exact fits""",
     "bench": """examples:
   layersim bench --out bench-quick --quick
   layersim bench --out bench --stability --backend warp-cuda --backend opencl
@@ -736,7 +815,13 @@ else scalar_rgb (much slower). See docs/renderers.md.""",
     "subtract": """examples:
   layersim solve stack.toml                                # stack.lsim
   layersim solve lacquer.toml --like stack.lsim            # lacquer.lsim, same discretisation
-  layersim subtract stack.lsim lacquer.lsim --side top -o base.lsim""",
+  layersim subtract stack.lsim lacquer.lsim --side top -o base.lsim
+  layersim subtract stack.lsim --side top --model template.toml -o base.lsim
+  layersim subtract stack.lsim lacquer.lsim --side top --model template.toml  # both ways
+
+--model: template.toml is the whole stack with the known layers fixed and the unknown layer's
+fields free ({ fit = [lo, hi] }); the known layers are those above the first free layer (--side
+top) or below the last one (--side bottom), the rest is fitted and solved alone.""",
 }
 
 
@@ -814,7 +899,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.set_defaults(func=cmd_bench)
 
     sp = _subparser(sub, "design", "inverse design (Bati et al. 2021): stacks whose "
-                                   "lobes at normal incidence match target lobes")
+                                   "lobes at normal incidence match target lobes", [quiet])
     sp.add_argument("targets", help="targets file (TOML: [[lobe]] energy, roughness, layers, "
                                     "base)")
     sp.add_argument("-o", "--output", help="write the preferred stack as a scene file (TOML)")
@@ -822,6 +907,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--candidates", type=int, default=3, help="how many candidate stacks to "
                                                              "print (default 3)")
     sp.add_argument("--no-verify", action="store_true", help="skip the exact solve")
+    sp.add_argument("--exact", action="store_true", help="refine the design by exact fits to "
+                    "the target lobes, report both designs (-o writes the refined one)")
     sp.set_defaults(func=cmd_design)
 
     src_help = "scene (.toml, solved on the fly), saved BSDF (.lsim) or .bsdf file"
@@ -883,12 +970,17 @@ def build_parser() -> argparse.ArgumentParser:
                                            "_blocks.png)")
     sp.set_defaults(func=cmd_plot)
     sp = _subparser(sub, "subtract", "recover the unknown layer of a solved stack "
-                                     "(subtracting equations)")
+                                     "(subtracting equations, or a fit with --model)",
+                    parents=[quiet])
     sp.add_argument("stack", help="solved stack (.lsim written by 'layersim solve')")
-    sp.add_argument("known", help="solved known layer on the stack's discretisation "
-                                  "('layersim solve KNOWN.toml --like STACK.lsim')")
+    sp.add_argument("known", nargs="?", help="solved known layer on the stack's discretisation "
+                    "('layersim solve KNOWN.toml --like STACK.lsim'); optional with --model, "
+                    "where it is checked against the template and subtracted plainly too")
     sp.add_argument("--side", choices=("top", "bottom"), required=True,
                     help="where the known layer sits in the stack")
+    sp.add_argument("--model", metavar="TEMPLATE",
+                    help="fit this template of the whole stack (known layers fixed, the "
+                         "unknown one's fields { fit = [lo, hi] }) and solve its unknown part")
     sp.add_argument("-o", "--output", help="where to save the recovered layer (default: "
                                            "STACK-minus-KNOWN.lsim)")
     sp.add_argument("--eps", type=float, help="Tikhonov parameter (default: automatic, "

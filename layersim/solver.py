@@ -16,6 +16,7 @@ from .stacking import adding
 from .aniso import adding as aniso_adding
 from .aniso.plan import STACK_RELERR, STACK_RELERR_INTERMEDIATE
 from .solved.bsdf import BSDF, channel_pairs, refuse_boundary
+from .specular_paths import SpecularPathsBSDF
 from .config import settings
 from .errors import InfeasibleError
 from .ingredients.aniso_microfacet import AnisoProjectionStats
@@ -290,6 +291,8 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
     if verbose:
         print(plan.report())
     t_plan = time.perf_counter() - t_start
+    if plan.representation == "specular-paths":
+        return _solve_paths(scene, plan, t_start, t_plan, verbose)
     stats = AnisoProjectionStats() if plan.representation == "anisotropic" \
         else ProjectionStats()
     used = [lp for lp in plan.layers if lp.action != "left out"]
@@ -326,6 +329,16 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
     # the operators hold the radiance inside the smooth boundaries (layersim.solved.boundary)
     return BSDF(stacks, plan, info, boundary=plan.boundary,
                 lobes=[_lobes(plan, mono) for mono in monos])
+
+
+def _solve_paths(scene, plan, t_start: float, t_plan: float, verbose: bool):
+    """The BSDF of a stack that the plan routes to specular paths
+    (:class:`layersim.specular_paths.SpecularPathsBSDF`)."""
+    bsdf = SpecularPathsBSDF(scene, plan, {"scene": scene.name, "notes": list(plan.notes)})
+    bsdf.info["seconds"] = {"plan": t_plan, "total": time.perf_counter() - t_start}
+    if verbose:
+        print(f"solved in {bsdf.info['seconds']['total']:.2f} s (specular paths)")
+    return bsdf
 
 
 def _project_channel(c: int, used: list, cache: _OperatorCache, owned: list, project,

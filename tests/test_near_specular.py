@@ -158,12 +158,19 @@ def test_bare_near_specular_conductor_is_its_exact_lobe(tmp_path, rough):
                        bsdf.eval(_dir(30.0), _dir(30.0) * [-1, -1, 1]), rtol=1e-12)
 
 
-def test_near_specular_conductor_behind_a_smooth_coat_is_refused_with_the_reason():
+def test_near_specular_conductor_behind_a_smooth_coat_is_not_a_mirror():
     """Behind a smooth coat nothing blurs the conductor's lobe (and near the coat's critical
-    angle part of it is trapped): the mirror is not used, and the exact projection's refusal
-    says why and what to use."""
+    angle part of it is trapped): the mirror is not used. With clear media only, the stack is
+    solved as specular paths (layersim.specular_paths); with a scattering medium the exact
+    projection's refusal says why and what to use."""
+    from layersim.specular_paths import SpecularPathsBSDF
+    assert isinstance(layersim.solve(_gold(0.005, coat=0.0)), SpecularPathsBSDF)
+    milky = layersim.Scene.from_dict({"layer": [
+        {"kind": "dielectric", "ior": 1.5, "roughness": 0.0},
+        {"kind": "medium", "albedo": 0.5, "tau": 0.1},
+        {"kind": "conductor", "ior": GOLD, "roughness": 0.005}]})
     with pytest.raises(layersim.InfeasibleError, match="no rough interface above it"):
-        layersim.solve(_gold(0.005, coat=0.0))
+        layersim.solve(milky)
 
 
 @pytest.mark.slow

@@ -13,6 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..solved.bsdf import BSDF
+from ..specular_paths import SpecularPathsBSDF
 from ..solved.channels import green_from_ybr
 from ..solved.directions import azimuth, direction_pairs
 from ..errors import FileFormatError, InfeasibleError
@@ -503,6 +504,11 @@ def export(bsdf: BSDF, path, version: int | None = None, alpha=(0.0, 0.0),
     ``samples``, ``seed``, ``name``). Returns its :class:`~layersim.bsdffile.rgl.RGLExport`
     (with the measured reconstruction ``error``).
     """
+    if isinstance(bsdf, SpecularPathsBSDF):
+        raise InfeasibleError(
+            f"format {format!r}: a stack solved by specular paths (near-specular lobes and "
+            "deltas of flat interfaces) has no Fourier series per ordinate pair to tabulate; "
+            "use its eval, sample and pdf directly")
     if format == "rgl":
         if version is not None or relerr or tuple(alpha) != (0.0, 0.0):
             raise ValueError("version, relerr and alpha belong to the .bsdf format; the RGL "

@@ -35,6 +35,8 @@ DIFF_STEP = 1e-6
 #: The coarse stage's fraction of the planner's ordinates and orders, and its floor.
 COARSE = 0.5
 MIN_COARSE_N, MIN_COARSE_MD = 32, 8
+#: Tolerances (scipy's ftol, xtol and gtol) of the final stage by default and of the coarse one.
+FINAL_TOL, COARSE_TOL = 1e-10, 1e-5
 #: Restarts of a stage on a finer plan before giving up.
 MAX_REPLANS = 3
 
@@ -48,18 +50,45 @@ def _even(n: float) -> int:
     return int(2 * np.ceil(n / 2))
 
 
-def _stages(template: Template, coarse: bool) -> list:
+def fourier_plan(scene):
+    """The planner's plan of ``scene``, refused where it routes the stack to specular paths
+    (:mod:`layersim.specular_paths`): the fit's stages are Fourier discretisations (``n``,
+    ``md``), which such a stack does not have."""
+    plan = make_plan(scene)
+    if plan.representation == "specular-paths":
+        raise InfeasibleError(
+            f"fit: scene {scene.name!r} is solved as specular paths (near-specular interfaces "
+            "and clear media), which fit does not take: its stages refine a Fourier "
+            "discretisation; free the roughnesses above 0.03 or give the template a rough "
+            "or scattering layer")
+    return plan
+
+
+def like_discretisation(like) -> dict:
+    """The discretisation (``n``, ``md``, quadrature rule and, if coupled, ``ms``) of a solved
+    BSDF, as ``[discretization]`` entries (what :func:`layersim.solve` with ``like=`` uses)."""
+    op = like.operators[0]
+    out = {"n": int(op.grid.n), "md": int(op.m), "quadrature": op.grid.rule}
+    ms = like.info.get("ms", getattr(op, "ms", None))
+    return out | ({"ms": int(ms)} if ms else {})
+
+
+def _stages(template: Template, coarse: bool, like=None) -> list:
     """The discretisations of the stages: ``[coarse, None]`` (None: plan at the stage's start),
-    or the template's own ``n``/``md`` for one stage when it fixes them."""
+    the template's own ``n``/``md`` for one stage when it fixes them, or with ``like`` (a solved
+    BSDF) ``[coarse, like's discretisation]``, the coarse stage at half of like's (none where
+    half would be below the floor: a coarser plan than the floor is refused by narrow lobes,
+    and the restart would then plan above like's)."""
     own = {k: v for k, v in template.data.get("discretization", {}).items() if k in ("n", "md")}
     if own:
         return [own]
-    plan = make_plan(template.scene(template.start))
-    first = {"n": max(_even(COARSE * plan.n), MIN_COARSE_N),
-             "md": max(int(COARSE * plan.md), MIN_COARSE_MD)}
-    if not coarse or first["n"] >= plan.n:
-        return [None]
-    return [first, None]
+    last = None if like is None else like_discretisation(like)
+    plan = fourier_plan(template.scene(template.start)) if last is None else None
+    n, md = (plan.n, plan.md) if last is None else (last["n"], last["md"])
+    first = {"n": max(_even(COARSE * n), MIN_COARSE_N), "md": max(int(COARSE * md), MIN_COARSE_MD)}
+    if not coarse or first["n"] >= n or (last is not None and MIN_COARSE_N > COARSE * n):
+        return [last]
+    return [first, last]
 
 
 class _Residuals:
@@ -86,14 +115,14 @@ class _Residuals:
 
 
 def _plan_of(template, x, disc=None) -> dict:
-    plan = make_plan(template.scene(x))
+    plan = fourier_plan(template.scene(x))
     out = {"n": plan.n, "md": plan.md}
     if disc:            # a restart never coarsens the stage
         out = {k: max(out[k], disc[k]) for k in out}
     return out
 
 
-def _run_stage(template, target, disc, x0, stage, history, bar, threads, final):
+def _run_stage(template, target, disc, x0, stage, history, bar, threads, tol):
     """Least squares over one stage; returns scipy's result, the residual function and the
     discretisation it ended on."""
     from scipy.optimize import least_squares
@@ -103,8 +132,7 @@ def _run_stage(template, target, disc, x0, stage, history, bar, threads, final):
         try:
             res = least_squares(fun, x0, bounds=(template.lo, template.hi), jac="2-point",
                                 diff_step=DIFF_STEP, x_scale="jac", method="trf",
-                                ftol=1e-10 if final else 1e-5, xtol=1e-10 if final else 1e-5,
-                                gtol=1e-10 if final else 1e-5)
+                                ftol=tol, xtol=tol, gtol=tol)
             return res, fun, disc
         except _Replan as exc:
             x0 = np.clip(fun.best[1], template.lo, template.hi)
@@ -121,7 +149,7 @@ def _check_channels(template: Template, target: Target) -> None:
 
 
 def fit(template, target, *, coarse: bool = True, threads: int | None = None,
-        progress: bool | None = None) -> FitResult:
+        progress: bool | None = None, like=None, tol: float = FINAL_TOL) -> FitResult:
     """Fit the free values of ``template`` to ``target`` by exact transport.
 
     Parameters
@@ -141,6 +169,13 @@ def fit(template, target, *, coarse: bool = True, threads: int | None = None,
         Threads of each solve.
     progress : bool, optional
         A progress bar on stderr (default: when stderr is a terminal).
+    like : BSDF, optional
+        Solve the final stage on this BSDF's discretisation (:func:`layersim.solve` ``like=``)
+        instead of the planner's: a BSDF target's own, so that the fit and the target share
+        their discretisation error (model-based subtraction, :mod:`.modelsub`).
+    tol : float
+        Tolerance of the final stage on the cost, the step and the gradient (scipy's ``ftol``,
+        ``xtol``, ``gtol``); the coarse stage stops at the larger of it and 1e-5.
 
     Returns
     -------
@@ -159,20 +194,21 @@ def fit(template, target, *, coarse: bool = True, threads: int | None = None,
     target = as_target(target, template.scene(template.start).wavelengths)
     _check_channels(template, target)
     history, plans, x = [], [], template.start
-    stages = _stages(template, coarse)
+    stages = _stages(template, coarse, like)
     with tqdm(desc="fit", unit="solve", disable=not (sys.stderr.isatty() if progress is None
                                                      else progress)) as bar:
         for k, disc in enumerate(stages):
             final = k == len(stages) - 1
             res, fun, disc = _run_stage(template, target, disc, x, "final" if final else
-                                        "coarse", history, bar, threads, final)
-            for _ in range(MAX_REPLANS if final else 0):
+                                        "coarse", history, bar, threads,
+                                        tol if final else max(tol, COARSE_TOL))
+            for _ in range(MAX_REPLANS if final and like is None else 0):
                 grown = _plan_of(template, res.x, disc)
                 if grown == disc:
                     break
                 plans.append({**disc, "nfev": res.nfev})
                 res, fun, disc = _run_stage(template, target, grown, res.x, "final", history,
-                                            bar, threads, True)
+                                            bar, threads, tol)
             x = res.x
             plans.append({**disc, "nfev": res.nfev})
     return _result(template, res, history, plans, target.unit)

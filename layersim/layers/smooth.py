@@ -71,7 +71,8 @@ def plan_dielectric(scene, i: int, layer, survey) -> None:
             f"layer {i} ({kind}): a smooth dielectric interface inside the stack refracts "
             "between two grids of ordinates that cannot both be matched to the stack's "
             "(only the top interface, and the bottom one of a transmissive stack with the "
-            "same index ratio, are solved exactly); give it a roughness > 0, or use "
+            "same index ratio, are solved exactly; a stack of flat interfaces and clear media "
+            "is solved as specular paths); give it a roughness > 0, or use "
             "layersim.montecarlo")
     if len(etas) > 1:
         raise InfeasibleError(

@@ -33,6 +33,10 @@ module of this package, and :func:`make_plan` composes them in order:
 
 A ``[discretization]`` table in the scene overrides ``n``, ``md``, ``ms`` and the quadrature
 rule.
+
+* **Route** (:mod:`.route`): a stack of flat interfaces and clear media with a near-specular
+  interface is solved by its specular paths (:mod:`layersim.specular_paths`) where the Fourier
+  plan is refused or over :data:`.route.FOURIER_MAX_BYTES`.
 """
 
 from __future__ import annotations
@@ -46,6 +50,7 @@ from .cost import ingredients
 from .coupling import choose_ms, needed_ms
 from .layers import scale_media, survey_projected
 from .model import LayerPlan, Plan
+from .route import fourier_unaffordable, paths_plan, try_fourier, wants_paths
 from .ordinates import DEFAULT_RULE, N_MAX, N_MIN, N_PER_WIDTH, SNELL_N_FACTOR, choose_grid
 from .orders import MD_MAX, THETA_FULL, choose_md, interface_lengths, truncation_notes
 
@@ -73,6 +78,22 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
         the layer, the limit and what to change.
     """
     scene = as_scene(scene, "make_plan()")
+    if wants_paths(scene):
+        why = fourier_unaffordable(try_fourier(fourier_plan, scene))
+        if why is not None:
+            try:
+                return paths_plan(scene, why)
+            except InfeasibleError as exc:
+                if refuse:
+                    raise InfeasibleError(f"{why}, and {exc}") from None
+                plan = fourier_plan(scene, refuse)
+                plan.notes.append(str(exc))
+                return plan
+    return fourier_plan(scene, refuse)
+
+
+def fourier_plan(scene: Scene, refuse: bool = True) -> Plan:
+    """The plan of ``scene`` in the Fourier basis (:func:`make_plan` without the route)."""
     disc = scene.discretization
     rule = disc.quadrature or DEFAULT_RULE
     notes: list[str] = []

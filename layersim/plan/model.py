@@ -53,6 +53,8 @@ class Plan:
 
     def report(self) -> str:
         """Human-readable summary (printed by ``layersim plan`` and ``layersim solve``)."""
+        if self.representation == "specular-paths":
+            return self._paths_report()
         src = lambda k: " (from the scene)" if k in self.overridden else ""
         basis = ("(cosine series in the azimuth difference)" if self.representation == "isotropic"
                  else "(Fourier series in phi_d and phi_s, coupled modes, Zeltner & Jakob 2018, "
@@ -82,4 +84,13 @@ class Plan:
             lines.append(f"  note: {note}")
         if self.refused:
             lines.append(f"refused: {self.refused}")
+        return "\n".join(lines)
+
+    def _paths_report(self) -> str:
+        """:meth:`report` of a stack solved by specular paths (:mod:`layersim.plan.route`)."""
+        lines = ["representation: specular paths (flat interfaces and clear media; "
+                 "layersim.specular_paths)",
+                 f"estimated memory: {self.memory_bytes / 2**20:.1f} MiB"]
+        lines += [f"  layer {lp.index} ({lp.kind}): {lp.action}" for lp in self.layers]
+        lines += [f"  note: {note}" for note in self.notes]
         return "\n".join(lines)

@@ -41,11 +41,12 @@ import numpy as np
 
 from ..aniso.bsdf import AnisoEvaluator
 from .boundary import BoundaryEvaluator
-from .directions import bin_edges, direction_pairs, unit_directions
+from .directions import bin_arguments, direction_pairs, incident_directions
 from ..errors import FileFormatError, OperatorError
 from .isobsdf import IsoEvaluator
 from ..operators.operator import from_arrays
 from .sampling import sampler_for
+from ..specular_paths.bsdf import FORMAT_VERSION_PATHS, SpecularPathsBSDF
 
 FORMAT_VERSION = 1
 #: First bytes of a saved BSDF: a zip archive (numpy ``.npz``) of plain arrays.
@@ -327,13 +328,7 @@ class BSDF:
     # ---- energy ------------------------------------------------------------------------
 
     def _incident(self, wi):
-        wi = unit_directions("wi", wi)
-        if np.any(wi[..., 2] == 0):
-            raise ValueError("wi lies on the horizon (wi.z == 0): no light enters")
-        if self.opaque and np.any(wi[..., 2] < 0):
-            raise ValueError("this stack is opaque (its base is a conductor or diffuse layer): "
-                             "light cannot arrive from below (wi.z < 0)")
-        return wi
+        return incident_directions(wi, self.opaque, "a conductor or diffuse layer")
 
     def albedo(self, wi):
         """Energy fractions ``(R, T)`` of a beam arriving from ``wi``: R leaves on the side it
@@ -373,11 +368,7 @@ class BSDF:
             added to the bin that holds its direction (mirror or straight-through).
         """
         wi = self._incident(wi)
-        if wi.shape != (3,):
-            raise ValueError(f"bin_energies takes one incident direction of shape (3,), got "
-                             f"{wi.shape}")
-        mu_edges = bin_edges("mu_edges", mu_edges, 0.0, 1.0)
-        phi_edges = bin_edges("phi_edges", phi_edges, 0.0, 2.0 * np.pi)
+        mu_edges, phi_edges = bin_arguments(wi, mu_edges, phi_edges)
         return self._per_channel(lambda c: self.evaluator(c).bins(wi, mu_edges, phi_edges))
 
     # ---- persistence -------------------------------------------------------------------
@@ -438,10 +429,13 @@ class BSDF:
                     raise FileFormatError(f"{path}: a zip archive, but not a saved layersim "
                                           "BSDF (BSDF.save / 'layersim solve' write those)")
                 version = int(d["version"])
-                if version > FORMAT_VERSION_ANISO:
+                if version > FORMAT_VERSION_PATHS:
                     raise FileFormatError(f"{path}: format version {version} is newer than "
-                                          f"this layersim ({FORMAT_VERSION_ANISO}); upgrade "
+                                          f"this layersim ({FORMAT_VERSION_PATHS}); upgrade "
                                           "layersim")
+                if version == FORMAT_VERSION_PATHS:
+                    # a stack of specular paths: the scene that rebuilds them
+                    return SpecularPathsBSDF.from_arrays(d)
                 channels = range(int(d["channels"]))
                 ops = [from_arrays(d, prefix=f"c{c}_") for c in channels]
                 boundary = _read_boundary(d, prefix="c0_")

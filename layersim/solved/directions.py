@@ -71,3 +71,26 @@ def bin_edges(name: str, edges, lo: float, hi: float) -> np.ndarray:
     if e[0] < lo - 1e-12 or e[-1] > hi + 1e-12:
         raise ValueError(f"{name} must lie within [{lo:g}, {hi:g}], got [{e[0]:g}, {e[-1]:g}]")
     return e
+
+
+def incident_directions(wi, opaque: bool, base: str) -> np.ndarray:
+    """Checked incident directions ``wi`` (..., 3) of a BSDF: unit vectors off the horizon,
+    and from above where the stack is ``opaque`` (``base`` names what makes it so, for the
+    message)."""
+    wi = unit_directions("wi", wi)
+    if np.any(wi[..., 2] == 0):
+        raise ValueError("wi lies on the horizon (wi.z == 0): no light enters")
+    if opaque and np.any(wi[..., 2] < 0):
+        raise ValueError(f"this stack is opaque (its base is {base}): light cannot arrive "
+                         "from below (wi.z < 0)")
+    return wi
+
+
+def bin_arguments(wi: np.ndarray, mu_edges, phi_edges) -> tuple[np.ndarray, np.ndarray]:
+    """The checked ``(mu_edges, phi_edges)`` of ``bin_energies``, whose checked ``wi`` must be
+    one direction of shape (3,)."""
+    if wi.shape != (3,):
+        raise ValueError(f"bin_energies takes one incident direction of shape (3,), got "
+                         f"{wi.shape}")
+    return (bin_edges("mu_edges", mu_edges, 0.0, 1.0),
+            bin_edges("phi_edges", phi_edges, 0.0, 2.0 * np.pi))

@@ -308,7 +308,8 @@ def assess(known: IsoOperator, recovered: IsoOperator, side: str, eps: float, ro
     ----------
     known, recovered : IsoOperator
         The known layer and the recovered one (rotational averages of anisotropic operators:
-        the estimate is made on the azimuthal mean).
+        the estimate is made on the azimuthal mean; the subtraction then replaces it, for its
+        final report, by one made in the coupled algebra, which the average under-reports).
     side : {"top", "bottom"}
         Where the known layer sits in the stack.
     eps : float
@@ -342,18 +343,26 @@ def assess(known: IsoOperator, recovered: IsoOperator, side: str, eps: float, ro
     est = error_by_cut(again, filled, side)
     if spread is not None:
         est = np.hypot(est, spread)
+    det = declare(grid, reached, est, tolerance, side, ior)
+    corrected = correct(recovered, reached, side, round_trip, again) if correct_hidden else None
+    return det, filled, corrected
+
+
+def declare(grid, reached: np.ndarray, est: np.ndarray, tolerance: float, side: str,
+            ior: float) -> Determined:
+    """The determined set from the estimated error ``est`` per cut (shape (h,), relative L2
+    over the directions with ordinate index ``>= k``): ``{mu >= mu_k}`` for the smallest ``k``
+    at or above the lowest reached ordinate whose every subset ``{mu >= mu_j}``, ``j >= k``, is
+    within ``tolerance``."""
     lowest = int(np.argmax(reached))
     ok = est <= tolerance
     ok[:lowest] = False
-    # the determined set is {mu >= mu_k} with every smaller such set also within the tolerance
     k = next((j for j in range(grid.h) if ok[j:].all()), None)
     mu = grid.mu
-    det = Determined(side, ior, float(mu[lowest]), None if k is None else float(mu[k]),
-                     float(est[lowest] if k is None else est[k]), tolerance,
-                     estimates=[(float(mu[j]), float(est[j])) for j in range(lowest, grid.h)],
-                     reached=reached, errors=est)
-    corrected = correct(recovered, reached, side, round_trip, again) if correct_hidden else None
-    return det, filled, corrected
+    return Determined(side, ior, float(mu[lowest]), None if k is None else float(mu[k]),
+                      float(est[lowest] if k is None else est[k]), tolerance,
+                      estimates=[(float(mu[j]), float(est[j])) for j in range(lowest, grid.h)],
+                      reached=reached, errors=est)
 
 
 def correct(recovered: IsoOperator, reached: np.ndarray, side: str, round_trip,

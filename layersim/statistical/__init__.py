@@ -5,10 +5,13 @@ material appearance").
 * :func:`lobes` (``layersim.statistical.lobes(scene, theta_i)``): the model's lobes, energy and
   roughness per channel, of a stack of GGX interfaces and absorbing media;
 * :class:`StatisticalBSDF`: the same as a BSDF (``eval``, ``albedo``, ``bin_energies``);
-* :func:`design` (also ``layersim.design``): target lobes -> candidate scenes.
+* :func:`design` (also ``layersim.design``): target lobes -> candidate scenes (a conductor
+  base inferred where no dielectric reaches the bottom lobe, :mod:`.design.inference`);
+* :func:`.refine.refine` (``layersim design --exact``): a design refined by exact fits to its
+  target lobes.
 
 Modules: :mod:`.fgd` (FGD tables), :mod:`.variance`, :mod:`.atomic`, :mod:`.forward`,
-:mod:`.stack`, :mod:`.lobes`, :mod:`.targets`, :mod:`.design`, :mod:`.verify`.
+:mod:`.stack`, :mod:`.lobes`, :mod:`.targets`, :mod:`.design`, :mod:`.verify`, :mod:`.refine`.
 """
 
 from .lobes import Lobe, StatisticalBSDF, lobes

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..solved.directions import bin_edges, direction_pairs, unit_directions
+from ..solved.directions import bin_arguments, bin_edges, direction_pairs, unit_directions
 from ..errors import InfeasibleError
 from .forward import add_stack
 from .stack import statistical_stacks
@@ -237,11 +237,7 @@ class StatisticalBSDF:
         with :func:`lobe_bins`; a smooth lobe lands in its mirror direction's bin); the bottom
         side is zeros (the model has no transmitted distribution)."""
         wi = self._check(wi)
-        if wi.shape != (3,):
-            raise ValueError(f"bin_energies takes one incident direction of shape (3,), got "
-                             f"{wi.shape}")
-        mu_edges = bin_edges("mu_edges", mu_edges, 0.0, 1.0)
-        phi_edges = bin_edges("phi_edges", phi_edges, 0.0, 2.0 * np.pi)
+        mu_edges, phi_edges = bin_arguments(wi, mu_edges, phi_edges)
         top = np.zeros((mu_edges.size - 1, phi_edges.size - 1, self.channels))
         mirror = np.array([-wi[0], -wi[1], wi[2]])
         phi_m = np.mod(np.arctan2(mirror[1], mirror[0]), 2 * np.pi)

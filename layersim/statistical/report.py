@@ -37,6 +37,42 @@ def verification_lines(targets, result, reference: str = "exact") -> list[str]:
     return lines
 
 
+def exact_lobe_lines(targets, lobes) -> list[str]:
+    """Per target lobe, the target and exact transport's lobe (``lobes``: per lobe
+    ``(energy, roughness)`` per channel, :func:`~layersim.statistical.verify.exact_lobes`)."""
+    lines = ["  lobe  target energy / alpha       exact energy / alpha (fit)"]
+    for k, (t, (e, a)) in enumerate(zip(targets.lobes, lobes), start=1):
+        lines.append(f"  {k:>4}  {_rgb(t.energy)} / {t.roughness:.4f}   {_rgb(e)} / "
+                     f"{_rgb(a, '{:.3f}')}")
+    return lines
+
+
+def _percent(mismatch: dict) -> str:
+    return f"energy {100 * mismatch['energy']:.1f} %, roughness {100 * mismatch['roughness']:.1f} %"
+
+
+def refinement_lines(targets, refinement) -> list[str]:
+    """The report of ``layersim design --exact``: both designs (layers, exact lobes against
+    the targets), the largest relative errors of each, and the fits (solves, time, RMS
+    residual, warnings) of a :class:`~layersim.statistical.refine.Refinement`."""
+    lines = []
+    for key in ("statistical", "refined"):
+        d = getattr(refinement, key)
+        lines.append(f"{key} design:")
+        lines += ["  " + s for s in d.scene.describe().splitlines()[1:]]
+        lines += exact_lobe_lines(targets, refinement.lobes[key])
+    before, after = refinement.mismatch["statistical"], refinement.mismatch["refined"]
+    lines.append(f"largest relative error of the exact lobes: statistical {_percent(before)}; "
+                 f"refined {_percent(after)}")
+    lines.append(f"refinement: {refinement.solves} exact solves in {refinement.seconds:.1f} s")
+    for k, fit in refinement.fits:
+        lines.append(f"  lobe {k + 1}: {len(fit.history)} solves, final plan n = "
+                     f"{fit.plans[-1]['n']}, md = {fit.plans[-1]['md']}, RMS weighted residual "
+                     f"{fit.residual:.3g} 1/sr")
+        lines += [f"  lobe {k + 1}: warning: {w}" for w in fit.warnings]
+    return lines
+
+
 def plot_lobes(targets, design, result, path) -> None:
     """Target lobes (GGX of the target roughness and energy) against exact transport's lobes
     (the cut-stack differences of :func:`~layersim.statistical.verify.exact_lobes`) at normal

@@ -10,14 +10,15 @@ TOML layout::
     energy = [0.04, 0.04, 0.04]   # fraction reflected in this lobe at normal incidence
     roughness = 0.05         # GGX alpha of the lobe (or: variance = Belcour's sigma)
     layers = 1               # 1 or 2 interfaces (optional: 1 where it can give the energy)
-    base = "dielectric"      # or "conductor" (the bottom lobe only)
+    base = "dielectric"      # or "conductor" (the bottom lobe only; left out: a conductor
+                             # where no dielectric stack reaches the lobe)
 """
 
 from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -46,13 +47,16 @@ class TargetError(LayersimError, ValueError):
 @dataclass(frozen=True)
 class Target:
     """One wanted lobe: ``energy`` per channel (shape (C,)), Belcour ``variance`` and GGX
-    ``roughness`` (equivalent), ``layers`` (1, 2 or None: choose), ``base``."""
+    ``roughness`` (equivalent), ``layers`` (1, 2 or None: choose), ``base`` and
+    ``base_given`` (False where the targets leave the base to the design, which then takes a
+    conductor where no dielectric reaches the lobe: :mod:`.design.inference`)."""
 
     energy: np.ndarray
     variance: float
     roughness: float
     layers: int | None = None
     base: str = "dielectric"
+    base_given: bool = True
 
 
 @dataclass(frozen=True)
@@ -118,7 +122,7 @@ def _lobe(raw: Any, k: int, last: bool, source) -> Target:
     if base == "conductor" and not last:
         raise TargetError("only the bottom lobe can have a conductor base (a conductor is "
                           "opaque)", k, "base", source)
-    return Target(energy, var, alpha, layers, base)
+    return Target(energy, var, alpha, layers, base, "base" in raw)
 
 
 def parse_targets(value, eta_max: float | None = None) -> Targets:
@@ -159,8 +163,7 @@ def parse_targets(value, eta_max: float | None = None) -> Targets:
     eta_max = _number(eta_max, None, "design.eta_max", source, lo=1.0, hi=4.0, lo_open=True)
     channels = {t.energy.size for t in lobes}
     if channels == {1, 3}:
-        lobes = tuple(Target(np.broadcast_to(t.energy, (3,)).copy(), t.variance, t.roughness,
-                             t.layers, t.base) for t in lobes)
+        lobes = tuple(replace(t, energy=np.broadcast_to(t.energy, (3,)).copy()) for t in lobes)
     total = np.sum([t.energy for t in lobes], axis=0)
     if np.any(total >= 1.0):
         raise TargetError(f"the lobes' energies add up to {float(np.max(total)):.4g} >= 1 in a "

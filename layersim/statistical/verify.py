@@ -45,10 +45,11 @@ RING_EDGES = np.cos(np.radians(np.arange(90.0, -0.5, -1.0)))
 
 
 def cut(design, k: int):
-    """The scene of ``design`` down to the last interface of lobe ``k`` (0-based)."""
+    """The scene of ``design`` down to the last interface of lobe ``k`` (0-based), on the
+    design's ``[discretization]`` where it has one."""
     from ..scene import Scene
     last = max(design.groups[k])
-    data = {"stack": dict(design.data["stack"]), "layer": design.data["layer"][:last + 1]}
+    data = {**design.data, "layer": design.data["layer"][:last + 1]}
     return Scene.from_dict(data)
 
 

@@ -8,14 +8,17 @@ incidence to layer stacks, checked against Belcour's forward model.
 returns candidate :class:`~layersim.Scene` objects, preferred first (see
 :mod:`.stacking` for which member of each equivalence class each candidate takes). An
 unreachable target raises :class:`~layersim.statistical.targets.TargetError` (a ValueError)
-naming the lobe and the bound.
+naming the lobe and the bound. A bottom lobe without a ``base`` that no dielectric reaches gets
+a conductor base, with a note (:mod:`.inference`).
 """
 
 from __future__ import annotations
 
 import itertools
+from dataclasses import replace
 
 from ..targets import TargetError, parse_targets
+from .inference import InferredBaseWarning, conductor_alternative, inferred_note, warn
 from .scene_out import Design, to_scene
 from .stacking import design_stack
 
@@ -38,9 +41,33 @@ def _choices(lobes: int):
 
 
 def designs(targets, eta_max: float | None = None) -> list[Design]:
-    """The candidate designs (:class:`Design`: scene, lobe groups, choice), preferred first,
-    without duplicates."""
+    """The candidate designs (:class:`Design`: scene, lobe groups, choice, notes), preferred
+    first, without duplicates. Where the bottom lobe's base is not given and no dielectric
+    design reaches the targets, those with a conductor base, each noting so in ``notes``.
+
+    Raises
+    ------
+    TargetError
+        Naming the first lobe that cannot be reached and the bound (where a conductor base
+        was inferred and fails too, both bounds).
+    """
     parsed = parse_targets(targets, eta_max)
+    try:
+        return _candidates(parsed)
+    except TargetError as exc:
+        alternative = conductor_alternative(parsed)
+        if alternative is None:
+            raise
+        try:
+            found = _candidates(alternative)
+        except TargetError as other:
+            raise TargetError(f"{exc}; with a conductor base: {other}") from None
+        note = inferred_note(parsed, exc)
+        return [replace(d, notes=d.notes + (note,)) for d in found]
+
+
+def _candidates(parsed) -> list[Design]:
+    """The candidates of parsed targets, bases as they stand."""
     out, seen, first_error = [], set(), None
     for choice in _choices(len(parsed.lobes)):
         if out and not isinstance(choice, float):
@@ -68,8 +95,17 @@ def design(targets, eta_max: float | None = None) -> list:
     ------
     TargetError
         For malformed or unreachable targets (names the lobe and the field or bound).
+
+    Warns
+    -----
+    InferredBaseWarning
+        Where the bottom lobe took a conductor base that the targets did not give (one line:
+        why).
     """
-    return [d.scene for d in designs(targets, eta_max)]
+    found = designs(targets, eta_max)
+    for note in found[0].notes:
+        warn(note)
+    return [d.scene for d in found]
 
 
-__all__ = ["design", "designs", "Design", "TargetError"]
+__all__ = ["design", "designs", "Design", "TargetError", "InferredBaseWarning"]

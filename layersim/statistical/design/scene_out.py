@@ -30,19 +30,21 @@ def _layer_dict(per_channel) -> dict:
 @dataclass(frozen=True)
 class Design:
     """A designed stack: ``data`` (the scene dict), ``scene``, ``groups`` (per target lobe,
-    the indices of its interfaces among the scene's layers) and ``choice`` (the member of the
-    equivalence classes taken)."""
+    the indices of its interfaces among the scene's layers), ``choice`` (the member of the
+    equivalence classes taken) and ``notes`` (one line each: a base inferred, a refinement)."""
 
     data: dict
     scene: Scene
     groups: list
     choice: object
+    notes: tuple = ()
 
     def toml(self) -> str:
         """The scene as TOML text (``layersim solve`` reads it)."""
         lines = [f"# designed by layersim design (Bati et al. 2021), position {self.choice} in "
-                 "the equivalence classes (0: low end, 0.5: middle, 1: high end)",
-                 "[stack]", f"name = \"{self.data['stack']['name']}\"", ""]
+                 "the equivalence classes (0: low end, 0.5: middle, 1: high end)"]
+        lines += [f"# {note}" for note in self.notes]
+        lines += ["[stack]", f"name = \"{self.data['stack']['name']}\"", ""]
         for layer in self.data["layer"]:
             lines.append("[[layer]]")
             for key, value in layer.items():

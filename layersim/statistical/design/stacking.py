@@ -20,6 +20,8 @@ Choices inside an equivalence class (``choice``, a position in [0, 1]):
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from .. import fgd
@@ -135,8 +137,7 @@ def design_stack(targets, choice=0.5):
     for k, target in enumerate(targets.lobes, start=1):
         choice = float(choices[k - 1])
         energy = np.broadcast_to(target.energy, (channels,))
-        target = type(target)(energy, target.variance, target.roughness, target.layers,
-                              target.base)
+        target = replace(target, energy=energy)
         total = total + energy
         before = len(stacks[0])
         options = [target.layers] if target.layers else [1, 2]
