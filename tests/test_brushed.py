@@ -1,6 +1,8 @@
 """Brushed near-specular top coats (layersim.layers.brushed): the route, the exact lobe in place of
 the coat's own reflection, energy, reciprocity, and the walk."""
 
+import contextlib
+
 import numpy as np
 import pytest
 
@@ -8,14 +10,28 @@ import layersim
 import layersim.montecarlo as mc
 from layersim.config import configure
 from layersim.layers import brushed
+from layersim import solver
 from layersim.plan import make_plan
+from layersim.plan.budget import repeated_solves
+from layersim.plan.cost import BYTES
 from layersim.solved.lobe import NearSpecularLobe
 
 GOLD = [0.143552, 3.98397]
-#: A coarse plan for the solves of the fast tests, with the floor raised to match it: what they
-#: test (which blocks hold what, energy, reciprocity) does not depend on the floor.
+#: A coarse plan for the solves of the fast tests, with the floors raised to match it: what they
+#: test (which blocks hold what, energy, reciprocity, the extrapolation's linearity) does not
+#: depend on the floors.
 COARSE = {"n": 32, "md": 12, "ms": 4}
-COARSE_FLOOR = 0.25
+COARSE_FLOORS = (0.28, 0.25)
+
+
+@contextlib.contextmanager
+def _floors(*floors):
+    """The route's floors set to ``floors`` (read when a plan is made) for the block."""
+    saved, brushed.BRUSHED_FLOORS = brushed.BRUSHED_FLOORS, tuple(floors)
+    try:
+        yield
+    finally:
+        brushed.BRUSHED_FLOORS = saved
 
 
 def _scene(base=None, rough=(0.03, 0.3), rotation=0.0, disc=None):
@@ -35,22 +51,79 @@ def _dirs(n, seed, upper=True):
     return np.stack([s * np.cos(phi), s * np.sin(phi), z if upper else -z], axis=1)
 
 
-def _coarse(albedo: float):
+def _coarse(albedo: float, floors=COARSE_FLOORS):
     """A solve on :data:`COARSE` of the coat (rotated 25 deg) over a Lambertian base."""
-    saved, brushed.BRUSHED_FLOOR = brushed.BRUSHED_FLOOR, COARSE_FLOOR
-    try:
+    with _floors(*floors):
         return layersim.solve(_scene({"kind": "diffuse", "albedo": albedo}, rotation=25.0,
                                      disc=COARSE))
-    finally:
-        brushed.BRUSHED_FLOOR = saved
 
 
-def test_plan_takes_the_route_and_prints_the_floor_and_the_error():
+def test_plan_takes_the_route_and_prints_the_floors_weights_and_error():
+    """Floors (0.12, 0.1) extrapolated to 0.03: w = ((v0 - v2) / (v1 - v2), (v1 - v0) / (v1 -
+    v2)) with v = alpha^2, i.e. (-2.068, +3.068); the worst measured row in the line."""
     plan = make_plan(_scene(disc={"n": 64, "md": 16, "ms": 4}))
-    assert plan.brushed == {"floor": brushed.BRUSHED_FLOOR, "alpha_u": 0.03, "alpha_v": 0.3}
+    v0, v1, v2 = 0.03**2, 0.12**2, 0.1**2
+    assert plan.brushed["floors"] == (0.12, 0.1) and plan.brushed["floor"] == 0.1
+    np.testing.assert_allclose(plan.brushed["weights"],
+                               [(v0 - v2) / (v1 - v2), (v1 - v0) / (v1 - v2)], rtol=1e-14)
+    assert (plan.brushed["alpha_u"], plan.brushed["alpha_v"]) == (0.03, 0.3)
     text = plan.report()
-    assert f"narrow roughness raised to {brushed.BRUSHED_FLOOR:g}" in text
+    assert "narrow roughness raised to 0.12, 0.1 on one discretisation" in text
+    assert "weights -2.068, +3.068" in text and "beckmann alpha=(0.1, 0.3)" in text
+    worst = max(r[1] for r in brushed.MEASURED_ERROR)
+    assert f"albedo within {worst:.1e}" in text
     assert "exact microfacet lobe" in text and "benchmarks/features/brushed_coats.txt" in text
+
+
+def test_the_weights_follow_the_floor_the_narrow_axis_reaches():
+    """A floor above the wide roughness raises the narrow axis only to the wide one: its
+    variance in the weights is the wide one's."""
+    plan = make_plan(_scene(rough=(0.02, 0.11), disc={"n": 32, "md": 12, "ms": 2}))
+    v0, v1, v2 = 0.02**2, 0.11**2, 0.1**2
+    np.testing.assert_allclose(plan.brushed["weights"],
+                               [(v0 - v2) / (v1 - v2), (v1 - v0) / (v1 - v2)], rtol=1e-14)
+
+
+def test_the_plan_counts_a_solve_per_floor():
+    """Two floors on one plan: twice one solve's time (every part), and its memory with one
+    solve's result held while the other is solved."""
+    scene = _scene(disc={"n": 64, "md": 16, "ms": 4})
+    with _floors(0.1):
+        one = make_plan(scene)
+    two = make_plan(scene)
+    assert (one.n, one.md, one.ms) == (two.n, two.md, two.ms)
+    for part, sec in one.seconds.items():
+        assert two.seconds[part] == pytest.approx(2 * sec, rel=1e-12)
+    assert one.memory_bytes < two.memory_bytes < 2 * one.memory_bytes
+
+
+def test_repeated_solves_cost_closed_form():
+    mem, sec, work = repeated_solves(1000, {"total": 3.0}, {"solve": 1.0}, 3, 10)
+    assert sec == {"total": 9.0} and work == {"solve": 3.0}
+    assert mem == max(1000 + 2 * 10, BYTES["solve"] + 5 * 10)
+    assert repeated_solves(1000, {"total": 3.0}, {}, 1, 10) == (1000, {"total": 3.0}, {})
+
+
+@pytest.mark.slow
+def test_the_solved_bsdf_is_the_weighted_sum_of_the_floors_solves(monkeypatch):
+    """The route's BSDF equals ``w1 B1 + w2 B2`` of the solves at each floor on the same plan:
+    its interpolant and albedo are linear in the coefficients (the exact lobe, which both
+    carry, passes through since the weights sum to one). Bin energies integrate the positive
+    part of the interpolant, so they are linear only where no solve undershoots zero."""
+    combined = _coarse(0.6)
+    w = combined.plan.brushed["weights"]
+    singles = []
+    for f in COARSE_FLOORS:
+        monkeypatch.setattr(solver, "projected_solves",
+                            lambda scene, plan, f=f: [(brushed.projected_scene(scene, f)[0],
+                                                       1.0)])
+        singles.append(_coarse(0.6))
+    wi, wo = _dirs(40, 11), _dirs(40, 12)
+    mix = lambda get: w[0] * get(singles[0]) + w[1] * get(singles[1])
+    for get in (lambda b: b.interpolant(wi, wo), lambda b: b.albedo(wi)[0]):
+        np.testing.assert_allclose(get(combined), mix(get), rtol=1e-12, atol=1e-12)
+    # the floors do differ, so the sum is not one solve's
+    assert abs(combined.interpolant(wi, wo) - singles[1].interpolant(wi, wo)).max() > 1e-4
 
 
 @pytest.mark.slow
@@ -67,7 +140,7 @@ def test_plan_projects_the_raised_coat_and_keeps_the_wide_axis():
     proj, taken, hints = brushed.projected_scene(_scene(rough=(0.3, 0.001), rotation=40.0))
     top = proj.layers[0]
     assert taken and hints == []
-    assert (top.alpha_u, top.alpha_v) == (0.3, brushed.BRUSHED_FLOOR)
+    assert (top.alpha_u, top.alpha_v) == (0.3, min(brushed.BRUSHED_FLOORS))
     assert top.rotation == pytest.approx(np.radians(40.0))
     # not brushed: near-specular on both axes (the smooth split), or rough on both
     for rough in ((0.03, 0.1), (0.05, 0.3), (0.03, 0.6)):
@@ -116,15 +189,12 @@ def test_inside_light_keeps_the_exact_coats_energy():
     its lobe seen from inside), never above 1; its own reflection is left out and it stays
     reciprocal."""
     scene = _scene({"kind": "diffuse", "albedo": 1.0}, rotation=25.0, disc=COARSE)
-    saved, brushed.BRUSHED_FLOOR = brushed.BRUSHED_FLOOR, COARSE_FLOOR
-    try:
+    with _floors(COARSE_FLOORS[-1]):
         plan = make_plan(scene)
         from layersim.solver import _layer_operator   # the solver's own construction
         from layersim.ingredients.aniso_microfacet import AnisoProjectionStats
         op = _layer_operator(plan, plan.grid, brushed.projected_scene(scene)[0], 0,
                              AnisoProjectionStats())
-    finally:
-        brushed.BRUSHED_FLOOR = saved
     r_in, t_in = NearSpecularLobe(1.5, 0.03, 0.3, "beckmann", np.radians(25.0)) \
         .inside_energies(plan.grid.mu)
     alb = op.albedo()

@@ -2,24 +2,26 @@
 
 A dielectric top coat whose narrow roughness is near-specular (0.001-0.03) and whose wide one is
 rough (0.2-0.5), over rough gold (alpha 0.2, the layerlab tutorial's index; one case in RGB),
-rotated in one case, indices 1.3-1.7. The solve projects the coat with its narrow roughness
-raised to the floor (``layersim.layers.brushed.BRUSHED_FLOOR``), its own reflection replaced by
-the exact microfacet lobe. For each case it prints the plan (n, md, ms), the solve's wall time and
-the process's peak RSS, and at 0, 30, 60 and 70 degrees the albedo against the walk's (difference,
-standard errors, whether within max(4 se, 1e-3)) and the fraction of populated 10 x 12 bins
-(uniform in |cos theta|, phi; the top side) within 3 sigma (the walk's standard error with the
-Poisson floor, ``SimulationResult.z_scores``). The walk walks the coat as given.
-
-Its second part solves the first case again with other floors against the same walks (the walk
-does not depend on the floor). Its last lines are the plan's ``MEASURED_ERROR`` rows.
+rotated in one case, indices 1.3-1.7. The route as built solves the coat with its narrow
+roughness raised to each floor of ``layersim.layers.brushed.BRUSHED_FLOORS`` on one
+discretisation (the plan of the lowest floor) and extrapolates in the slope variance, its own
+reflection replaced by the exact microfacet lobe. For each case it prints the plan (n, md, ms,
+floors, weights, estimated memory and time), the solve's wall time and the process's peak RSS;
+at 0, 30, 60 and 70 degrees the albedo against the walk's (difference, standard errors,
+whether within max(4 se, 1e-3)) and the fraction of populated 10 x 12 bins (uniform in |cos
+theta|, phi; the top side) within 3 sigma (the walk's standard error with the Poisson floor,
+``SimulationResult.z_scores``); and the most negative value of the solved interpolant (which
+``eval`` clips to zero) over 64 x 128 outgoing directions at each incidence, relative to the
+largest. The walk walks the coat as given. Walks are read from (or written to) the cache of
+``brushed_richardson.py`` (``out/brushed_walks/``, same scenes and seeds). Its last lines are
+the plan's ``MEASURED_ERROR`` rows.
 
 ``control`` solves the first case's raised coat, (0.1, 0.3) over the same gold, exactly (an
 ordinary coupled projection, its own reflection included) against its own walk: what the Fourier
-solve of the raised stack alone achieves, so that the rest of the route's error is the route's
-(``benchmarks/features/brushed_coats_control.txt``).
+solve of the raised stack alone achieves (``benchmarks/features/brushed_coats_control.txt``).
 
-Usage: python benchmarks/features/brushed_coats.py [paths] [backend] [cases|floors|all|control]
-(default 1e6, auto, all)
+Usage: python benchmarks/features/brushed_coats.py [paths] [backend] [cases|control] [indices]
+(default 1e6, auto, cases, all five)
 """
 
 from __future__ import annotations
@@ -46,10 +48,6 @@ CASES = [("(0.03, 0.3) eta 1.5", [0.03, 0.3], 1.5, 0.0, GOLD),
          ("(0.01, 0.5) eta 1.3", [0.01, 0.5], 1.3, 0.0, GOLD),
          ("(0.2, 0.02) eta 1.7 rotated 30", [0.2, 0.02], 1.7, 30.0, GOLD),
          ("(0.03, 0.3) eta 1.5 RGB", [0.03, 0.3], 1.5, 0.0, GOLD_RGB)]
-#: Floors compared on the first case (BRUSHED_FLOOR is the plan's).
-FLOORS = (0.15, 0.06)
-
-
 def scene(rough, eta: float, rotation: float, gold) -> layersim.Scene:
     return layersim.Scene.from_dict({"layer": [
         {"kind": "dielectric", "ior": eta, "roughness": rough, "rotation": rotation},
@@ -72,12 +70,30 @@ def solve(label: str, sc: layersim.Scene):
     bsdf = layersim.solve(sc)
     seconds = time.perf_counter() - t0
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
-    p = bsdf.plan
-    floor = "exact" if p.brushed is None else f"floor {p.brushed['floor']:g}"
-    print(f"{label}: n={p.n} md={p.md} ms={p.ms} {floor}, plan "
-          f"{p.memory_bytes / 2**30:.2f} GiB; solve {seconds:.1f} s wall, peak RSS of this "
+    p, b = bsdf.plan, bsdf.plan.brushed
+    route = "exact" if b is None else (
+        f"floors {', '.join(f'{f:g}' for f in b['floors'])} weights "
+        f"{', '.join(f'{w:+.3f}' for w in b['weights'])}")
+    print(f"{label}: n={p.n} md={p.md} ms={p.ms} {route}; plan {p.memory_bytes / 2**30:.2f} GiB, "
+          f"{p.seconds['total']:.0f} s estimated; solve {seconds:.1f} s wall, peak RSS of this "
           f"process so far {rss:.2f} GiB", flush=True)
     return bsdf
+
+
+def most_negative(bsdf) -> tuple[float, float]:
+    """The most negative value of ``bsdf.interpolant`` (1/sr, over channels) over 64 x 128
+    outgoing directions (cosines 0.01-1, azimuths 0-2 pi) at every incidence of
+    :data:`INCIDENCE`, and the largest value there."""
+    mu = np.linspace(0.01, 1.0, 64)
+    phi = np.linspace(0.0, 2 * np.pi, 128, endpoint=False)
+    m, p = np.meshgrid(mu, phi, indexing="ij")
+    s = np.sqrt(1 - m * m)
+    wo = np.stack([s * np.cos(p), s * np.sin(p), m], axis=-1).reshape(-1, 3)
+    lo, hi = np.inf, -np.inf
+    for theta in INCIDENCE:
+        f = bsdf.interpolant(np.broadcast_to(unit(theta), wo.shape), wo)
+        lo, hi = min(lo, float(f.min())), max(hi, float(f.max()))
+    return lo, hi
 
 
 def compare(bsdf, results: list) -> tuple[float, float, bool]:
@@ -102,44 +118,42 @@ def compare(bsdf, results: list) -> tuple[float, float, bool]:
     return worst_d, worst_f, ok
 
 
+def cached_walks(k: int, sc: layersim.Scene, paths: int, backend: str) -> list:
+    """Case ``k``'s walks through the cache of ``brushed_richardson.py`` (imported here: it
+    imports this module)."""
+    import brushed_richardson
+    return brushed_richardson.walks(k, sc, paths, backend)
+
+
 def main() -> None:
     paths = int(float(sys.argv[1])) if len(sys.argv) > 1 else 1_000_000
     backend = sys.argv[2] if len(sys.argv) > 2 else "auto"
-    part = sys.argv[3] if len(sys.argv) > 3 else "all"
+    part = sys.argv[3] if len(sys.argv) > 3 else "cases"
+    picked = [int(c) for c in sys.argv[4].split(",")] if len(sys.argv) > 4 else \
+        list(range(len(CASES)))
     print(f"# {paths:.3g} paths per direction, backend {backend}, {platform.node()}; incidence "
-          f"{', '.join(f'{t:g}' for t in INCIDENCE)} deg (phi 20 deg); plan floor "
-          f"{brushed.BRUSHED_FLOOR:g}")
+          f"{', '.join(f'{t:g}' for t in INCIDENCE)} deg (phi 20 deg); floors "
+          f"{', '.join(f'{f:g}' for f in brushed.BRUSHED_FLOORS)} on the plan of the lowest")
     if part == "control":
         sc = scene([0.1, 0.3], 1.5, 0.0, GOLD)
         d, f, ok = compare(solve("(0.1, 0.3) eta 1.5, exact (control)", sc),
                            walks(sc, paths, backend, 3900))
         print(f"  worst: |albedo diff| {d:.1e}, bins {100 * f:.1f} %", flush=True)
         return
-    rows, first = [], None
-    for k, (label, rough, eta, rot, gold) in enumerate(CASES if part != "floors" else CASES[:1]):
+    rows = []
+    for k in picked:
+        label, rough, eta, rot, gold = CASES[k]
         sc = scene(rough, eta, rot, gold)
-        results = walks(sc, paths, backend, 3000 + 10 * k)
-        first = first or (sc, results)
-        if part == "floors":
-            break
-        d, f, ok = compare(solve(label, sc), results)
+        results = cached_walks(k, sc, paths, backend)
+        bsdf = solve(label, sc)
+        d, f, ok = compare(bsdf, results)
+        lo, hi = most_negative(bsdf)
         rows.append((min(rough), d, f))
         print(f"  worst: |albedo diff| {d:.1e}, bins within 3 sigma {100 * f:.1f} %, albedos "
-              f"{'all within' if ok else 'NOT all within'} max(4 se, 1e-3)", flush=True)
-    if part in ("floors", "all"):
-        print("# other floors on the first case (same walks)")
-        plan_floor = brushed.BRUSHED_FLOOR
-        for floor in FLOORS:
-            brushed.BRUSHED_FLOOR = floor          # read by the plan and the solve when called
-            try:
-                d, f, ok = compare(solve(f"{CASES[0][0]} at floor {floor:g}", first[0]),
-                                   first[1])
-                print(f"  worst: |albedo diff| {d:.1e}, bins {100 * f:.1f} %", flush=True)
-            except layersim.InfeasibleError as exc:
-                print(f"  floor {floor:g}: refused: {exc}", flush=True)
-        brushed.BRUSHED_FLOOR = plan_floor
+              f"{'all within' if ok else 'NOT all within'} max(4 se, 1e-3); interpolant "
+              f"min {lo:+.2e} 1/sr, {lo / hi:+.1e} of its peak {hi:.3g}", flush=True)
     print("# MEASURED_ERROR rows (narrow alpha, largest |albedo diff|, smallest bin fraction):")
-    for a, d, f in sorted(rows):
+    for a, d, f in rows:
         print(f"#   ({a:g}, {d:.2g}, {f:.3f}),")
 
 

@@ -6,8 +6,8 @@ sec. 5; Belcour 2018), so a smooth output ``X`` of the solve (albedo, bin energy
 linear in the BSDF) changes, to first order, in proportion to the added variance
 ``v - v0`` with ``v = f^2`` and ``v0 = alpha_narrow^2``. Solving at two or three floors and
 evaluating the interpolating polynomial in ``v`` at ``v0`` (Richardson 1911; Lagrange weights,
-:func:`weights`) removes that first-order (or also the second-order) term. The exact lobe that
-replaces the coat's own reflection does not depend on the floor and the weights sum to one, so
+:func:`layersim.layers.brushed.extrapolation_weights`) removes that first-order (or also the
+second-order) term. The exact lobe that replaces the coat's own reflection does not depend on the floor and the weights sum to one, so
 it passes through unchanged.
 
 For each case it prints, for every single floor of :data:`FLOORS` and every combination of
@@ -43,7 +43,7 @@ import layersim  # noqa: E402
 from layersim.layers import brushed  # noqa: E402
 from layersim.montecarlo import MCResult  # noqa: E402
 
-#: Floors solved for every case (descending; the last is the plan's BRUSHED_FLOOR).
+#: Floors solved for every case (descending; the last is the plan's lowest floor).
 FLOORS = (0.15, 0.12, 0.1)
 #: Extrapolations: the floors whose solves are combined.
 VARIANTS = ((0.15, 0.1), (0.12, 0.1), (0.15, 0.12, 0.1))
@@ -52,25 +52,8 @@ ALBEDO_SE, ALBEDO_ABS, BIN_FRACTION = 4.0, 1e-3, 0.97
 WALK_DIR = Path(__file__).resolve().parents[2] / "out" / "brushed_walks"
 
 
-def weights(v0: float, vs) -> np.ndarray:
-    """Lagrange weights that evaluate at ``v0`` the polynomial through the points ``vs``.
-
-    Parameters
-    ----------
-    v0 : float
-        Slope variance to extrapolate to (the coat's narrow ``alpha^2``, dimensionless).
-    vs : sequence of float, length m
-        Slope variances of the solves (``floor^2``), distinct.
-
-    Returns
-    -------
-    ndarray, shape (m,)
-        ``w_i = prod_{j != i} (v0 - v_j) / (v_i - v_j)``; they sum to one. For m = 2 this is
-        ``X = X2 + (v0 - v2) (X1 - X2) / (v1 - v2)`` (first-order Richardson).
-    """
-    vs = np.asarray(vs, float)
-    return np.array([np.prod([(v0 - vj) / (vi - vj) for j, vj in enumerate(vs) if j != i])
-                     for i, vi in enumerate(vs)])
+#: Lagrange weights at v0 of the solves at variances vs (the route's own function).
+weights = brushed.extrapolation_weights
 
 
 def case_file(k: int, paths: int) -> Path:
@@ -117,13 +100,13 @@ def solve_outputs(sc, floor: float, like=None) -> tuple[list, float, float, str,
     """Albedos and top bin energies at every incidence of the route solved at ``floor`` (on
     the discretisation of the BSDF ``like`` if given); the solve's wall seconds, its plan
     memory (GiB), its plan (n, md, ms) and the BSDF."""
-    saved, brushed.BRUSHED_FLOOR = brushed.BRUSHED_FLOOR, floor   # read when the plan is made
+    saved, brushed.BRUSHED_FLOORS = brushed.BRUSHED_FLOORS, (floor,)   # read by the plan
     try:
         t0 = time.perf_counter()
         bsdf = layersim.solve(sc, like=like)
         seconds = time.perf_counter() - t0
     finally:
-        brushed.BRUSHED_FLOOR = saved
+        brushed.BRUSHED_FLOORS = saved
     p = bsdf.plan
     out = [(np.atleast_1d(bsdf.albedo(bc.unit(t))[0]).astype(float),
             np.asarray(bsdf.bin_energies(bc.unit(t), bc.MU_EDGES, bc.PHI_EDGES)["top"], float))

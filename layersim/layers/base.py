@@ -115,8 +115,9 @@ class Survey:
         The layers solved by a near-specular split.
     brushed : dict or None
         A brushed top coat projected with its narrow roughness raised, its own reflection
-        left to its exact lobe (:mod:`layersim.layers.brushed`): ``{"floor", "alpha_u",
-        "alpha_v"}`` (the raised roughness and the coat's own); None without one.
+        left to its exact lobe (:mod:`layersim.layers.brushed`): ``{"floor", "floors",
+        "weights", "alpha_u", "alpha_v"}`` (the lowest raised roughness, every one solved,
+        their extrapolation weights, and the coat's own); None without one.
     hints : list of str
         What would make a refused plan affordable (added to the refusal's message).
     """
