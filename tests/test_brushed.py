@@ -129,7 +129,7 @@ def test_the_solved_bsdf_is_the_weighted_sum_of_the_floors_solves(monkeypatch):
 @pytest.mark.slow
 def test_the_default_plan_fits():
     """The issue's coat (0.03, 0.3) over gold (0.2): exact, n = 650, ms = 26, 14 GiB; raised,
-    n = 196, ms = 8, under 1 GiB and (estimated) 60 s."""
+    n = 196, ms = 8, both floors' solves together under 1 GiB and (estimated) 60 s."""
     plan = make_plan(_scene())
     assert plan.brushed is not None and plan.refused is None
     assert plan.n == 196 and plan.ms == 8
@@ -215,10 +215,10 @@ def test_the_split_stack_is_reciprocal():
 
 @pytest.mark.slow
 def test_over_a_white_base_the_stack_returns_at_most_what_arrives_to_70_degrees():
-    """Lobe energy (exact coat) plus what the raised coat lets in and out stays <= 1 up to 70
-    deg; beyond, along the coat's narrow axis, it does not (1.03 at 85 deg: the exact lobe's
-    reflected energy depends on the azimuth there, the raised coat's transmission much less;
-    docs/method.md)."""
+    """Lobe energy (exact coat) plus what the extrapolated raised coat lets in and out stays
+    <= 1 up to 70 deg. Beyond, along the coat's narrow axis, the single floor 0.1 was not (1.03
+    at 85 deg: the exact lobe's reflected energy depends on the azimuth there, the raised coat's
+    transmission much less); this test does not look there."""
     bsdf = layersim.solve(_scene({"kind": "diffuse", "albedo": 1.0}, rotation=25.0))
     for z in (1.0, 0.8, 0.5, np.cos(np.radians(70.0))):
         phi = np.linspace(0.0, np.pi, 13)
@@ -230,21 +230,24 @@ def test_over_a_white_base_the_stack_returns_at_most_what_arrives_to_70_degrees(
 
 @pytest.mark.slow
 def test_the_issues_coat_over_gold_agrees_with_the_walk():
-    """(0.03, 0.3) eta 1.5 over gold (0.2) on the plan's discretisation against 1e6 paths at
-    0 and 60 deg: albedos within 3e-3 and >= 80 % of populated 10 x 12 bins within 3 sigma, the
-    route's measured level (at 1e7 paths, benchmarks/features/brushed_coats.txt, the bins fall
-    to 23 % at 60 deg; the issue asks for 1e-3 and 97 %, which the route does not reach)."""
+    """(0.03, 0.3) eta 1.5 over gold (0.2), the route as built (floors 0.12 and 0.1
+    extrapolated), against 1e6 paths at 0 and 60 deg: albedos within max(4 se, 1e-3) and >= 95 %
+    of populated 10 x 12 bins within 3 sigma. At 1e7 paths (benchmarks/features/
+    brushed_coats.txt) the route is within 5.9e-4 (6.9 se at 60 deg) with 98.3-100 % of bins;
+    one floor alone (0.1) was 1.5e-3 off at 0 deg (23 % of bins at 60 deg), which fails here."""
     sc = _scene()
     bsdf = layersim.solve(sc)
+    assert bsdf.plan.brushed["floors"] == (0.12, 0.1)
     mu, phi = np.linspace(0, 1, 11), np.linspace(0, 2 * np.pi, 13)
     for k, theta in enumerate((0.0, 60.0)):
         t = np.radians(theta)
         wi = np.array([np.sin(t) * np.cos(0.35), np.sin(t) * np.sin(0.35), np.cos(t)])
         res = mc.simulate(sc, wi, 1_000_000, mu_edges=mu, phi_edges=phi, backend="warp-cpu",
                           seed=41 + k)
-        assert abs(float(bsdf.albedo(wi)[0]) - res.reflectance) < 3e-3
+        d = float(bsdf.albedo(wi)[0]) - res.reflectance
+        assert abs(d) <= max(4 * res.reflectance_stderr, 1e-3), (theta, d)
         z = res.z_scores("top", bsdf.bin_energies(wi, mu, phi)["top"])
-        assert np.mean(z <= 3.0) >= 0.8
+        assert np.mean(z <= 3.0) >= 0.95, (theta, np.mean(z <= 3.0))
 
 
 @pytest.mark.slow
