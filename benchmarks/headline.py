@@ -40,6 +40,10 @@ STUDIES = {
     "near_specular_conductors": ("cpu", "benchmarks/features/near_specular.py 1e7 warp-cpu "
                                         "conductors",
                                  "benchmarks/features/near_specular_conductors.txt"),
+    "brushed_coats": ("cpu", "benchmarks/features/brushed_coats.py 1e7 warp-cpu",
+                      "benchmarks/features/brushed_coats.txt"),
+    "brushed_coats_control": ("cpu", "benchmarks/features/brushed_coats.py 1e7 warp-cpu control",
+                              "benchmarks/features/brushed_coats_control.txt"),
     "energy_compensation": ("cpu", "benchmarks/features/energy_compensation.py 1e7 warp-cpu",
                             "benchmarks/features/energy_compensation.txt"),
     "tabulated_ndf": ("cpu", "benchmarks/features/tabulated_ndf.py",

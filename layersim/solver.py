@@ -23,6 +23,8 @@ from .ingredients.aniso_microfacet import AnisoProjectionStats
 from .ingredients.microfacet import ProjectionStats
 from .kernels.runtime import device_for
 from .layers import OperatorJob, kind_of
+from .layers.brushed import projected_solves
+from .operators.combine import linear_combination
 from .operators.operator import IsoOperator, Operator, common_representation
 from .outofcore import memory
 from .outofcore.workspace import Workspace
@@ -50,8 +52,8 @@ def _layer_operator(plan: Plan, grid, scene: Scene, i: int, stats: ProjectionSta
 def _lobes(plan: Plan, mono: Scene) -> dict:
     """The near-specular lobes that the BSDF of the one-channel scene ``mono`` evaluates
     (:attr:`BSDF.lobes`): under a smooth boundary the plan's (a near-specular coat); else those
-    the top layer's kind evaluates in place of its operator (a near-specular conductor alone:
-    :meth:`layersim.layers.LayerKind.evaluated_lobes`)."""
+    the top layer's kind evaluates in place of its operator (a near-specular conductor alone, a
+    brushed coat's direct reflection: :meth:`layersim.layers.LayerKind.evaluated_lobes`)."""
     if plan.boundary:
         return dict(plan.lobes)
     return kind_of(mono.layers[0]).evaluated_lobes(plan, mono, 0)
@@ -295,26 +297,25 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
     stats = AnisoProjectionStats() if plan.representation == "anisotropic" \
         else ProjectionStats()
     used = [lp for lp in plan.layers if lp.action != "left out"]
-    monos = [scene.channel(c) for c in range(scene.channels)]
-    cache = _OperatorCache([[(mono.layers[lp.index], mono.ior_above(lp.index)) for lp in used]
-                            for mono in monos])
+    # the scenes as projected, with their weights: the scene, or a brushed top coat raised to
+    # each floor of its extrapolation, all on this plan (layersim.layers.brushed)
+    solves = projected_solves(scene, plan)
+    monos = [[s.channel(c) for c in range(scene.channels)] for s, _ in solves]
+    caches = [_OperatorCache([[(m.layers[lp.index], m.ior_above(lp.index)) for lp in used]
+                              for m in ms]) for ms in monos]
     memory.release()                # the plan's temporaries
-    phases = _Phases(progress, {"projection": cache.size, "adding": len(monos)})
+    phases = _Phases(progress, {"projection": sum(c.size for c in caches),
+                                "adding": scene.channels * len(solves)})
     phases.start("projection")
     notes: list[str] = []           # diagnostics of the solve, for info["notes"]
-    stacks = []
-    for c, mono in enumerate(monos):
-        owned = cache.owned(c)
-        # anisotropic operators that a coupled adding step will consume wait in the workspace
-        # as their blocks are built (aniso_interface_operator(workspace=...))
-        workspace = Workspace.for_bytes(plan.memory_bytes) \
-            if plan.representation == "anisotropic" and len(used) > 1 else Workspace()
-        project = functools.partial(_layer_operator, plan, plan.grid, mono, stats=stats,
-                                    projection=projection, device=device, notes=notes)
-        _project_channel(c, used, cache, owned, project, workspace, phases)
-        with phases.step("adding", f"channel {c}" if len(monos) > 1 else ""):
-            stacks.append(_add_channel(plan, used, cache.take(c), owned, threads, workspace,
-                                       scene.top_ior))
+    project = lambda mono: functools.partial(_layer_operator, plan, plan.grid, mono,
+                                             stats=stats, projection=projection,
+                                             device=device, notes=notes)
+    solved = [_channel_stacks(plan, used, ms, cache, project, phases, threads, scene.top_ior)
+              for ms, cache in zip(monos, caches)]
+    stacks = solved[0] if len(solved) == 1 else \
+        [linear_combination(ops, [w for _, w in solves]) for ops in zip(*solved)]
+    del solved
     info = _info(scene, plan, projection, stats, stacks, notes,
                  {"plan": t_plan, "layers": phases.seconds["projection"],
                   "projection": stats.seconds, "adding": phases.seconds["adding"],
@@ -325,7 +326,26 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
               f"adding {s['adding']:.2f} s)")
     # the operators hold the radiance inside the smooth boundaries (layersim.solved.boundary)
     return BSDF(stacks, plan, info, boundary=plan.boundary,
-                lobes=[_lobes(plan, mono) for mono in monos])
+                lobes=[_lobes(plan, mono) for mono in monos[0]])
+
+
+def _channel_stacks(plan: Plan, used: list, monos: list, cache: _OperatorCache, project,
+                    phases: _Phases, threads, top_ior: float) -> list:
+    """The solved stack of every one-channel scene of ``monos`` (as projected) on ``plan``:
+    its layers (``used``) built with ``project(mono)(i, workspace=...)`` into ``cache`` and
+    added."""
+    stacks = []
+    for c, mono in enumerate(monos):
+        owned = cache.owned(c)
+        # anisotropic operators that a coupled adding step will consume wait in the workspace
+        # as their blocks are built (aniso_interface_operator(workspace=...))
+        workspace = Workspace.for_bytes(plan.memory_bytes) \
+            if plan.representation == "anisotropic" and len(used) > 1 else Workspace()
+        _project_channel(c, used, cache, owned, project(mono), workspace, phases)
+        with phases.step("adding", f"channel {c}" if len(monos) > 1 else ""):
+            stacks.append(_add_channel(plan, used, cache.take(c), owned, threads, workspace,
+                                       top_ior))
+    return stacks
 
 
 def _solve_paths(scene, plan, t_start: float, t_plan: float, verbose: bool):

@@ -4,7 +4,7 @@ planner, the solver, the Monte Carlo walk and the statistical model need from it
 
 * :mod:`.dielectric`, :mod:`.conductor` -- rough or smooth interfaces (shared in
   :mod:`.interface`, with the variants :mod:`.smooth`, :mod:`.near_specular`,
-  :mod:`.tabulated`);
+  :mod:`.brushed`, :mod:`.tabulated`);
 * :mod:`.medium` -- homogeneous scattering and absorbing slab;
 * :mod:`.diffuse` -- Lambertian base;
 * :mod:`.measured` -- measured (MERL) base, its files read by :mod:`.merl`.

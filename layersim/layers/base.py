@@ -113,6 +113,11 @@ class Survey:
         Near-specular boundaries, ``{"top": parameters of layersim.solved.lobe.NearSpecularLobe}``.
     near_specular : tuple of int
         The layers solved by a near-specular split.
+    brushed : dict or None
+        A brushed top coat projected with its narrow roughness raised, its own reflection
+        left to its exact lobe (:mod:`layersim.layers.brushed`): ``{"floor", "floors",
+        "weights", "alpha_u", "alpha_v"}`` (the lowest raised roughness, every one solved,
+        their extrapolation weights, and the coat's own); None without one.
     hints : list of str
         What would make a refused plan affordable (added to the refusal's message).
     """
@@ -126,6 +131,7 @@ class Survey:
     snell_eta: float | None = None
     lobes: dict = field(default_factory=dict)
     near_specular: tuple = ()
+    brushed: dict | None = None
     hints: list = field(default_factory=list)
 
 

@@ -3,15 +3,17 @@ GGX or tabulated microfacets; Walter et al. 2007) or smooth.
 
 Index-matched interfaces are exact no-ops and left out; a smooth one is a boundary of the stack
 (:mod:`.smooth`), a near-specular top coat is split into smooth transport and its lobe
-(:mod:`.near_specular`); every other one is projected (:mod:`.interface`).
+(:mod:`.near_specular`), a brushed top coat (narrow axis near-specular, wide axis rough) is
+projected with its narrow roughness raised and its own reflection left to its exact lobe
+(:mod:`.brushed`); every other one is projected (:mod:`.interface`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
-from . import near_specular, smooth
+from . import brushed, near_specular, smooth
 from .base import LayerPlan
 from .fields import MAX_IOR, Field, per_channel, real
 from .interface import Interface, InterfaceKind
@@ -68,6 +70,22 @@ class DielectricKind(InterfaceKind):
         if eta == 1.0:
             return math.inf, ""
         return (layer.lobe_width() * abs(1.0 - 1.0 / max(eta, 1.0 / eta)), "refraction lobe")
+
+    def operator(self, job):
+        if job.index != 0 or job.plan.brushed is None:
+            return super().operator(job)
+        # a brushed coat: projected raised, in memory (its blocks are rescaled before the
+        # adding takes them), its energies made the exact coat's and its own reflection left
+        # to the exact lobe at evaluation
+        op = super().operator(replace(job, workspace=None))
+        return brushed.coat_operator(op, brushed.lobe_params(job.scene, job.plan.brushed))
+
+    def evaluated_lobes(self, plan, scene, i: int) -> dict:
+        """A brushed top coat's direct reflection: its exact microfacet lobe, which the
+        projection leaves out."""
+        if i == 0 and plan.brushed is not None:
+            return {"top": brushed.lobe_params(scene, plan.brushed)}
+        return {}
 
     def special_operator(self, job):
         if job.layer.smooth:

@@ -45,10 +45,11 @@ from ..errors import InfeasibleError
 from ..scene import Scene, as_scene
 from ..outofcore.memory import memory_limit
 from .budget import (MD_LOWER_PER_INV_ALPHA, estimate_bytes, estimate_seconds, lower_bound,
-                     refuse_below_lower_bound, refuse_over_limit, refuse_over_time)
-from .cost import ingredients
+                     refuse_below_lower_bound, refuse_over_limit, refuse_over_time,
+                     repeated_solves)
+from .cost import ingredients, stacks_bytes
 from .coupling import choose_ms, needed_ms
-from .layers import scale_media, survey_layers
+from .layers import scale_media, survey_projected
 from .model import LayerPlan, Plan
 from .route import fourier_unaffordable, paths_plan, try_fourier, wants_paths
 from .ordinates import DEFAULT_RULE, N_MAX, N_MIN, N_PER_WIDTH, SNELL_N_FACTOR, choose_grid
@@ -98,7 +99,9 @@ def fourier_plan(scene: Scene, refuse: bool = True) -> Plan:
     rule = disc.quadrature or DEFAULT_RULE
     notes: list[str] = []
     overridden: dict = {}
-    survey = survey_layers(scene)
+    # a brushed top coat is projected raised (layersim.layers.brushed): every size below is
+    # that of the projected scene
+    survey, scene = survey_projected(scene)
     layers = survey.layers
     ms_needed = needed_ms(layers, survey.left_out, notes)
     anisotropic = ms_needed > 0
@@ -123,7 +126,8 @@ def fourier_plan(scene: Scene, refuse: bool = True) -> Plan:
                     else 0, layers=layers, left_out=survey.left_out, notes=notes,
                     memory_bytes=memory, overridden=overridden,
                     representation=representation, refused=str(exc), boundary=survey.boundary,
-                    lobes=survey.lobes, near_specular=survey.near_specular)
+                    lobes=survey.lobes, near_specular=survey.near_specular,
+                    brushed=survey.brushed)
     theta_full = disc.theta_full or THETA_FULL
     lengths = interface_lengths(grid, mono, layers, theta_full)
     md_needed = max([survey.media_orders] + [lp.orders for lp, _ in lengths])
@@ -133,6 +137,10 @@ def fourier_plan(scene: Scene, refuse: bool = True) -> Plan:
     ings = ingredients(scene, layers, lengths, grid, md)
     memory = estimate_bytes(ings, grid, md, scene.channels, anisotropic)
     seconds, work = estimate_seconds(ings, grid, md, scene.channels, anisotropic)
+    if survey.brushed is not None:      # one solve per floor, on this plan
+        memory, seconds, work = repeated_solves(
+            memory, seconds, work, len(survey.brushed["floors"]),
+            stacks_bytes(ings, grid, md, scene.channels, anisotropic))
     refused = None
     try:
         refuse_over_limit(memory, grid.n, md, ms, anisotropic)
@@ -146,7 +154,7 @@ def fourier_plan(scene: Scene, refuse: bool = True) -> Plan:
                 notes=notes, memory_bytes=memory, seconds=seconds, work=work,
                 overridden=overridden, representation=representation, refused=refused,
                 boundary=survey.boundary, lobes=survey.lobes,
-                near_specular=survey.near_specular)
+                near_specular=survey.near_specular, brushed=survey.brushed)
 
 
 def with_hints(exc: InfeasibleError, hints: list) -> InfeasibleError:

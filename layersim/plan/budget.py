@@ -143,6 +143,37 @@ def estimate_seconds(ings: list, grid: Grid, md: int, channels: int,
     return cost.seconds(work), work
 
 
+def repeated_solves(memory: int, seconds: dict, work: dict, solves: int,
+                    held: int) -> tuple[int, dict, dict]:
+    """The cost of ``solves`` solves of one plan, one after the other, whose results are kept
+    and combined linearly at the end (the brushed route's extrapolation,
+    :func:`layersim.layers.brushed.projected_solves`).
+
+    Parameters
+    ----------
+    memory : int
+        Peak bytes of one solve (:func:`estimate_bytes`).
+    seconds, work : dict
+        One solve's time per part and work units (:func:`estimate_seconds`).
+    solves : int
+        Number of solves (>= 1).
+    held : int
+        Bytes of one solve's result (:func:`layersim.plan.cost.stacks_bytes`).
+
+    Returns
+    -------
+    (int, dict, dict)
+        Peak bytes: the last solve's peak with the earlier results held, or the combination
+        (every result, its output and one partial sum, on the solve's fixed working set),
+        whichever is larger; seconds and work units: ``solves`` times one solve's.
+    """
+    if solves <= 1:
+        return memory, seconds, work
+    peak = max(memory + (solves - 1) * held, cost.BYTES["solve"] + (solves + 2) * held)
+    return (int(peak), {k: solves * v for k, v in seconds.items()},
+            {k: solves * v for k, v in work.items()})
+
+
 def time_limit() -> float | None:
     """Seconds a solve may plan for: ``settings().max_seconds`` (``LAYERSIM_MAX_SECONDS``;
     None: no limit)."""

@@ -302,6 +302,22 @@ def iso_bytes(ings: list, grid: Grid, md: int, channels: int) -> int:
     return int(peak)
 
 
+def stacks_bytes(ings: list, grid: Grid, md: int, channels: int, anisotropic: bool) -> int:
+    """Bytes of the solved stacks of all ``channels`` (what a solve returns): the last adding
+    step's result (:func:`coupled_chain` or :func:`adding_chain`), or the one operator of a
+    one-layer stack."""
+    h = grid.h
+    if anisotropic:
+        steps = coupled_chain(ings, md, h)
+        one = BYTES["nonzero"] * steps[-1].result if steps else 0
+    else:
+        steps = adding_chain(ings, md, h)
+        one = steps[-1].out_bytes if steps else 0
+    if not steps and ings:
+        one = operator_bytes(ings[0], md, h)
+    return int(max(1, channels) * one)
+
+
 def iso_work(ings: list, grid: Grid, md: int, channels: int) -> dict:
     """Work units of an isotropic solve (the keys of :data:`SECONDS`)."""
     h = float(grid.h)

@@ -8,12 +8,12 @@ only. Index-matched interfaces and empty media are exact no-ops and are left out
 
 from __future__ import annotations
 
-from ..layers import kind_of
+from ..layers import brushed, kind_of
 from ..layers.base import Survey
 from ..operators.operator import Grid
 from ..scene import Scene
 
-__all__ = ["Survey", "survey_layers", "scale_media"]
+__all__ = ["Survey", "survey_layers", "survey_projected", "scale_media"]
 
 
 def survey_layers(scene: Scene) -> Survey:
@@ -33,6 +33,19 @@ def survey_layers(scene: Scene) -> Survey:
         survey.left_out.append("transmission blocks (Ttb, Tbt) and bottom reflection: the "
                                "base is opaque")
     return survey
+
+
+def survey_projected(scene: Scene) -> tuple[Survey, Scene]:
+    """The survey of the scene the Fourier solve projects, and that scene: ``scene`` itself, or
+    with a brushed top coat's narrow roughness raised (:func:`layersim.layers.brushed.
+    projected_scene`; the survey then says so and holds the floor in ``brushed_floor``). A
+    brushed coat that cannot take that route adds why to ``survey.hints``."""
+    projected, is_brushed, hints = brushed.projected_scene(scene)
+    survey = survey_layers(projected)
+    survey.hints += hints
+    if is_brushed:
+        brushed.annotate(survey, scene)
+    return survey, projected
 
 
 def scale_media(scene: Scene, survey: Survey, grid: Grid) -> int:

@@ -42,6 +42,12 @@ class Plan:
     #: :class:`layersim.solved.lobe.NearSpecularLobe`, and the layer indices they stand for.
     lobes: dict = field(default_factory=dict)
     near_specular: tuple = ()
+    #: A brushed top coat projected with its narrow roughness raised (its own reflection left
+    #: out, evaluated as its exact lobe; :mod:`layersim.layers.brushed`): ``{"floor"`` (the
+    #: lowest, whose plan this is), ``"floors"``, ``"weights"`` (their extrapolation weights),
+    #: ``"alpha_u", "alpha_v"}`` (the coat's own), or None. The memory and time count a solve
+    #: per floor.
+    brushed: dict | None = None
 
     @property
     def grid(self) -> Grid:

@@ -203,6 +203,18 @@ class NearSpecularLobe:
                       np.repeat(x, n_az)], axis=1)
         return self.energies(w)[which].reshape(x.size, n_az).mean(axis=1)
 
+    def mean_energies(self, x: np.ndarray):
+        """Reflected and transmitted energy ``(E_R, E_T)`` (each ``x.shape``) at cosines ``x``
+        (> 0) on the side the lobe is seen from, averaged over the incident azimuth."""
+        x = np.asarray(x, float)
+        return self._average(x, 0), self._average(x, 1)
+
+    def inside_energies(self, mu: np.ndarray):
+        """:meth:`mean_energies` of the same interface lit from the dense side (relative index
+        ``1 / eta``) at cosines ``mu``: its internal reflection, total beyond the critical angle
+        up to the microsurface's blur and loss, and what leaves."""
+        return self._inside().mean_energies(np.abs(np.asarray(mu, float)))
+
     def reflectance(self, mu: np.ndarray) -> np.ndarray:
         """Reflected energy ``E_R`` at cosines ``mu`` (> 0), averaged over the incident
         azimuth: the diagonal that stands for a near-specular conductor in the solve
