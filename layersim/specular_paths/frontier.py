@@ -43,17 +43,26 @@ def _direction_after(step: tuple) -> bool:
     return (not down) if what == "R" else down
 
 
-def _cut(path: Path, rough: list, energy_of, complete: bool, below: float):
+def _central(ev: Events, path: Path) -> np.ndarray:
+    """Central energy (largest channel) of every prefix of ``path``: entry ``k - 1`` is that
+    of its first ``k`` steps, at the wave vector of ``ev``."""
+    w = np.ones(ev.chain.channels)
+    out = np.empty(len(path.steps))
+    for s, (e, down, what) in enumerate(path.steps):
+        w = w * ev.step(e, down, what, path.gaps[s])[0]
+        out[s] = w.max()
+    return out
+
+
+def _cut(path: Path, rough: list, ev: Events, complete: bool, below: float):
     """Length of the shortest prefix of ``path`` to walk (None: keep it). ``rough`` are the
     indices of its near-specular steps; ``complete`` whether ``path`` leaves the chain (a
     complete path with one near-specular event is kept: it is exact)."""
     if not rough or (complete and len(rough) == 1):
         return None
     last = len(path.steps) if complete else len(path.steps) - 1
-    for k in range(rough[0] + 1, last + 1):
-        if energy_of(path, k) < below:
-            return k
-    return None
+    low = np.flatnonzero(_central(ev, path)[rough[0]:last] < below)
+    return int(rough[0] + low[0] + 1) if low.size else None
 
 
 def split(model, top: bool, p_i: np.ndarray, below: float | None = None):
@@ -74,18 +83,17 @@ def split(model, top: bool, p_i: np.ndarray, below: float | None = None):
     below = WALK_BELOW if below is None else below
     chain = model.chain
     ev = Events(chain, model.faces, np.asarray(p_i, float).reshape(1, 2))
-    energy_of = lambda path, k: float(ev.energy(path, range(k))[0].max())
     rough_steps = lambda path: [s for s, (e, _, what) in enumerate(path.steps)
                                 if what != "S" and not chain.elements[e].smooth]
     entries, walked = [], {}
     for x in model.entries[top]:
-        k = _cut(x.path, x.steps, energy_of, True, below)
+        k = _cut(x.path, x.steps, ev, True, below)
         if k is None:
             entries.append(x)
         else:
             walked[x.path.steps[:k]] = x.path
     for path, down in model.sets[top].frontier:
-        k = _cut(path, rough_steps(path), energy_of, False, below)
+        k = _cut(path, rough_steps(path), ev, False, below)
         if k is None:
             walked[path.steps] = (path, down)
         else:
