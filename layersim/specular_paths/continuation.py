@@ -69,8 +69,7 @@ class _Prefix:
 
     def __init__(self, chain, path):
         self.path = path
-        self.steps = [s for s, (e, _, what) in enumerate(path.steps)
-                      if what != "S" and not chain.elements[e].smooth]
+        self.steps = path.rough_steps(chain)
 
 
 def _mu(p: np.ndarray, n: np.ndarray) -> np.ndarray:

@@ -83,8 +83,6 @@ def split(model, top: bool, p_i: np.ndarray, below: float | None = None):
     below = WALK_BELOW if below is None else below
     chain = model.chain
     ev = Events(chain, model.faces, np.asarray(p_i, float).reshape(1, 2))
-    rough_steps = lambda path: [s for s, (e, _, what) in enumerate(path.steps)
-                                if what != "S" and not chain.elements[e].smooth]
     entries, walked = [], {}
     for x in model.entries[top]:
         k = _cut(x.path, x.steps, ev, True, below)
@@ -93,7 +91,7 @@ def split(model, top: bool, p_i: np.ndarray, below: float | None = None):
         else:
             walked[x.path.steps[:k]] = x.path
     for path, down in model.sets[top].frontier:
-        k = _cut(path, rough_steps(path), ev, False, below)
+        k = _cut(path, path.rough_steps(chain), ev, False, below)
         if k is None:
             walked[path.steps] = (path, down)
         else:

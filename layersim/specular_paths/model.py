@@ -59,8 +59,7 @@ class _Entry:
     def __init__(self, chain, path):
         self.path = path
         self.rough = path.rough(chain)
-        self.steps = [s for s, (e, _, what) in enumerate(path.steps)
-                      if what != "S" and not chain.elements[e].smooth]
+        self.steps = path.rough_steps(chain)
         self.exact = len(self.rough) == 1
         # a single event's lobe serves sampling; eval uses its exact microfacet BSDF
         self.lobe = PathLobe(self.rough, chain.n) if self.rough else None
@@ -132,18 +131,23 @@ class PathModel:
 
     def eval_path(self, x: _Entry, pi: np.ndarray, po: np.ndarray) -> np.ndarray:
         """``f`` (Q, C) of the path ``x`` from wave vectors ``pi`` to ``po`` (Q, 2)."""
-        n_out = self.n_side(x.path.exit_top)
         if x.exact:
             ev_in = Events(self.chain, self.faces, pi)
             ev_out = Events(self.chain, self.faces, po)
             return self.single_event(x.path, x.steps[0], ev_in, ev_out, pi, po)
+        return self.linearised(x, [x.lobe], pi, po)[0]
+
+    def linearised(self, x: _Entry, lobes: list, pi: np.ndarray, po: np.ndarray) -> list:
+        """``f`` (Q, C) of the path ``x`` from ``pi`` to ``po`` with each of ``lobes`` as its
+        deviation's density (:class:`.lobes.PathLobe`; the path's own, or one event's alone
+        for :mod:`.tails`): ``E(p_bar) n_out^2 density(p_o - p_i)``."""
+        n_out = self.n_side(x.path.exit_top)
         pbar = 0.5 * (pi + po)
         ev_mid = Events(self.chain, self.faces, pbar)
-        dens = x.lobe.density(po - pi, pbar)
         # the geometric mean with the reversed path makes f reciprocal: a rough face
         # transmits slightly differently from either side (single-scattering loss)
         energy = np.sqrt(ev_mid.energy(x.path) * ev_mid.energy_reversed(x.path))
-        return energy * (n_out ** 2 * dens)[:, None]
+        return [energy * (n_out ** 2 * lobe.density(po - pi, pbar))[:, None] for lobe in lobes]
 
     def single_event(self, path, s: int, ev_in: Events, ev_out: Events, pi, po) -> np.ndarray:
         """``f`` (Q, C) of ``path`` with its step ``s`` the only deviating event: that face's

@@ -56,14 +56,15 @@ class Path:
     start_top: bool
     exit_top: bool
 
+    def rough_steps(self, chain) -> list:
+        """Indices of the steps that are events at near-specular faces, in order."""
+        return [s for s, (e, _, what) in enumerate(self.steps)
+                if what != "S" and not chain.elements[e].smooth]
+
     def rough(self, chain) -> list:
         """``(face, what, gap_in, gap_out)`` of the events at near-specular faces, in order."""
-        out = []
-        for s, (e, down, what) in enumerate(self.steps):
-            el = chain.elements[e]
-            if what != "S" and not el.smooth:
-                out.append((el, what, self.gaps[s], self.gaps[s + 1]))
-        return out
+        return [(chain.elements[self.steps[s][0]], self.steps[s][2], self.gaps[s],
+                 self.gaps[s + 1]) for s in self.rough_steps(chain)]
 
 
 @dataclass

@@ -34,17 +34,10 @@ def tail_f(model, x, pi: np.ndarray, po: np.ndarray) -> np.ndarray:
     :class:`.model.PathModel`) from wave vectors ``pi`` to ``po`` (Q, 2): the linearised lobe
     with each event's far tail exact (module docstring); exact for one event. Negative sums
     (where the corrections overshoot in a lobe's flank) are 0."""
-    f = model.eval_path(x, pi, po)
     if x.exact:
-        return f
-    chain, path = model.chain, x.path
-    ev_in, ev_out = Events(chain, model.faces, pi), Events(chain, model.faces, po)
-    pbar = 0.5 * (pi + po)
-    ev_mid = Events(chain, model.faces, pbar)
-    energy = np.sqrt(ev_mid.energy(path) * ev_mid.energy_reversed(path))
-    n_out = model.n_side(path.exit_top)
-    for s, lobe in zip(x.steps, x.singles):
-        exact = model.single_event(path, s, ev_in, ev_out, pi, po)
-        linear = energy * (n_out ** 2 * lobe.density(po - pi, pbar))[:, None]
-        f = f + exact - linear
+        return model.eval_path(x, pi, po)
+    f, *linear = model.linearised(x, [x.lobe, *x.singles], pi, po)
+    ev_in, ev_out = Events(model.chain, model.faces, pi), Events(model.chain, model.faces, po)
+    for s, lin in zip(x.steps, linear):
+        f = f + model.single_event(x.path, s, ev_in, ev_out, pi, po) - lin
     return np.maximum(f, 0.0)
