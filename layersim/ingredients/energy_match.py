@@ -24,7 +24,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sps
 
-__all__ = ["energy_kernel", "kept_energy_factors", "match_kept_energy", "FACTOR_RANGE"]
+__all__ = ["energy_kernel", "kept_energy_factors", "match_kept_energy", "two_sided_factors",
+           "rescaled", "FACTOR_RANGE"]
 
 #: Bounds of each factor: a node whose projected energy is far from the target stays within
 #: them rather than amplify a near-empty column.
@@ -75,3 +76,64 @@ def match_kept_energy(op, kept: np.ndarray):
     blocks["Ttb"] = sps.csr_matrix(A @ blocks["Ttb"])
     blocks["Tbt"] = sps.csr_matrix(blocks["Tbt"] @ A)
     return (type(op)(op.grid, op.md, blocks, op.eta_top, op.eta_bottom, op.delta, ms=op.ms), a)
+
+
+def _slot0(op, name: str):
+    """Block ``name``'s azimuthally uniform part (h, h): order 0 of an isotropic operator,
+    the slot-0 rows and columns of a coupled one."""
+    blk = op.blocks[name]
+    return blk[0] if op.representation == "isotropic" else blk[:op.h, :op.h]
+
+
+def _kernel(op, name: str) -> np.ndarray:
+    """:func:`energy_kernel` of either representation."""
+    fw = op.grid.flux_weight
+    return _slot0(op, name).toarray() * fw[:, None] / fw[None, :]
+
+
+def two_sided_factors(op, transmitted_top: np.ndarray, kept_bottom: np.ndarray,
+                      sweeps: int = 30) -> tuple[np.ndarray, np.ndarray]:
+    """Factors ``(a_top, a_bottom)`` (h,) each, within :data:`FACTOR_RANGE`, such that the
+    transmissive operator ``op`` rescaled by :func:`rescaled` transmits ``transmitted_top``
+    of light from above (``a_top_i sum_o a_bottom_o Kttb[o, i]``) and keeps
+    ``kept_bottom`` of light from below (``E_Rb + E_Tbt``), per node.
+
+    Alternates the closed-form top update with the Sinkhorn update of
+    :func:`kept_energy_factors` on the bottom side (the top factors scale the rows of ``Tbt``
+    that the bottom side sees).
+    """
+    Kttb, Krb, Ktbt = (_kernel(op, n) for n in ("Ttb", "Rb", "Tbt"))
+    a_top, a_bot = np.ones(op.h), np.ones(op.h)
+    for _ in range(sweeps):
+        a_bot = kept_energy_factors(Krb, a_top[:, None] * Ktbt, kept_bottom)
+        sent = a_bot @ Kttb
+        a_top = np.clip(np.where(sent > _TINY, transmitted_top / np.maximum(sent, _TINY), 1.0),
+                        *FACTOR_RANGE)
+    return a_top, a_bot
+
+
+def rescaled(op, a_top: np.ndarray, a_bottom: np.ndarray, Rt=None, Rt_delta=None):
+    """``op`` (either representation) with every block scaled on its top-side nodes by
+    ``a_top`` and its bottom-side nodes by ``a_bottom`` (the same in every Fourier order or
+    slot), which keeps reciprocity exactly::
+
+        Ttb' = A_b Ttb A_t     Tbt' = A_t Tbt A_b     Rb' = A_b Rb A_b
+
+    and ``Rt`` replaced by ``Rt`` (the representation's block, with its delta ``Rt_delta``
+    (h,)); the scattered parts carry no delta."""
+    iso = op.representation == "isotropic"
+    slots = 1 if iso else op.blocks["Rt"].shape[0] // op.h
+    At, Ab = (sps.diags(np.tile(a, slots), format="csr") for a in (a_top, a_bottom))
+    scale = {"Ttb": (Ab, At), "Tbt": (At, Ab), "Rb": (Ab, Ab)}
+    blocks = {}
+    for name, (left, right) in scale.items():
+        blk = op.blocks[name]
+        blocks[name] = ([sps.csr_matrix(left @ b @ right) for b in blk] if iso else
+                        sps.csr_matrix(left @ blk @ right))
+    blocks["Rt"] = Rt
+    delta = {k: v for k, v in op.delta.items() if k not in scale and k != "Rt"}
+    if Rt_delta is not None:
+        delta["Rt"] = Rt_delta
+    if iso:
+        return type(op)(op.grid, blocks, op.eta_top, op.eta_bottom, delta)
+    return type(op)(op.grid, op.md, blocks, op.eta_top, op.eta_bottom, delta, ms=op.ms)
