@@ -38,7 +38,8 @@ from dataclasses import replace
 import numpy as np
 import scipy.sparse as sps
 
-from ..ingredients.energy_match import rescaled, two_sided_factors
+from ..ingredients.energy_match import (energy_kernel, kept_energy_factors, rescaled,
+                                        scaled_block, two_sided_factors)
 from ..solved.lobe import NEAR_SPECULAR_ALPHA, NEAR_SPECULAR_WIDE_MAX, NearSpecularLobe
 from .near_specular import _blurred_below
 
@@ -51,10 +52,15 @@ __all__ = ["FLOOR", "MEASURED_ERROR", "is_candidate", "why_not", "route_layers",
 FLOOR = 0.1
 
 #: Measured error against 1e7 walk paths per incidence at 0-70 deg
-#: (``benchmarks/accuracy/near_specular_anywhere.py --case NAME``, 2-core VM): ``(case,
-#: largest albedo gap in units of max(4 se, 1e-3), smallest fraction of populated 10 x 12 bins
-#: within 3 sigma)``.
-MEASURED_ERROR: tuple = ()
+#: (``benchmarks/accuracy/near_specular_anywhere.py --case NAME --cache ...``, 2-core VM):
+#: ``(case, largest albedo gap in units of max(4 se, 1e-3), fraction of the populated
+#: 10 x 12 bins of all incidences within 3 sigma)``. The GGX case misses in the bins next to
+#: the mirror direction (up to 33 sigma at 20 deg): its lobe (2 alpha = 0.04 rad, with GGX's
+#: power-law tail) is not small against the coat's blur (0.057 rad per pass).
+MEASURED_ERROR: tuple = (
+    ("inner_under_rough (Beckmann 0.01)", 0.51, 1.0),
+    ("inner_ggx_under_coat (GGX 0.02)", 0.24, 0.948),
+)
 
 
 def is_candidate(layer) -> bool:
@@ -174,7 +180,9 @@ def error_line() -> str:
     rows = "; ".join(f"{name}: albedo gap {gap:.2f} of max(4 se, 1e-3), {100 * frac:.1f} % of "
                      "bins within 3 sigma" for name, gap, frac in MEASURED_ERROR)
     return ("measured against 1e7 walk paths at 0-70 deg "
-            f"(benchmarks/accuracy/near_specular_anywhere.py): {rows}")
+            f"(benchmarks/accuracy/near_specular_anywhere.py): {rows}; a lobe not small against "
+            "the blur above misses next to the mirror direction: where that matters, use "
+            "layersim.montecarlo")
 
 
 def lobe_params(mono, i: int, own: tuple) -> dict:
@@ -197,14 +205,29 @@ def mirror_block(op, reflectance: np.ndarray):
     return sps.diags(np.tile(reflectance, slots), format="csr")
 
 
+def tail_weight(lobe: dict) -> float:
+    """The share ``w = alpha^2 / FLOOR^2`` (mean over the two axes) of the reflection from above
+    given to the raised lobe, the rest to the mirror: the mixture has the interface's slope
+    variance (``w FLOOR^2``; Beckmann), which sets the first-order change of what the blur above
+    shows, and for GGX, whose slope density falls like ``alpha^2 / s^4``, its far tail."""
+    return 0.5 * (lobe["alpha_u"] ** 2 + lobe["alpha_v"] ** 2) / FLOOR ** 2
+
+
 def inner_operator(op, lobe: dict):
     """The operator of the mirrored inner interface from ``op``, its raised projection:
-    ``Rt`` a mirror of the rough ``E_R`` (from above), the other blocks rescaled so that
-    ``E_Ttb`` from above and ``E_Rb + E_Tbt`` from below are the rough interface's (lobe
-    parameters ``lobe``, :func:`lobe_params`)."""
+    ``Rt`` a mirror of the rough ``E_R`` (from above) mixed with a share :func:`tail_weight`
+    of the raised reflection, the other blocks rescaled so that ``E_Ttb`` from above and
+    ``E_Rb + E_Tbt`` from below are the rough interface's (lobe parameters ``lobe``,
+    :func:`lobe_params`)."""
     ns = NearSpecularLobe(**lobe)
     mu = op.grid.mu
     e_r, e_t = ns.mean_energies(mu)
     r_in, t_in = ns.inside_energies(mu)
+    w = tail_weight(lobe)
+    a = kept_energy_factors(energy_kernel(op, "Rt"), np.zeros((op.h, op.h)), e_r)
+    raised = scaled_block(op, "Rt", a, a)
+    mirror = mirror_block(op, (1.0 - w) * e_r)
+    Rt = ([m + w * r for m, r in zip(mirror, raised)] if op.representation == "isotropic"
+          else mirror + w * raised)
     a_top, a_bot = two_sided_factors(op, e_t, r_in + t_in)
-    return rescaled(op, a_top, a_bot, mirror_block(op, e_r), e_r)
+    return rescaled(op, a_top, a_bot, Rt, (1.0 - w) * e_r)

@@ -116,7 +116,10 @@ def fourier_plan(scene: Scene, refuse: bool = True, inner: str | None = None) ->
     ms_needed = needed_ms(layers, survey.left_out, notes)
     anisotropic = ms_needed > 0
     representation = "anisotropic" if anisotropic else "isotropic"
-    grid = choose_grid(disc, rule, survey, notes, overridden)
+    try:
+        grid = choose_grid(disc, rule, survey, notes, overridden)
+    except InfeasibleError as exc:
+        raise with_hints(exc, survey.hints) from None
     scale_media(scene, survey, grid)
     mono = scene.channel(0)
     try:
