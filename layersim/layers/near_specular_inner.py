@@ -41,7 +41,7 @@ import scipy.sparse as sps
 from ..ingredients.energy_match import (energy_kernel, kept_energy_factors, rescaled,
                                         scaled_block, two_sided_factors)
 from ..solved.lobe import NEAR_SPECULAR_ALPHA, NEAR_SPECULAR_WIDE_MAX, NearSpecularLobe
-from .near_specular import _blurred_below
+from .near_specular import blurred_below
 
 __all__ = ["FLOOR", "MEASURED_ERROR", "is_candidate", "why_not", "route_layers",
            "projected_scene", "projected", "annotate", "lobe_params", "inner_operator"]
@@ -81,7 +81,7 @@ def why_not(scene, i: int) -> str | None:
     layers = scene.channel(0).layers
     if i == 0:
         return "it is the top interface (its reflection is seen directly)"
-    if not _blurred_below(scene, i):
+    if not blurred_below(scene, i):
         return (f"no rough dielectric interface (alpha > {NEAR_SPECULAR_ALPHA:g}) above it blurs "
                 "its reflection")
     if not layers[-1].opaque:
