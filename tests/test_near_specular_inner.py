@@ -119,8 +119,8 @@ def test_saved_file_and_sampling_of_the_solved_bsdf(tmp_path):
     np.testing.assert_array_equal(loaded.eval(wi, wo), bsdf.eval(wi, wo))
     np.testing.assert_array_equal(loaded.albedo(wi), bsdf.albedo(wi))
     w1 = np.tile(wi[:1], (20000, 1))
-    s = loaded.sample(w1, rng.random((20000, 3)))
-    R = float(loaded.albedo(wi[:1])[0])
+    s = loaded.sample(w1, rng.random((20000, 2)))
+    R = float(np.ravel(loaded.albedo(wi[0]))[0])
     assert abs(s.weight.mean() - R) < 4 * s.weight.std() / np.sqrt(20000) + 1e-3
 
 
