@@ -24,6 +24,7 @@ from .ingredients.microfacet import ProjectionStats
 from .kernels.runtime import device_for
 from .layers import OperatorJob, kind_of
 from .layers.brushed import projected_solves
+from .layers.near_specular_inner import projected as inner_projected
 from .operators.combine import linear_combination
 from .operators.operator import IsoOperator, Operator, common_representation
 from .outofcore import memory
@@ -299,7 +300,9 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
     used = [lp for lp in plan.layers if lp.action != "left out"]
     # the scenes as projected, with their weights: the scene, or a brushed top coat raised to
     # each floor of its extrapolation, all on this plan (layersim.layers.brushed)
-    solves = projected_solves(scene, plan)
+    # (and near-specular inner interfaces raised below their mirror,
+    # layersim.layers.near_specular_inner)
+    solves = [(inner_projected(s, plan), w) for s, w in projected_solves(scene, plan)]
     monos = [[s.channel(c) for c in range(scene.channels)] for s, _ in solves]
     caches = [_OperatorCache([[(m.layers[lp.index], m.ior_above(lp.index)) for lp in used]
                               for m in ms]) for ms in monos]

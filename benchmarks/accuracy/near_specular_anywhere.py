@@ -3,7 +3,7 @@
 Every stack of the issue's table (frosted glass, tinted lacquer, glass pane, smooth coat over
 polished gold, brushed coat over gold, the Bati et al. 2021 one-lobe design of energy 0.08 and
 roughness 0.02) and the same classes with other values (alpha 0.001-0.03, indices 1.3-1.7,
-absorbing media of tau 0.01-2, RGB, rotated anisotropic, a near-specular interface under a rough
+absorbing media of tau 0.01-2, RGB, rotated anisotropic, near-specular interfaces under a rough
 one, Beckmann and GGX): :data:`CASES`, one table. For each case:
 
 * ``layersim.make_plan`` under the 4 GiB limit: the plan's n, md, ms, estimated memory and
@@ -192,6 +192,10 @@ def _cases() -> list:
              "into eta 1.3 of alpha 0.01, absorbing tau 0.3, white-ish diffuse base 0.8",
              (diel(1.5, 0.2), diel(1.3, 0.01), absorbing(0.3),
               {"kind": "diffuse", "albedo": 0.8})),
+        Case("inner_ggx_under_coat", 0, "rough coat eta 1.4 alpha 0.2 over an inner GGX "
+             "interface into eta 1.8 of alpha 0.02, absorbing tau 0.5, grey diffuse base 0.5",
+             (diel(1.4, 0.2), diel(1.8, 0.02, "ggx"), absorbing(0.5),
+              {"kind": "diffuse", "albedo": 0.5})),
         Case("bati_0.04_0.005", 0, "layersim design, one lobe of energy 0.04, roughness 0.005",
              tuple(designed(0.04, 0.005))),
     ]

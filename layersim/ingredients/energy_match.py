@@ -24,7 +24,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sps
 
-__all__ = ["energy_kernel", "kept_energy_factors", "match_kept_energy", "FACTOR_RANGE"]
+__all__ = ["energy_kernel", "kept_energy_factors", "match_kept_energy", "two_sided_factors",
+           "scaled_block", "rescaled", "FACTOR_RANGE"]
 
 #: Bounds of each factor: a node whose projected energy is far from the target stays within
 #: them rather than amplify a near-empty column.
@@ -35,12 +36,11 @@ _TINY = 1e-12
 
 
 def energy_kernel(op, name: str) -> np.ndarray:
-    """``K[o, i] = B[o, i] w_o mu_o / (w_i mu_i)`` of block ``name``'s slot-0 rows and columns
-    (h, h): the energy for uniform illumination from node ``i`` is ``K[:, i].sum()``
-    (:meth:`layersim.aniso.operator.AnisoOperator.albedo_slots`)."""
-    h, fw = op.h, op.grid.flux_weight
-    block = op.blocks[name][:h, :h].toarray()
-    return block * fw[:, None] / fw[None, :]
+    """``K[o, i] = B[o, i] w_o mu_o / (w_i mu_i)`` of block ``name``'s azimuthally uniform part
+    (h, h; :func:`_slot0`): the energy for uniform illumination from node ``i`` is
+    ``K[:, i].sum()`` (:meth:`layersim.aniso.operator.AnisoOperator.albedo_slots`)."""
+    fw = op.grid.flux_weight
+    return _slot0(op, name).toarray() * fw[:, None] / fw[None, :]
 
 
 def kept_energy_factors(K_refl: np.ndarray, K_trans: np.ndarray,
@@ -75,3 +75,64 @@ def match_kept_energy(op, kept: np.ndarray):
     blocks["Ttb"] = sps.csr_matrix(A @ blocks["Ttb"])
     blocks["Tbt"] = sps.csr_matrix(blocks["Tbt"] @ A)
     return (type(op)(op.grid, op.md, blocks, op.eta_top, op.eta_bottom, op.delta, ms=op.ms), a)
+
+
+def _slot0(op, name: str):
+    """Block ``name``'s azimuthally uniform part (h, h): order 0 of an isotropic operator,
+    the slot-0 rows and columns of a coupled one."""
+    blk = op.blocks[name]
+    return blk[0] if op.representation == "isotropic" else blk[:op.h, :op.h]
+
+
+def two_sided_factors(op, transmitted_top: np.ndarray, kept_bottom: np.ndarray,
+                      sweeps: int = 30) -> tuple[np.ndarray, np.ndarray]:
+    """Factors ``(a_top, a_bottom)`` (h,) each, within :data:`FACTOR_RANGE`, such that the
+    transmissive operator ``op`` rescaled by :func:`rescaled` transmits ``transmitted_top``
+    of light from above (``a_top_i sum_o a_bottom_o Kttb[o, i]``) and keeps
+    ``kept_bottom`` of light from below (``E_Rb + E_Tbt``), per node.
+
+    Within a few ordinates of a critical angle from above the raised interface transmits where
+    the interface itself does not (or far less), and the factor stops at the range's bound.
+    Alternates the closed-form top update with the Sinkhorn update of
+    :func:`kept_energy_factors` on the bottom side (the top factors scale the rows of ``Tbt``
+    that the bottom side sees).
+    """
+    Kttb, Krb, Ktbt = (energy_kernel(op, n) for n in ("Ttb", "Rb", "Tbt"))
+    a_top, a_bot = np.ones(op.h), np.ones(op.h)
+    for _ in range(sweeps):
+        a_bot = kept_energy_factors(Krb, a_top[:, None] * Ktbt, kept_bottom)
+        sent = a_bot @ Kttb
+        a_top = np.clip(np.where(sent > _TINY, transmitted_top / np.maximum(sent, _TINY), 1.0),
+                        *FACTOR_RANGE)
+    return a_top, a_bot
+
+
+def scaled_block(op, name: str, left: np.ndarray, right: np.ndarray):
+    """Block ``name`` of ``op`` (either representation) as ``diag(left) B diag(right)`` in
+    every Fourier order or slot (``left``, ``right``: (h,) factors on the outgoing and incident
+    nodes)."""
+    iso = op.representation == "isotropic"
+    slots = 1 if iso else op.blocks["Rt"].shape[0] // op.h
+    L, R = (sps.diags(np.tile(a, slots), format="csr") for a in (left, right))
+    blk = op.blocks[name]
+    return [sps.csr_matrix(L @ b @ R) for b in blk] if iso else sps.csr_matrix(L @ blk @ R)
+
+
+def rescaled(op, a_top: np.ndarray, a_bottom: np.ndarray, Rt, Rt_delta=None):
+    """``op`` (either representation) with every block scaled on its top-side nodes by
+    ``a_top`` and its bottom-side nodes by ``a_bottom`` (the same in every Fourier order or
+    slot), which keeps reciprocity exactly::
+
+        Ttb' = A_b Ttb A_t     Tbt' = A_t Tbt A_b     Rb' = A_b Rb A_b
+
+    and ``Rt`` replaced by ``Rt`` (the representation's block, with its delta ``Rt_delta``
+    (h,) or none); the scattered parts carry no delta."""
+    scale = {"Ttb": (a_bottom, a_top), "Tbt": (a_top, a_bottom), "Rb": (a_bottom, a_bottom)}
+    blocks = {name: scaled_block(op, name, *lr) for name, lr in scale.items()}
+    blocks["Rt"] = Rt
+    delta = {k: v for k, v in op.delta.items() if k not in scale and k != "Rt"}
+    if Rt_delta is not None:
+        delta["Rt"] = Rt_delta
+    if op.representation == "isotropic":
+        return type(op)(op.grid, blocks, op.eta_top, op.eta_bottom, delta)
+    return type(op)(op.grid, op.md, blocks, op.eta_top, op.eta_bottom, delta, ms=op.ms)

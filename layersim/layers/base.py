@@ -118,6 +118,10 @@ class Survey:
         left to its exact lobe (:mod:`layersim.layers.brushed`): ``{"floor", "floors",
         "weights", "alpha_u", "alpha_v"}`` (the lowest raised roughness, every one solved,
         their extrapolation weights, and the coat's own); None without one.
+    inner_mirrors : dict or None
+        Near-specular inner interfaces solved as a mirror from above over their raised
+        transmission (:mod:`layersim.layers.near_specular_inner`): ``{"floor", "layers":
+        {index: (alpha_u, alpha_v)}}`` (the raised roughness and their own); None without one.
     hints : list of str
         What would make a refused plan affordable (added to the refusal's message).
     """
@@ -132,6 +136,7 @@ class Survey:
     lobes: dict = field(default_factory=dict)
     near_specular: tuple = ()
     brushed: dict | None = None
+    inner_mirrors: dict | None = None
     hints: list = field(default_factory=list)
 
 

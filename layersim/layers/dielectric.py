@@ -5,7 +5,9 @@ Index-matched interfaces are exact no-ops and left out; a smooth one is a bounda
 (:mod:`.smooth`), a near-specular top coat is split into smooth transport and its lobe
 (:mod:`.near_specular`), a brushed top coat (narrow axis near-specular, wide axis rough) is
 projected with its narrow roughness raised and its own reflection left to its exact lobe
-(:mod:`.brushed`); every other one is projected (:mod:`.interface`).
+(:mod:`.brushed`), a near-specular interface inside the stack under a rough one is a mirror from
+above over its raised transmission (:mod:`.near_specular_inner`); every other one is projected
+(:mod:`.interface`).
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-from . import brushed, near_specular, smooth
+from . import brushed, near_specular, near_specular_inner, smooth
 from .base import LayerPlan
 from .fields import MAX_IOR, Field, per_channel, real
 from .interface import Interface, InterfaceKind
@@ -72,6 +74,13 @@ class DielectricKind(InterfaceKind):
         return (layer.lobe_width() * abs(1.0 - 1.0 / max(eta, 1.0 / eta)), "refraction lobe")
 
     def operator(self, job):
+        mirrors = job.plan.inner_mirrors
+        if mirrors and job.index in mirrors["layers"]:
+            # a near-specular inner interface: projected raised, in memory (its blocks are
+            # rescaled before the adding takes them), its reflection from above a mirror
+            op = super().operator(replace(job, workspace=None))
+            return near_specular_inner.inner_operator(op, near_specular_inner.lobe_params(
+                job.scene, job.index, mirrors["layers"][job.index]))
         if job.index != 0 or job.plan.brushed is None:
             return super().operator(job)
         # a brushed coat: projected raised, in memory (its blocks are rescaled before the

@@ -64,7 +64,7 @@ def plan_coat(scene, i: int, layer, survey) -> bool:
     return True
 
 
-def _blurred_below(scene, i: int) -> bool:
+def blurred_below(scene, i: int) -> bool:
     """True if a rough dielectric interface that the solve projects (not smooth, not
     near-specular) lies above layer ``i``: it blurs what layer ``i`` reflects by more than a
     near-specular lobe's width."""
@@ -81,7 +81,7 @@ def plan_conductor(scene, i: int, layer, survey) -> bool:
     Alone (the top layer), the conductor is the whole BSDF: ``eval``, ``albedo`` and
     ``bin_energies`` use its exact microfacet lobe, and the mirror only stands for it when the
     BSDF is added to other layers. Under other layers its lobe (about ``2 alpha`` wide) must be
-    blurred by a rough interface above it (:func:`_blurred_below`) and both its roughnesses be
+    blurred by a rough interface above it (:func:`blurred_below`) and both its roughnesses be
     at most :data:`~layersim.solved.lobe.NEAR_SPECULAR_BASE_ALPHA`; behind a smooth or near-specular
     coat the lobe is seen directly, and near the coat's critical angle part of it is trapped, which
     a mirror does not reproduce (``benchmarks/features/near_specular.txt``)."""
@@ -89,7 +89,7 @@ def plan_conductor(scene, i: int, layer, survey) -> bool:
     if lo > NEAR_SPECULAR_ALPHA or layer.film is not None:
         # (a film: the mirror's reflectance and its lobe have bare Fresnel factors)
         return False
-    if i > 0 and (hi > NEAR_SPECULAR_BASE_ALPHA or not _blurred_below(scene, i)):
+    if i > 0 and (hi > NEAR_SPECULAR_BASE_ALPHA or not blurred_below(scene, i)):
         why = (f"its wider roughness exceeds {NEAR_SPECULAR_BASE_ALPHA:g}"
                if hi > NEAR_SPECULAR_BASE_ALPHA else "no rough interface above it blurs its lobe")
         survey.hints.append(

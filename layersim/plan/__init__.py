@@ -36,7 +36,9 @@ rule.
 
 * **Route** (:mod:`.route`): a stack of flat interfaces and clear media with a near-specular
   interface is solved by its specular paths (:mod:`layersim.specular_paths`) where the Fourier
-  plan is refused or over :data:`.route.FOURIER_MAX_BYTES`.
+  plan is refused or over :data:`.route.FOURIER_MAX_BYTES`; so is a near-specular dielectric
+  interface inside the stack under a rough one solved as a mirror over its raised transmission
+  (:mod:`layersim.layers.near_specular_inner`, :func:`.route.wants_inner_mirrors`).
 """
 
 from __future__ import annotations
@@ -51,7 +53,8 @@ from .cost import ingredients, stacks_bytes
 from .coupling import choose_ms, needed_ms
 from .layers import scale_media, survey_projected
 from .model import LayerPlan, Plan
-from .route import fourier_unaffordable, paths_plan, try_fourier, wants_paths
+from .route import (fourier_unaffordable, paths_plan, try_fourier, wants_inner_mirrors,
+                    wants_paths)
 from .ordinates import DEFAULT_RULE, N_MAX, N_MIN, N_PER_WIDTH, SNELL_N_FACTOR, choose_grid
 from .orders import MD_MAX, THETA_FULL, choose_md, interface_lengths, truncation_notes
 
@@ -90,23 +93,33 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
                 plan = fourier_plan(scene, refuse)
                 plan.notes.append(str(exc))
                 return plan
+    if wants_inner_mirrors(scene):
+        why = fourier_unaffordable(try_fourier(fourier_plan, scene))
+        if why is not None:
+            return fourier_plan(scene, refuse, inner=why)
     return fourier_plan(scene, refuse)
 
 
-def fourier_plan(scene: Scene, refuse: bool = True) -> Plan:
-    """The plan of ``scene`` in the Fourier basis (:func:`make_plan` without the route)."""
+def fourier_plan(scene: Scene, refuse: bool = True, inner: str | None = None) -> Plan:
+    """The plan of ``scene`` in the Fourier basis (:func:`make_plan` without the route);
+    ``inner`` (why the exact plan is not used), when given, solves the near-specular inner
+    interfaces under a rough one as mirrors over their raised transmission
+    (:mod:`layersim.layers.near_specular_inner`)."""
     disc = scene.discretization
     rule = disc.quadrature or DEFAULT_RULE
     notes: list[str] = []
     overridden: dict = {}
     # a brushed top coat is projected raised (layersim.layers.brushed): every size below is
     # that of the projected scene
-    survey, scene = survey_projected(scene)
+    survey, scene = survey_projected(scene, inner)
     layers = survey.layers
     ms_needed = needed_ms(layers, survey.left_out, notes)
     anisotropic = ms_needed > 0
     representation = "anisotropic" if anisotropic else "isotropic"
-    grid = choose_grid(disc, rule, survey, notes, overridden)
+    try:
+        grid = choose_grid(disc, rule, survey, notes, overridden)
+    except InfeasibleError as exc:
+        raise with_hints(exc, survey.hints) from None
     scale_media(scene, survey, grid)
     mono = scene.channel(0)
     try:
@@ -127,7 +140,7 @@ def fourier_plan(scene: Scene, refuse: bool = True) -> Plan:
                     memory_bytes=memory, overridden=overridden,
                     representation=representation, refused=str(exc), boundary=survey.boundary,
                     lobes=survey.lobes, near_specular=survey.near_specular,
-                    brushed=survey.brushed)
+                    brushed=survey.brushed, inner_mirrors=survey.inner_mirrors)
     theta_full = disc.theta_full or THETA_FULL
     lengths = interface_lengths(grid, mono, layers, theta_full)
     md_needed = max([survey.media_orders] + [lp.orders for lp, _ in lengths])
@@ -154,7 +167,8 @@ def fourier_plan(scene: Scene, refuse: bool = True) -> Plan:
                 notes=notes, memory_bytes=memory, seconds=seconds, work=work,
                 overridden=overridden, representation=representation, refused=refused,
                 boundary=survey.boundary, lobes=survey.lobes,
-                near_specular=survey.near_specular, brushed=survey.brushed)
+                near_specular=survey.near_specular, brushed=survey.brushed,
+                inner_mirrors=survey.inner_mirrors)
 
 
 def with_hints(exc: InfeasibleError, hints: list) -> InfeasibleError:

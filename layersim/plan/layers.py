@@ -8,7 +8,7 @@ only. Index-matched interfaces and empty media are exact no-ops and are left out
 
 from __future__ import annotations
 
-from ..layers import brushed, kind_of
+from ..layers import brushed, kind_of, near_specular_inner
 from ..layers.base import Survey
 from ..operators.operator import Grid
 from ..scene import Scene
@@ -35,16 +35,23 @@ def survey_layers(scene: Scene) -> Survey:
     return survey
 
 
-def survey_projected(scene: Scene) -> tuple[Survey, Scene]:
+def survey_projected(scene: Scene, inner: str | None = None) -> tuple[Survey, Scene]:
     """The survey of the scene the Fourier solve projects, and that scene: ``scene`` itself, or
     with a brushed top coat's narrow roughness raised (:func:`layersim.layers.brushed.
-    projected_scene`; the survey then says so and holds the floor in ``brushed_floor``). A
-    brushed coat that cannot take that route adds why to ``survey.hints``."""
+    projected_scene`; the survey then says so and holds the floor in ``brushed_floor``) and,
+    with ``inner`` (why the exact plan is not used), near-specular inner interfaces under a
+    rough one raised below a mirror (:mod:`layersim.layers.near_specular_inner`; in
+    ``survey.inner_mirrors``). A brushed coat or inner interface that cannot take its route
+    adds why to ``survey.hints``."""
     projected, is_brushed, hints = brushed.projected_scene(scene)
+    mirrored, inner_hints = near_specular_inner.route_layers(scene, inner is not None)
+    projected = near_specular_inner.projected_scene(projected, mirrored)
     survey = survey_layers(projected)
-    survey.hints += hints
+    survey.hints += hints + inner_hints
     if is_brushed:
         brushed.annotate(survey, scene)
+    if mirrored:
+        near_specular_inner.annotate(survey, scene, mirrored, inner)
     return survey, projected
 
 

@@ -48,6 +48,11 @@ class Plan:
     #: ``"alpha_u", "alpha_v"}`` (the coat's own), or None. The memory and time count a solve
     #: per floor.
     brushed: dict | None = None
+    #: Near-specular inner interfaces under a rough one, solved as a mirror from above over
+    #: their transmission projected at a raised roughness
+    #: (:mod:`layersim.layers.near_specular_inner`): ``{"floor", "layers": {index: (alpha_u,
+    #: alpha_v)}}`` (their own roughnesses), or None. This plan is that of the raised stack.
+    inner_mirrors: dict | None = None
 
     @property
     def grid(self) -> Grid:

@@ -5,11 +5,17 @@ A stack of flat interfaces and clear media with a near-specular interface
 (:mod:`layersim.specular_paths`) unless the exact Fourier representation is affordable: its plan
 fits the limits and needs at most :data:`FOURIER_MAX_BYTES`. A scene whose
 ``[discretization]`` sets ``n`` or ``md`` asks for the Fourier basis and keeps it.
+
+A near-specular dielectric interface inside a stack, under a rough one, is solved as a mirror
+over its raised transmission (:mod:`layersim.layers.near_specular_inner`) on the same terms:
+where the exact Fourier plan is refused or over :data:`FOURIER_MAX_BYTES`, and not where the
+``[discretization]`` sets ``n``, ``md`` or ``tol``.
 """
 
 from __future__ import annotations
 
 from ..errors import InfeasibleError
+from ..layers.near_specular_inner import route_layers
 from ..specular_paths import why_not
 from ..specular_paths.accuracy import measured_error_line
 from ..specular_paths.channels import ChannelModels
@@ -18,7 +24,7 @@ from ..specular_paths.frontier import WALK_BELOW
 from ..specular_paths.paths import PRUNE
 from .model import LayerPlan, Plan
 
-__all__ = ["FOURIER_MAX_BYTES", "wants_paths", "paths_plan"]
+__all__ = ["FOURIER_MAX_BYTES", "wants_paths", "wants_inner_mirrors", "paths_plan"]
 
 #: The Fourier basis is kept for a stack that specular paths could solve while its plan needs at
 #: most this much memory (1 GiB: a second or two of projection on the 2-core VM). Above it,
@@ -32,6 +38,16 @@ def wants_paths(scene) -> bool:
     ``md`` set in its ``[discretization]``."""
     disc = scene.discretization
     return disc.n is None and disc.md is None and disc.tol is None and why_not(scene) is None
+
+
+def wants_inner_mirrors(scene) -> bool:
+    """True if ``scene`` has a near-specular inner interface that may be solved as a mirror
+    over its raised transmission (:func:`layersim.layers.near_specular_inner.route_layers`)
+    and its ``[discretization]`` leaves ``n``, ``md`` and ``tol`` free; the route is taken
+    where the exact Fourier plan is unaffordable (:func:`fourier_unaffordable`)."""
+    disc = scene.discretization
+    return (disc.n is None and disc.md is None and disc.tol is None
+            and bool(route_layers(scene, True)[0]))
 
 
 def fourier_unaffordable(fourier: Plan | None) -> str | None:
