@@ -951,3 +951,18 @@ def test_rotational_average_is_the_mean_over_frame_rotations_and_sampling_is_unb
     R, _ = bsdf.albedo(w1)
     se = weight.std() / np.sqrt(weight.size)
     assert abs(weight.mean() - float(R)) < 4 * se + 2e-3, (weight.mean(), float(R), se)
+
+
+@pytest.mark.slow
+def test_projecting_a_subset_of_blocks_leaves_the_others_empty_and_the_rest_unchanged():
+    layer = Dielectric(ior=1.5, alpha_u=0.2, alpha_v=0.35, rotation=0.4)
+    full = aniso_interface_operator(G32, 8, 3, layer, 1.0)
+    part = aniso_interface_operator(G32, 8, 3, layer, 1.0, only=("Rb", "Ttb", "Tbt"))
+    assert part.blocks["Rt"].nnz == 0
+    for name in ("Rb", "Ttb", "Tbt"):
+        assert (part.blocks[name] != full.blocks[name]).nnz == 0
+    rb = aniso_interface_operator(G32, 8, 3, layer, 1.0, only=("Rb",))
+    assert rb.blocks["Ttb"].nnz == rb.blocks["Tbt"].nnz == 0
+    assert (rb.blocks["Rb"] != full.blocks["Rb"]).nnz == 0
+    with pytest.raises(ValueError, match="reciprocal image"):
+        aniso_interface_operator(G32, 8, 3, layer, 1.0, only=("Ttb",))

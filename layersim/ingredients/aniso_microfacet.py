@@ -44,6 +44,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sps
 
 from ..operators import fourier
 from ..aniso import basis, series
@@ -545,7 +546,7 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
                              stats: AnisoProjectionStats | None = None,
                              reciprocity: bool = True, relerr: float = RELERR,
                              workspace: Workspace | None = None,
-                             projector=None) -> AnisoOperator:
+                             projector=None, only: tuple | None = None) -> AnisoOperator:
     """Operator of an anisotropic (or rotated) rough interface in the slot basis.
 
     Parameters
@@ -580,9 +581,17 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
         triangle, stats, relerr, out)`` appends the real entries ``(rows, cols, values)`` of
         block ``name`` to ``out`` (a tabulated NDF:
         :func:`layersim.ingredients.tabulated.projector`).
+    only : tuple of str, optional
+        The blocks to project (default: all); the others are left empty (zero), for a caller
+        that takes them from elsewhere (a brushed coat: :mod:`layersim.layers.brushed`).
+        ``Tbt`` is the reciprocal image of ``Ttb``: the two are projected together or not at
+        all.
     """
     if layer.smooth:
         raise ValueError("aniso_interface_operator needs a rough interface")
+    if only is not None and ("Ttb" in only) != ("Tbt" in only):
+        raise ValueError(f"only={only!r}: Tbt is the reciprocal image of Ttb; project both or "
+                         "neither")
     stats = stats if stats is not None else AnisoProjectionStats()
     t0 = time.perf_counter()
     eta = complex(layer.ior) / eta_above
@@ -616,7 +625,10 @@ def aniso_interface_operator(grid: Grid, md: int, ms: int, layer, eta_above: flo
 
     blocks = {}
     for name in names:
-        if not reciprocity or name == "Ttb":
+        if only is not None and name not in only:
+            blocks[name] = sps.csr_matrix((N, N))
+            done(name)
+        elif not reciprocity or name == "Ttb":
             blocks[name] = project(name)
             if not (reciprocity and name == "Ttb"):     # else done with its image
                 done(name)

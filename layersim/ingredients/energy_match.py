@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sps
 
 __all__ = ["energy_kernel", "kept_energy_factors", "match_kept_energy", "two_sided_factors",
-           "scaled_block", "rescaled", "FACTOR_RANGE"]
+           "scaled_block", "rescaled", "diag_scaled", "FACTOR_RANGE"]
 
 #: Bounds of each factor: a node whose projected energy is far from the target stays within
 #: them rather than amplify a near-empty column.
@@ -69,11 +69,11 @@ def match_kept_energy(op, kept: np.ndarray):
         The rescaled operator (same class) and the factors ``A`` (h,).
     """
     a = kept_energy_factors(energy_kernel(op, "Rb"), energy_kernel(op, "Tbt"), kept)
-    A = sps.diags(np.tile(a, op.blocks["Rt"].shape[0] // op.h))
+    A = np.tile(a, op.blocks["Rt"].shape[0] // op.h)
     blocks = dict(op.blocks)
-    blocks["Rb"] = sps.csr_matrix(A @ blocks["Rb"] @ A)
-    blocks["Ttb"] = sps.csr_matrix(A @ blocks["Ttb"])
-    blocks["Tbt"] = sps.csr_matrix(blocks["Tbt"] @ A)
+    blocks["Rb"] = diag_scaled(blocks["Rb"], A, A)
+    blocks["Ttb"] = diag_scaled(blocks["Ttb"], A, None)
+    blocks["Tbt"] = diag_scaled(blocks["Tbt"], None, A)
     return (type(op)(op.grid, op.md, blocks, op.eta_top, op.eta_bottom, op.delta, ms=op.ms), a)
 
 
@@ -113,9 +113,21 @@ def scaled_block(op, name: str, left: np.ndarray, right: np.ndarray):
     nodes)."""
     iso = op.representation == "isotropic"
     slots = 1 if iso else op.blocks["Rt"].shape[0] // op.h
-    L, R = (sps.diags(np.tile(a, slots), format="csr") for a in (left, right))
+    L, R = (np.tile(a, slots) for a in (left, right))
     blk = op.blocks[name]
-    return [sps.csr_matrix(L @ b @ R) for b in blk] if iso else sps.csr_matrix(L @ blk @ R)
+    return [diag_scaled(b, L, R) for b in blk] if iso else diag_scaled(blk, L, R)
+
+
+def diag_scaled(B, left: np.ndarray | None, right: np.ndarray | None):
+    """``diag(left) B diag(right)`` (CSR; a factor None is the identity), scaling a copy of
+    ``B``'s stored entries in place: the same products as the sparse ones, without their
+    symbolic pass and temporaries (on a coupled coat's blocks, 1e8 entries, seconds)."""
+    B = sps.csr_matrix(B, copy=True)
+    if left is not None:
+        B.data *= np.repeat(np.asarray(left, float), np.diff(B.indptr))
+    if right is not None:
+        B.data *= np.asarray(right, float)[B.indices]
+    return B
 
 
 def rescaled(op, a_top: np.ndarray, a_bottom: np.ndarray, Rt, Rt_delta=None):

@@ -144,7 +144,9 @@ class Survey:
 class OperatorJob:
     """What the solver hands a kind to build the operator of layer ``index`` of ``scene`` (one
     channel): the plan and its grid, the projection's statistics and options, the coupled
-    adding's workspace, and ``notes`` for the BSDF's ``info["notes"]``."""
+    adding's workspace, ``notes`` for the BSDF's ``info["notes"]``, and ``blocks``: the blocks
+    of a coupled projection to project (None: all; the others are left empty, for a kind that
+    takes them from elsewhere, as a brushed coat does: :mod:`layersim.layers.brushed`)."""
 
     plan: Any
     grid: Any
@@ -155,6 +157,7 @@ class OperatorJob:
     device: Any = None
     workspace: Any = None
     notes: list = field(default_factory=list)
+    blocks: tuple | None = None
 
     @property
     def layer(self):

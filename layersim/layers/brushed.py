@@ -222,12 +222,18 @@ def error_line() -> str:
             "where that matters, use layersim.montecarlo")
 
 
-def coat_operator(op, lobe: dict):
-    """The operator of the raised coat as the stack uses it: ``op`` (its projection, coupled)
-    rescaled so that inside light keeps the exact coat's energy ``E_R + E_T`` per elevation
-    (:func:`layersim.ingredients.energy_match.match_kept_energy`; the exact lobe of parameters
-    ``lobe`` seen from inside), its own reflection left out (:func:`without_reflection`)."""
-    r_in, t_in = NearSpecularLobe(**lobe).inside_energies(op.grid.mu)
+def coat_operator(job, project):
+    """The operator of the raised coat as the stack uses it: ``project(job)`` (the kind's
+    projection of the coat as ``job.scene`` raises it) without its own reflection
+    (:func:`without_reflection`; not projected at all where the projection is coupled, as
+    every brushed coat's is unless a floor reaches its wide roughness), rescaled so that
+    inside light keeps the exact coat's energy ``E_R + E_T`` per elevation
+    (:func:`layersim.ingredients.energy_match.match_kept_energy`; the exact lobe of
+    :func:`lobe_params` seen from inside)."""
+    coupled = job.layer.anisotropic
+    op = project(replace(job, workspace=None, blocks=("Rb", "Ttb", "Tbt") if coupled else None))
+    lobe = NearSpecularLobe(**lobe_params(job.scene, job.plan.brushed))
+    r_in, t_in = lobe.inside_energies(op.grid.mu)
     return without_reflection(match_kept_energy(op, r_in + t_in)[0])
 
 

@@ -85,9 +85,8 @@ class DielectricKind(InterfaceKind):
             return super().operator(job)
         # a brushed coat: projected raised, in memory (its blocks are rescaled before the
         # adding takes them), its energies made the exact coat's and its own reflection left
-        # to the exact lobe at evaluation
-        op = super().operator(replace(job, workspace=None))
-        return brushed.coat_operator(op, brushed.lobe_params(job.scene, job.plan.brushed))
+        # to the exact lobe at evaluation (layersim.layers.brushed.coat_operator)
+        return brushed.coat_operator(job, super().operator)
 
     def evaluated_lobes(self, plan, scene, i: int) -> dict:
         """A brushed top coat's direct reflection: its exact microfacet lobe, which the

@@ -351,9 +351,12 @@ class InterfaceKind(LayerKind):
                 job.grid, plan.md, lp.ms, layer, eta_above, job.stats, relerr=COUPLED_RELERR,
                 workspace=job.workspace,
                 projector=None if layer.ndf is None else
-                tabulated_projection.projector(layer, eta_above, job.device))
+                tabulated_projection.projector(layer, eta_above, job.device), only=job.blocks)
             job.notes += check_operator_energy(op, job.index, layer, plan.n)
             return op
+        if job.blocks is not None:
+            raise ValueError(f"layer {job.index}: only a coupled (anisotropic) projection "
+                             "projects a subset of the blocks")
         if job.projection == "numeric":
             op = numeric_interface_operator(job.grid, plan.md, layer, eta_above, job.stats,
                                             device=job.device)
