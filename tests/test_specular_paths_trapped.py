@@ -33,8 +33,11 @@ def pane():
     return SpecularPathsBSDF(layersim.Scene.from_dict({"layer": PANE}))
 
 
-def _without_continuation(monkeypatch):
-    """Make the model carry nothing of the cut branches (the solver before continuation)."""
+def _without_continuation(monkeypatch, bsdf):
+    """Make the model of ``bsdf`` carry nothing of the cut branches (the solver before
+    continuation), forgetting the walk it shares between albedos and bins."""
+    for m in bsdf.model.models:
+        monkeypatch.setattr(m, "_walked", {})
     none = lambda model, *a, **k: Exits(np.zeros((0, 2)), np.zeros(0, bool),
                                         np.zeros((0, model.chain.channels)),
                                         np.zeros(model.chain.channels))
@@ -76,6 +79,7 @@ def test_walking_the_faint_branches_changes_nothing_where_nothing_is_trapped(pan
     R, T = pane.albedo(wi)
     bins = pane.bin_energies(wi, MU_EDGES, PHI_EDGES)
     monkeypatch.setattr(frontier, "WALK_BELOW", 0.0)
+    monkeypatch.setattr(model, "_walked", {})       # the walk it shares is the old split's
     assert len(frontier.split(model, True, p)[0]) > kept, "the test would not test it"
     R0, T0 = pane.albedo(wi)
     bins0 = pane.bin_energies(wi, MU_EDGES, PHI_EDGES)
@@ -104,7 +108,7 @@ def test_a_lossless_pane_keeps_the_walks_energy_at_grazing_incidence(pane, theta
     print(f"{theta} deg: 1 - R - T = {1 - R - T:.2e} +- {se:.1e}, walk {lost:.2e} +- "
           f"{se_walk:.1e}, continuation {ex.w.sum():.2e}")
     assert abs(1.0 - R - T - lost) <= 4 * math.hypot(se, se_walk) + 2e-5
-    _without_continuation(monkeypatch)
+    _without_continuation(monkeypatch, pane)
     R0, T0 = pane.albedo(wi)
     assert 1.0 - (R0 + T0) > 10 * se
 
@@ -135,7 +139,7 @@ def test_the_glass_pane_bins_agree_with_the_walk_at_70_degrees(pane, monkeypatch
         return out
 
     after = z(pane.bin_energies(wi, MU_EDGES, PHI_EDGES), se)
-    _without_continuation(monkeypatch)
+    _without_continuation(monkeypatch, pane)
     zero = {k: np.zeros_like(v) for k, v in se.items()}
     before = z(pane.bin_energies(wi, MU_EDGES, PHI_EDGES), zero)
     print(f"grazing bins z: top {before['top'][0, 6]:.1f} -> {after['top'][0, 6]:.1f}, "
@@ -143,3 +147,28 @@ def test_the_glass_pane_bins_agree_with_the_walk_at_70_degrees(pane, monkeypatch
           f"{max(after['top'].max(), after['bottom'].max()):.1f}")
     assert before["top"][0, 6] > 3.0 and before["bottom"][0, 6] > 3.0
     assert after["top"].max() <= 3.0 and after["bottom"].max() <= 3.0
+
+
+def test_albedo_and_bins_at_one_incidence_share_one_walk(monkeypatch):
+    """The walked branches' light is walked once per incidence for ``albedo`` and
+    ``bin_energies`` together (deterministic: the same seed), and both equal those of a fresh
+    model that walks for each."""
+    scene = layersim.Scene.from_dict({"layer": [{"kind": "dielectric", "ior": 1.5,
+                                                 "roughness": 0.02}]})
+    wi = _wi(60.0)
+    fresh = SpecularPathsBSDF(scene)
+    R0, T0 = fresh.albedo(wi)
+    bins0 = SpecularPathsBSDF(scene).bin_energies(wi, MU_EDGES, PHI_EDGES)
+    calls = []
+    real = path_model.continue_frontier
+    monkeypatch.setattr(path_model, "continue_frontier",
+                        lambda *a, **k: calls.append(1) or real(*a, **k))
+    shared = SpecularPathsBSDF(scene)
+    R, T = shared.albedo(wi)
+    bins = shared.bin_energies(wi, MU_EDGES, PHI_EDGES)
+    assert len(calls) == 1
+    assert (R, T) == (R0, T0)
+    for side in bins:
+        np.testing.assert_array_equal(bins[side], bins0[side])
+    shared.albedo(_wi(30.0))
+    assert len(calls) == 2

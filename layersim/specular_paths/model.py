@@ -83,6 +83,20 @@ class PathModel:
             ps = enumerate_paths(chain, self.faces, top, prune)
             self.sets[top] = ps
             self.entries[top] = [_Entry(chain, p) for p in ps.paths]
+        self._walked = {}
+
+    def walked(self, top: bool, p_i: np.ndarray):
+        """The split at ``p_i`` (2,) (:func:`.frontier.split`: the traced entries and the
+        walked prefixes) and the exits of its walked branches
+        (:func:`.continuation.continue_frontier`), for light entering at the top (``top``)
+        or bottom. The walk is deterministic (one seed), so ``albedo`` and ``bins`` at one
+        incidence share it: the latest incidence's is kept (its 2^20 exits take about 40 MB),
+        and a caller of both pays one walk."""
+        key = (top, np.asarray(p_i, float).tobytes())
+        if key not in self._walked:
+            entries, prefixes = split(self, top, p_i)
+            self._walked = {key: (entries, continue_frontier(self, top, p_i, prefixes))}
+        return self._walked[key]
 
     # ---- geometry ----------------------------------------------------------------------
 
@@ -196,7 +210,7 @@ class PathModel:
             top = bool(wi[q, 2] > 0)
             p = self.p_in(wi[q:q + 1])
             ev = Events(self.chain, self.faces, p)
-            entries, prefixes = split(self, top, p[0])
+            entries, ex = self.walked(top, p[0])
             energy = [ev.energy(x.path)[0].max() for x in entries]
             for x, e0 in zip(entries, energy):
                 if x.rough:
@@ -209,7 +223,6 @@ class PathModel:
                     R[q] += e
                 else:
                     T[q] += e
-            ex = continue_frontier(self, top, p[0], prefixes)
             R[q] += ex.w[ex.top == top].sum(axis=0)
             T[q] += ex.w[ex.top != top].sum(axis=0)
         return R, T
@@ -248,7 +261,7 @@ class PathModel:
         ev = Events(self.chain, self.faces, p)
         shape = (mu_edges.size - 1, phi_edges.size - 1, self.chain.channels)
         out = {"top": np.zeros(shape), "bottom": np.zeros(shape)}
-        entries, prefixes = split(self, top, p[0])
+        entries, ex = self.walked(top, p[0])
         energy = [ev.energy(x.path)[0].max() for x in entries]
         for x, e in zip(entries, energy):
             side = out["top" if x.path.exit_top else "bottom"]
@@ -262,5 +275,5 @@ class PathModel:
                 i, j = direction_bin(wo[0], mu_edges, phi_edges)
                 if i is not None:
                     side[i, j] += ev.energy(x.path)[0]
-        cut = exit_bins(self, continue_frontier(self, top, p[0], prefixes), mu_edges, phi_edges)
+        cut = exit_bins(self, ex, mu_edges, phi_edges)
         return {k: out[k] + cut[k] for k in out}
