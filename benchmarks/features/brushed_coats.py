@@ -21,7 +21,7 @@ ordinary coupled projection, its own reflection included) against its own walk: 
 solve of the raised stack alone achieves (``benchmarks/features/brushed_coats_control.txt``).
 
 Usage: python benchmarks/features/brushed_coats.py [paths] [backend] [cases|control] [indices]
-(default 1e6, auto, cases, all five)
+(default 1e6, auto, cases, all six)
 """
 
 from __future__ import annotations
@@ -47,7 +47,8 @@ CASES = [("(0.03, 0.3) eta 1.5", [0.03, 0.3], 1.5, 0.0, GOLD),
          ("(0.001, 0.3) eta 1.5", [0.001, 0.3], 1.5, 0.0, GOLD),
          ("(0.01, 0.5) eta 1.3", [0.01, 0.5], 1.3, 0.0, GOLD),
          ("(0.2, 0.02) eta 1.7 rotated 30", [0.2, 0.02], 1.7, 30.0, GOLD),
-         ("(0.03, 0.3) eta 1.5 RGB", [0.03, 0.3], 1.5, 0.0, GOLD_RGB)]
+         ("(0.03, 0.3) eta 1.5 RGB", [0.03, 0.3], 1.5, 0.0, GOLD_RGB),
+         ("(0.03, 0.3) eta 1.3", [0.03, 0.3], 1.3, 0.0, GOLD)]
 def scene(rough, eta: float, rotation: float, gold) -> layersim.Scene:
     return layersim.Scene.from_dict({"layer": [
         {"kind": "dielectric", "ior": eta, "roughness": rough, "rotation": rotation},
