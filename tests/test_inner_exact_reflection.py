@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import layersim
+import layersim.montecarlo as mc
 from layersim.ingredients.microfacet import interface_operator
 from layersim.ingredients.numeric import numeric_interface_operator
 from layersim.layers import near_specular_inner as nsi
@@ -69,6 +70,7 @@ def test_the_solvers_inner_operator_has_the_exact_reflection_from_above():
     _same_blocks(op.blocks["Rt"], exact.blocks["Rt"])
 
 
+@pytest.mark.slow
 def test_the_plan_resolves_the_reflection_lobe():
     """Below alpha 0.02 the plan's n is the reflection lobe's (``alpha`` wide, as a
     conductor's, not the raised refraction lobe's 294) and grows as alpha shrinks; its
@@ -101,3 +103,25 @@ def test_the_mirror_stays_where_the_lobe_is_small_or_unaffordable():
     detail = tiny.layers[1].detail
     assert "projected at its own roughness is unaffordable" in detail and "n = 6500" in detail
     assert "reflection from above is a mirror" in detail
+
+
+@pytest.mark.slow
+def test_inner_ggx_under_coat_agrees_with_the_walk():
+    """inner_ggx_under_coat against 1e6 walk paths at 10 and 20 deg, where its mirror missed
+    most (up to 33 sigma at 1e7 paths): albedo within max(4 se, 1e-3), >= 97 % of populated
+    10 x 12 bins within 3 sigma and none beyond 5 (the benchmark at 1e7 paths: 0.29 of the
+    tolerance, every bin within 2.1 sigma)."""
+    sc = _ggx()
+    bsdf = layersim.solve(sc)
+    mu, phi = np.linspace(0, 1, 11), np.linspace(0, 2 * np.pi, 13)
+    for k, theta in enumerate((10.0, 20.0)):
+        t = np.radians(theta)
+        wi = np.array([np.sin(t) * np.cos(0.35), np.sin(t) * np.sin(0.35), np.cos(t)])
+        res = mc.simulate(sc, wi, 1_000_000, mu_edges=mu, phi_edges=phi, backend="warp-cpu",
+                          seed=83 + k)
+        d = float(bsdf.albedo(wi)[0]) - res.reflectance
+        assert abs(d) <= max(4 * res.reflectance_stderr, 1e-3), (theta, d)
+        z = res.z_scores("top", bsdf.bin_energies(wi, mu, phi)["top"])
+        assert np.mean(z <= 3.0) >= 0.97, (theta, np.mean(z <= 3.0))
+        # the mirror misses next to the mirror direction by 7.5 sigma at 10 deg with these paths
+        assert z.max() < 5.0, (theta, z.max())
