@@ -172,7 +172,8 @@ def fourier_plan(scene: Scene, refuse: bool = True, inner: str | None = None,
     md_needed = needed_orders(lengths, survey.media_orders, survey.inner_mirrors)
     md = choose_md(disc, md_needed, notes, overridden)
     ms = choose_ms(disc, layers, ms_needed, notes, overridden)
-    truncation_notes(lengths, md, notes, theta_full)
+    truncation_notes(lengths, md, notes, theta_full,
+                     (survey.inner_mirrors or {}).get("layers", {}))
     ings = ingredients(scene, layers, lengths, grid, md)
     memory = estimate_bytes(ings, grid, md, scene.channels, anisotropic)
     seconds, work = estimate_seconds(ings, grid, md, scene.channels, anisotropic)

@@ -102,12 +102,17 @@ def choose_md(disc: Discretization, md_needed: int, notes: list, overridden: dic
 
 
 def truncation_notes(lengths: list, md: int, notes: list,
-                     theta_full: float = THETA_FULL) -> None:
-    """A note per interface whose pairs (beyond ``theta_full`` degrees) need more than ``md``
+                     theta_full: float = THETA_FULL, behind=()) -> None:
+    """A note per interface whose pairs (beyond ``theta_full`` degrees; at any elevation for
+    the split inner interfaces ``behind``, :func:`needed_orders`) need more than ``md``
     orders (``lengths``: the ``(LayerPlan, lengths)`` of :func:`interface_lengths`)."""
     for lp, pair_lengths in lengths:
         trunc = int(np.count_nonzero(pair_lengths > md))
-        if trunc:
-            notes.append(f"layer {lp.index}: {trunc} ordinate pairs beyond {theta_full:g} deg "
-                         f"would need up to {int(pair_lengths.max())} orders; they keep {md} "
-                         "(tapered; energy unaffected)")
+        if not trunc:
+            continue
+        where = (f"beyond {theta_full:g} deg" if lp.index not in behind else
+                 "(a split inner interface, seen only through the orders of the interface "
+                 "above)")
+        notes.append(f"layer {lp.index}: {trunc} ordinate pairs {where} would need up to "
+                     f"{int(pair_lengths.max())} orders; they keep {md} (tapered; energy "
+                     "unaffected)")
