@@ -34,9 +34,10 @@ def test_the_route_and_its_plan_line():
     mirror over its transmission raised to the floor; the plan line says so, with the measured
     error, and the plan is the raised stack's."""
     plan = layersim.make_plan(_scene())
-    assert plan.inner_mirrors == {"floor": nsi.FLOOR, "layers": {1: (0.01, 0.01)}}
+    assert plan.inner_mirrors == {"floor": nsi.FLOOR, "layers": {1: (0.01, 0.01)}, "exact": ()}
     lp = next(x for x in plan.layers if x.index == 1)
-    assert lp.action.startswith("near-specular inner interface")
+    assert lp.action.startswith("project (near-specular inner interface")
+    assert "a mirror with the rough reflected energy" in lp.detail
     assert f"projected at alpha {nsi.FLOOR:g}" in lp.detail
     assert "inner_under_rough" in lp.detail and "cannot represent it" in lp.detail
     assert plan.n < 1000 and plan.memory_bytes < 1 << 30

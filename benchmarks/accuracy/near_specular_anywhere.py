@@ -196,6 +196,15 @@ def _cases() -> list:
              "interface into eta 1.8 of alpha 0.02, absorbing tau 0.5, grey diffuse base 0.5",
              (diel(1.4, 0.2), diel(1.8, 0.02, "ggx"), absorbing(0.5),
               {"kind": "diffuse", "albedo": 0.5})),
+        Case("inner_beckmann_0.02", 0, "inner_under_rough with an inner Beckmann interface of "
+             "0.02", (diel(1.5, 0.2), diel(1.3, 0.02), absorbing(0.3),
+                      {"kind": "diffuse", "albedo": 0.8})),
+        Case("inner_ggx_0.01", 0, "inner_ggx_under_coat with an inner GGX interface of 0.01",
+             (diel(1.4, 0.2), diel(1.8, 0.01, "ggx"), absorbing(0.5),
+              {"kind": "diffuse", "albedo": 0.5})),
+        Case("inner_ggx_0.007", 0, "inner_ggx_under_coat with an inner GGX interface of 0.007",
+             (diel(1.4, 0.2), diel(1.8, 0.007, "ggx"), absorbing(0.5),
+              {"kind": "diffuse", "albedo": 0.5})),
         Case("bati_0.04_0.005", 0, "layersim design, one lobe of energy 0.04, roughness 0.005",
              tuple(designed(0.04, 0.005))),
     ]

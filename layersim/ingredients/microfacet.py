@@ -155,7 +155,8 @@ def significant_pairs(grid: Grid, name: str, triangle: bool, eta: complex, alpha
     return mu_i, mu_o, o, i, q0, qpi, np.flatnonzero(energy > ENERGY_DROP)
 
 
-def series_lengths(grid: Grid, layer, eta_above: float, relerr: float = RELERR):
+def series_lengths(grid: Grid, layer, eta_above: float, relerr: float = RELERR,
+                   blocks: tuple | None = None):
     """Pre-pass of the projection for the plan: how many cosine orders each significant pair
     of an isotropic interface needs, from one cheap kernel launch per block.
 
@@ -173,6 +174,8 @@ def series_lengths(grid: Grid, layer, eta_above: float, relerr: float = RELERR):
         Absolute index of the medium above the interface.
     relerr : float
         Relative truncation of the series (the projection's :data:`RELERR`).
+    blocks : tuple of str, optional
+        Only these of the interface's blocks (as :func:`interface_operator` projects them).
 
     Returns
     -------
@@ -185,6 +188,7 @@ def series_lengths(grid: Grid, layer, eta_above: float, relerr: float = RELERR):
     eta = complex(layer.ior) / eta_above
     film, shadowing = layer.film_params(eta_above), layer.shadowing
     names = ("Rt",) if layer.opaque else ("Rt", "Rb", "Ttb", "Tbt")
+    names = names if blocks is None else tuple(n for n in names if n in blocks)
     dist = layer.distribution
     fw = grid.flux_weight
     lengths, mu_min = [], []
@@ -436,7 +440,7 @@ def film_orders(film, alpha: float) -> int:
 def interface_operator(grid: Grid, m: int, layer, eta_above: float,
                        stats: ProjectionStats | None = None,
                        reciprocity: bool = True, method=None, batch: int = BATCH,
-                       device=None) -> IsoOperator:
+                       device=None, blocks: tuple | None = None) -> IsoOperator:
     """Operator of an isotropic rough interface.
 
     Parameters
@@ -462,10 +466,18 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
     device : str, optional
         Warp device of the coarse sampling; a CUDA device also makes the blocks run one after
         the other (each launch already fills the GPU).
+    blocks : tuple of str, optional
+        Project only these blocks (``("Rt",)``: the reflection from above of an inner
+        interface, :mod:`layersim.layers.near_specular_inner`); the others are left out
+        (None). With ``reciprocity``, ``Tbt`` needs ``Ttb``, from which it is derived.
     """
     stats = stats if stats is not None else ProjectionStats()
     t0 = time.perf_counter()
     eta, dist, alpha, opaque, names, film, shadowing = interface_setup(layer, eta_above)
+    left_out = () if blocks is None else tuple(n for n in names if n not in blocks)
+    if reciprocity and "Ttb" in left_out and "Tbt" in names and "Tbt" not in left_out:
+        raise ValueError("interface_operator derives Tbt from Ttb: blocks must name both")
+    names = tuple(n for n in names if n not in left_out)
     series = {}
     # Blocks are independent: project them concurrently (Warp CPU launches, FFTs and LAPACK
     # release the GIL), one worker per thread of layersim.config (threads) up to the number of
@@ -501,6 +513,7 @@ def interface_operator(grid: Grid, m: int, layer, eta_above: float,
             series[name] = done[name]
     if opaque:
         series.update({"Rb": None, "Ttb": None, "Tbt": None})
+    series.update({name: None for name in left_out})
     stats.seconds += time.perf_counter() - t0
     return IsoOperator.from_series(grid, m, series, eta_top=eta_above,
                                    eta_bottom=None if opaque else layer.ior.real)

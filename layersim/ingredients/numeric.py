@@ -111,18 +111,23 @@ def numeric_interface_operator(grid: Grid, m: int, layer, eta_above: float,
                                stats: ProjectionStats | None = None, device=None,
                                max_samples: int = MAX_SAMPLES, min_samples: int = 16,
                                reciprocity: bool = True,
-                               on_device: bool | None = None) -> IsoOperator:
+                               on_device: bool | None = None,
+                               blocks: tuple | None = None) -> IsoOperator:
     """Operator of an isotropic rough interface by sampling and FFT (see module docstring).
 
-    Parameters are those of :func:`layersim.ingredients.microfacet.interface_operator`, plus
-    ``device`` (Warp device for the sampling and, on CUDA, the transform), ``max_samples`` and
-    ``min_samples`` (bounds on the azimuth samples per pair), and ``on_device``: build the whole
-    operator on ``device`` (:func:`device_interface_operator`; default: on CUDA devices, when its
-    scratch block fits :data:`DEVICE_DENSE_MAX`).
+    Parameters are those of :func:`layersim.ingredients.microfacet.interface_operator`
+    (``blocks`` included: only those blocks, on the host path), plus ``device`` (Warp device
+    for the sampling and, on CUDA, the transform), ``max_samples`` and ``min_samples``
+    (bounds on the azimuth samples per pair), and ``on_device``: build the whole operator on
+    ``device`` (:func:`device_interface_operator`; default: on CUDA devices, when its scratch
+    block fits :data:`DEVICE_DENSE_MAX`, and all blocks are asked for).
     """
     fits = m * grid.h * grid.h <= DEVICE_DENSE_MAX
     if microfacet.on_gpu(device) and on_device is None:
-        on_device = fits
+        on_device = fits and blocks is None
+    if on_device and blocks is not None:
+        raise ValueError("the device assembly projects every block: use on_device=False "
+                         "with blocks")
     if on_device:
         if not fits:
             raise ValueError(f"device assembly of {m} orders on {grid.h} nodes needs more than "
@@ -138,7 +143,7 @@ def numeric_interface_operator(grid: Grid, m: int, layer, eta_above: float,
     batch = GPU_BATCH if microfacet.on_gpu(device) else microfacet.BATCH
     return microfacet.interface_operator(grid, m, layer, eta_above, stats,
                                          reciprocity=reciprocity, method=method, batch=batch,
-                                         device=device)
+                                         device=device, blocks=blocks)
 
 
 def _device_block(grid: Grid, name: str, triangle: bool, m: int, eta: complex, alpha: float,

@@ -119,9 +119,11 @@ class Survey:
         "weights", "alpha_u", "alpha_v"}`` (the lowest raised roughness, every one solved,
         their extrapolation weights, and the coat's own); None without one.
     inner_mirrors : dict or None
-        Near-specular inner interfaces solved as a mirror from above over their raised
-        transmission (:mod:`layersim.layers.near_specular_inner`): ``{"floor", "layers":
-        {index: (alpha_u, alpha_v)}}`` (the raised roughness and their own); None without one.
+        Near-specular inner interfaces split over their raised transmission, their reflection
+        from above a mirror or projected at their own roughness
+        (:mod:`layersim.layers.near_specular_inner`): ``{"floor", "layers": {index: (alpha_u,
+        alpha_v)}, "exact": (index, ...)}`` (the raised roughness, their own, and those whose
+        reflection from above is projected at it); None without one.
     hints : list of str
         What would make a refused plan affordable (added to the refusal's message).
     """

@@ -18,6 +18,8 @@ from dataclasses import dataclass, replace
 from . import brushed, near_specular, near_specular_inner, smooth
 from .base import LayerPlan
 from .fields import MAX_IOR, Field, per_channel, real
+from ..ingredients.microfacet import interface_operator
+from ..ingredients.numeric import numeric_interface_operator
 from .interface import Interface, InterfaceKind
 from .registry import register
 
@@ -76,17 +78,32 @@ class DielectricKind(InterfaceKind):
     def operator(self, job):
         mirrors = job.plan.inner_mirrors
         if mirrors and job.index in mirrors["layers"]:
-            # a near-specular inner interface: projected raised, in memory (its blocks are
-            # rescaled before the adding takes them), its reflection from above a mirror
-            op = super().operator(replace(job, workspace=None))
-            return near_specular_inner.inner_operator(op, near_specular_inner.lobe_params(
-                job.scene, job.index, mirrors["layers"][job.index]))
+            return self._inner_operator(job, mirrors)
         if job.index != 0 or job.plan.brushed is None:
             return super().operator(job)
         # a brushed coat: projected raised, in memory (its blocks are rescaled before the
         # adding takes them), its energies made the exact coat's and its own reflection left
         # to the exact lobe at evaluation (layersim.layers.brushed.coat_operator)
         return brushed.coat_operator(job, super().operator)
+
+    def _inner_operator(self, job, mirrors: dict):
+        """A near-specular inner interface (:mod:`.near_specular_inner`): projected raised, in
+        memory (its blocks are rescaled before the adding takes them), its reflection from
+        above projected at its own roughness (``mirrors["exact"]``) or a mirror."""
+        own = mirrors["layers"][job.index]
+        op = super().operator(replace(job, workspace=None))
+        Rt = None
+        if job.index in mirrors.get("exact", ()):
+            layer = near_specular_inner.own_reflection_layer(job.layer, own)
+            if job.projection == "numeric":
+                own_op = numeric_interface_operator(job.grid, job.plan.md, layer, job.eta_above,
+                                                    job.stats, device=job.device, blocks=("Rt",))
+            else:
+                own_op = interface_operator(job.grid, job.plan.md, layer, job.eta_above,
+                                            job.stats, blocks=("Rt",))
+            Rt = own_op.blocks["Rt"]
+        return near_specular_inner.inner_operator(
+            op, near_specular_inner.lobe_params(job.scene, job.index, own), Rt)
 
     def evaluated_lobes(self, plan, scene, i: int) -> dict:
         """A brushed top coat's direct reflection: its exact microfacet lobe, which the

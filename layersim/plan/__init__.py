@@ -44,6 +44,7 @@ rule.
 from __future__ import annotations
 
 from ..errors import InfeasibleError
+from ..layers.near_specular_inner import own_reflections
 from ..scene import Scene, as_scene
 from ..outofcore.memory import memory_limit
 from .budget import (MD_LOWER_PER_INV_ALPHA, estimate_bytes, estimate_seconds, lower_bound,
@@ -53,10 +54,11 @@ from .cost import ingredients, stacks_bytes
 from .coupling import choose_ms, needed_ms
 from .layers import scale_media, survey_projected
 from .model import LayerPlan, Plan
-from .route import (fourier_unaffordable, paths_plan, try_fourier, wants_inner_mirrors,
-                    wants_paths)
+from .route import (exact_unaffordable, fourier_unaffordable, paths_plan, try_fourier,
+                    wants_inner_mirrors, wants_paths)
 from .ordinates import DEFAULT_RULE, N_MAX, N_MIN, N_PER_WIDTH, SNELL_N_FACTOR, choose_grid
-from .orders import MD_MAX, THETA_FULL, choose_md, interface_lengths, truncation_notes
+from .orders import (MD_MAX, THETA_FULL, choose_md, interface_lengths, needed_orders,
+                     truncation_notes)
 
 __all__ = ["Plan", "LayerPlan", "make_plan", "memory_limit", "THETA_FULL", "N_PER_WIDTH",
            "N_MIN", "N_MAX", "MD_MAX", "MD_LOWER_PER_INV_ALPHA", "DEFAULT_RULE"]
@@ -96,22 +98,45 @@ def make_plan(scene: Scene, refuse: bool = True) -> Plan:
     if wants_inner_mirrors(scene):
         why = fourier_unaffordable(try_fourier(fourier_plan, scene))
         if why is not None:
-            return fourier_plan(scene, refuse, inner=why)
+            return inner_plan(scene, refuse, why)
     return fourier_plan(scene, refuse)
 
 
-def fourier_plan(scene: Scene, refuse: bool = True, inner: str | None = None) -> Plan:
+def inner_plan(scene: Scene, refuse: bool, why: str) -> Plan:
+    """The plan of ``scene`` with its near-specular inner interfaces split
+    (:mod:`layersim.layers.near_specular_inner`; ``why``: why the exact plan is not used):
+    their reflection from above projected at their own roughness where
+    :func:`~layersim.layers.near_specular_inner.exact_reflection` asks for it and that plan
+    is affordable (:func:`.route.exact_unaffordable`), else a mirror (the plan line says
+    why)."""
+    try:
+        exact = fourier_plan(scene, False, inner=why, exact=True)
+        if not exact.inner_mirrors["exact"]:
+            return fourier_plan(scene, refuse, inner=why)
+        reason = exact_unaffordable(exact)
+    except InfeasibleError as exc:
+        reason = str(exc)
+    if reason is None:
+        return exact
+    why = (f"{why}, and its reflection from above projected at its own roughness is "
+           f"unaffordable ({reason})")
+    return fourier_plan(scene, refuse, inner=why)
+
+
+def fourier_plan(scene: Scene, refuse: bool = True, inner: str | None = None,
+                 exact: bool = False) -> Plan:
     """The plan of ``scene`` in the Fourier basis (:func:`make_plan` without the route);
     ``inner`` (why the exact plan is not used), when given, solves the near-specular inner
-    interfaces under a rough one as mirrors over their raised transmission
-    (:mod:`layersim.layers.near_specular_inner`)."""
+    interfaces under a rough one split, their reflection from above a mirror or, with
+    ``exact``, projected at their own roughness where it can be (:mod:`layersim.layers.
+    near_specular_inner`)."""
     disc = scene.discretization
     rule = disc.quadrature or DEFAULT_RULE
     notes: list[str] = []
     overridden: dict = {}
     # a brushed top coat is projected raised (layersim.layers.brushed): every size below is
     # that of the projected scene
-    survey, scene = survey_projected(scene, inner)
+    survey, scene = survey_projected(scene, inner, exact)
     layers = survey.layers
     ms_needed = needed_ms(layers, survey.left_out, notes)
     anisotropic = ms_needed > 0
@@ -142,11 +167,13 @@ def fourier_plan(scene: Scene, refuse: bool = True, inner: str | None = None) ->
                     lobes=survey.lobes, near_specular=survey.near_specular,
                     brushed=survey.brushed, inner_mirrors=survey.inner_mirrors)
     theta_full = disc.theta_full or THETA_FULL
-    lengths = interface_lengths(grid, mono, layers, theta_full)
-    md_needed = max([survey.media_orders] + [lp.orders for lp, _ in lengths])
+    lengths = interface_lengths(grid, mono, layers, theta_full,
+                                own_reflections(mono, survey.inner_mirrors))
+    md_needed = needed_orders(lengths, survey.media_orders, survey.inner_mirrors)
     md = choose_md(disc, md_needed, notes, overridden)
     ms = choose_ms(disc, layers, ms_needed, notes, overridden)
-    truncation_notes(lengths, md, notes, theta_full)
+    truncation_notes(lengths, md, notes, theta_full,
+                     (survey.inner_mirrors or {}).get("layers", {}))
     ings = ingredients(scene, layers, lengths, grid, md)
     memory = estimate_bytes(ings, grid, md, scene.channels, anisotropic)
     seconds, work = estimate_seconds(ings, grid, md, scene.channels, anisotropic)

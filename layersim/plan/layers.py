@@ -35,14 +35,16 @@ def survey_layers(scene: Scene) -> Survey:
     return survey
 
 
-def survey_projected(scene: Scene, inner: str | None = None) -> tuple[Survey, Scene]:
+def survey_projected(scene: Scene, inner: str | None = None,
+                     exact: bool = False) -> tuple[Survey, Scene]:
     """The survey of the scene the Fourier solve projects, and that scene: ``scene`` itself, or
     with a brushed top coat's narrow roughness raised (:func:`layersim.layers.brushed.
     projected_scene`; the survey then says so and holds the floor in ``brushed_floor``) and,
     with ``inner`` (why the exact plan is not used), near-specular inner interfaces under a
     rough one raised below a mirror (:mod:`layersim.layers.near_specular_inner`; in
-    ``survey.inner_mirrors``). A brushed coat or inner interface that cannot take its route
-    adds why to ``survey.hints``."""
+    ``survey.inner_mirrors``; with ``exact``, their reflection from above is projected at their
+    own roughness where it can be). A brushed coat or inner interface that cannot take its
+    route adds why to ``survey.hints``."""
     projected, is_brushed, hints = brushed.projected_scene(scene)
     mirrored, inner_hints = near_specular_inner.route_layers(scene, inner is not None)
     projected = near_specular_inner.projected_scene(projected, mirrored)
@@ -51,7 +53,7 @@ def survey_projected(scene: Scene, inner: str | None = None) -> tuple[Survey, Sc
     if is_brushed:
         brushed.annotate(survey, scene)
     if mirrored:
-        near_specular_inner.annotate(survey, scene, mirrored, inner)
+        near_specular_inner.annotate(survey, scene, mirrored, inner, exact)
     return survey, projected
 
 

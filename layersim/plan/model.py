@@ -48,10 +48,12 @@ class Plan:
     #: ``"alpha_u", "alpha_v"}`` (the coat's own), or None. The memory and time count a solve
     #: per floor.
     brushed: dict | None = None
-    #: Near-specular inner interfaces under a rough one, solved as a mirror from above over
-    #: their transmission projected at a raised roughness
-    #: (:mod:`layersim.layers.near_specular_inner`): ``{"floor", "layers": {index: (alpha_u,
-    #: alpha_v)}}`` (their own roughnesses), or None. This plan is that of the raised stack.
+    #: Near-specular inner interfaces under a rough one, split: their transmission and
+    #: reflection from below projected at a raised roughness, their reflection from above a
+    #: mirror or projected at their own roughness (:mod:`layersim.layers.near_specular_inner`):
+    #: ``{"floor", "layers": {index: (alpha_u, alpha_v)}, "exact": (index, ...)}`` (their own
+    #: roughnesses, and those whose reflection from above is projected at it), or None. This
+    #: plan is that of the raised stack, with ``n`` resolving the projected reflection lobes.
     inner_mirrors: dict | None = None
 
     @property

@@ -24,13 +24,22 @@ from ..specular_paths.frontier import WALK_BELOW
 from ..specular_paths.paths import PRUNE
 from .model import LayerPlan, Plan
 
-__all__ = ["FOURIER_MAX_BYTES", "wants_paths", "wants_inner_mirrors", "paths_plan"]
+__all__ = ["FOURIER_MAX_BYTES", "EXACT_REFLECTION_MAX_BYTES", "wants_paths",
+           "wants_inner_mirrors", "exact_unaffordable", "paths_plan"]
 
 #: The Fourier basis is kept for a stack that specular paths could solve while its plan needs at
 #: most this much memory (1 GiB: a second or two of projection on the 2-core VM). Above it,
 #: the plan of a near-specular interface grows like ``1 / alpha`` (``layersim plan``: a rough
 #: glass interface of alpha 0.02 needs 2.5 GiB, a smooth coat over gold of alpha 0.01 4.2 GiB).
 FOURIER_MAX_BYTES = 1 << 30
+
+#: A split inner interface's reflection from above is projected at its own roughness while
+#: that plan needs at most this much memory (2.5 GiB: the issue's 4 GiB of peak resident
+#: memory less the process's own 0.25 GiB, over the estimate's measured margin of up to
+#: 1.3x on the 2-core VM), else it is a mirror (:mod:`layersim.layers.near_specular_inner`):
+#: a GGX inner interface of 0.007 under a coat of 0.2 into 1.4 plans 2.4 GiB, one of 0.005
+#: 4.65 GiB.
+EXACT_REFLECTION_MAX_BYTES = 5 << 29
 
 
 def wants_paths(scene) -> bool:
@@ -60,6 +69,17 @@ def fourier_unaffordable(fourier: Plan | None) -> str | None:
     if fourier.memory_bytes > FOURIER_MAX_BYTES:
         return (f"the Fourier plan (n = {fourier.n}, md = {fourier.md}) needs "
                 f"{fourier.memory_bytes / 2**30:.2f} GiB, over {FOURIER_MAX_BYTES / 2**30:g} GiB")
+    return None
+
+
+def exact_unaffordable(plan: Plan) -> str | None:
+    """Why the plan that projects a split inner interface's reflection from above at its own
+    roughness is not used (None: it is): refused, or over :data:`EXACT_REFLECTION_MAX_BYTES`."""
+    if plan.refused:
+        return f"n = {plan.n}, md = {plan.md}: {plan.refused}"
+    if plan.memory_bytes > EXACT_REFLECTION_MAX_BYTES:
+        return (f"n = {plan.n}, md = {plan.md} needs {plan.memory_bytes / 2**30:.2f} GiB, over "
+                f"{EXACT_REFLECTION_MAX_BYTES / 2**30:g} GiB")
     return None
 
 
