@@ -216,6 +216,12 @@ class Scene:
                        wavelengths=None if self.wavelengths is None else
                        (self.wavelengths[c],))
 
+    def with_layer(self, i: int, layer: Layer) -> "Scene":
+        """The monochromatic scene with layer ``i`` replaced by ``layer`` (a route's variant
+        of it: raised, or at its own roughness)."""
+        layers = self.layers
+        return replace(self, stacks=(layers[:i] + (layer,) + layers[i + 1:],))
+
     # ---- derived optics (monochromatic) ------------------------------------------------
 
     @property

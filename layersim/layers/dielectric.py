@@ -18,8 +18,6 @@ from dataclasses import dataclass, replace
 from . import brushed, near_specular, near_specular_inner, smooth
 from .base import LayerPlan
 from .fields import MAX_IOR, Field, per_channel, real
-from ..ingredients.microfacet import interface_operator
-from ..ingredients.numeric import numeric_interface_operator
 from .interface import Interface, InterfaceKind
 from .registry import register
 
@@ -95,13 +93,8 @@ class DielectricKind(InterfaceKind):
         Rt = None
         if job.index in mirrors.get("exact", ()):
             layer = near_specular_inner.own_reflection_layer(job.layer, own)
-            if job.projection == "numeric":
-                own_op = numeric_interface_operator(job.grid, job.plan.md, layer, job.eta_above,
-                                                    job.stats, device=job.device, blocks=("Rt",))
-            else:
-                own_op = interface_operator(job.grid, job.plan.md, layer, job.eta_above,
-                                            job.stats, blocks=("Rt",))
-            Rt = own_op.blocks["Rt"]
+            Rt = super().operator(replace(job, scene=job.scene.with_layer(job.index, layer),
+                                          workspace=None, blocks=("Rt",))).blocks["Rt"]
         return near_specular_inner.inner_operator(
             op, near_specular_inner.lobe_params(job.scene, job.index, own), Rt)
 

@@ -354,14 +354,12 @@ class InterfaceKind(LayerKind):
                 tabulated_projection.projector(layer, eta_above, job.device), only=job.blocks)
             job.notes += check_operator_energy(op, job.index, layer, plan.n)
             return op
-        if job.blocks is not None:
-            raise ValueError(f"layer {job.index}: only a coupled (anisotropic) projection "
-                             "projects a subset of the blocks")
         if job.projection == "numeric":
             op = numeric_interface_operator(job.grid, plan.md, layer, eta_above, job.stats,
-                                            device=job.device)
+                                            device=job.device, blocks=job.blocks)
         else:
-            op = interface_operator(job.grid, plan.md, layer, eta_above, job.stats)
+            op = interface_operator(job.grid, plan.md, layer, eta_above, job.stats,
+                                    blocks=job.blocks)
         # the compensation fills what the (energy-limited) single-scattering operator loses
         job.notes += check_operator_energy(op, job.index, layer, plan.n)
         op, note = compensate(op, layer, eta_above)
