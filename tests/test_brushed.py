@@ -75,6 +75,27 @@ def test_plan_takes_the_route_and_prints_the_floors_weights_and_error():
     assert "exact microfacet lobe" in text and "benchmarks/features/brushed_coats.txt" in text
 
 
+def test_the_coats_own_reflection_is_neither_planned_nor_projected():
+    """The exact lobe replaces the coat's own reflection: its layer plan names the other three
+    blocks, the pre-pass counts only their pairs (fewer than all four blocks'), and the
+    solved coat's ``Rt`` block is empty."""
+    from layersim.ingredients import aniso_microfacet
+    from layersim.layers.base import OperatorJob
+    from layersim.layers import kind_of
+    with _floors(*COARSE_FLOORS):
+        plan = make_plan(_scene(disc=COARSE))
+        raised = brushed.projected_scene(_scene(disc=COARSE))[0].channel(0)
+    lp = next(x for x in plan.layers if x.index == 0)
+    assert lp.blocks == ("Rb", "Ttb", "Tbt")
+    coat = raised.layers[0]
+    full = aniso_microfacet.series_lengths(plan.grid, coat, 1.0, lp.ms, 1e-4)[0]
+    part = aniso_microfacet.series_lengths(plan.grid, coat, 1.0, lp.ms, 1e-4, lp.blocks)[0]
+    assert 0 < part.size < full.size
+    job = OperatorJob(plan, plan.grid, raised, 0, aniso_microfacet.AnisoProjectionStats())
+    op = kind_of(coat).operator(job)
+    assert op.blocks["Rt"].nnz == 0 and op.blocks["Ttb"].nnz > 0
+
+
 def test_the_weights_follow_the_floor_the_narrow_axis_reaches():
     """A floor above the wide roughness raises the narrow axis only to the wide one: its
     variance in the weights is the wide one's."""

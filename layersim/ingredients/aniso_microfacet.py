@@ -161,7 +161,8 @@ def _coarse_chunk(mu_i, mu_o, eta, au, av, dist, qs, film=None, shadowing="separ
     return theta0, q0, qpi, bound
 
 
-def series_lengths(grid: Grid, layer, eta_above: float, ms: int, relerr: float):
+def series_lengths(grid: Grid, layer, eta_above: float, ms: int, relerr: float,
+                   blocks: tuple | None = None):
     """Pre-pass of the projection for the plan: how many orders in ``phi_d`` each significant
     pair of an anisotropic interface needs (the maximum over coarse ``phi_s`` samples, plus the
     smooth factor's terms), from one cheap kernel pass per block (:func:`_coarse`).
@@ -179,6 +180,9 @@ def series_lengths(grid: Grid, layer, eta_above: float, ms: int, relerr: float):
     relerr : float
         Relative truncation of each pair's coefficients
         (:data:`layersim.aniso.plan.COUPLED_RELERR` on the coupled path).
+    blocks : tuple of str, optional
+        Only these of the interface's blocks (as :func:`aniso_interface_operator` projects
+        them with ``only``).
 
     Returns
     -------
@@ -191,6 +195,7 @@ def series_lengths(grid: Grid, layer, eta_above: float, ms: int, relerr: float):
     eta = complex(layer.ior) / eta_above
     film, shadowing = layer.film_params(eta_above), layer.shadowing
     names = ("Rt",) if layer.opaque else ("Rt", "Rb", "Ttb", "Tbt")
+    names = names if blocks is None else tuple(n for n in names if n in blocks)
     fw = grid.flux_weight
     lengths, mu_min = [], []
     qs = max(8, _qs_for(ms) // 2)

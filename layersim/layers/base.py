@@ -76,6 +76,10 @@ class LayerPlan:
         Fourier orders the layer needs (from the projection's pre-pass for interfaces).
     ms : int
         Coupling half-width of an anisotropic interface (0 otherwise).
+    blocks : tuple of str or None
+        The blocks of an interface that the solve projects, where not all (a brushed coat's
+        own reflection is its exact lobe instead: :mod:`layersim.layers.brushed`); the
+        pre-pass and the cost count only these.
     """
 
     index: int
@@ -85,6 +89,7 @@ class LayerPlan:
     width: float | None = None
     orders: int = 1
     ms: int = 0
+    blocks: tuple | None = None
 
 
 @dataclass

@@ -198,6 +198,8 @@ def annotate(survey, scene) -> None:
     weights = extrapolation_weights(narrow(top) ** 2, [narrow(raised(top, f)) ** 2
                                                       for f in floors])
     lp = next(x for x in survey.layers if x.index == 0)
+    if lp.ms:   # coupled: its own reflection (the exact lobe replaces it) is not projected
+        lp.blocks = ("Rb", "Ttb", "Tbt")
     solved = ", ".join(f"{f:g}" for f in floors)
     lp.detail = (f"brushed near-specular coat alpha=({top.alpha_u:g}, {top.alpha_v:g}): its "
                  f"direct reflection is the exact microfacet lobe (layersim.solved.lobe), left "
@@ -225,14 +227,14 @@ def error_line() -> str:
 
 def coat_operator(job, project):
     """The operator of the raised coat as the stack uses it: ``project(job)`` (the kind's
-    projection of the coat as ``job.scene`` raises it) without its own reflection
-    (:func:`without_reflection`; not projected at all where the projection is coupled, as
-    every brushed coat's is unless a floor reaches its wide roughness), rescaled so that
+    projection of the coat as ``job.scene`` raises it, of the blocks its layer plan names)
+    without its own reflection (:func:`without_reflection`; not projected at all where the
+    projection is coupled, as every brushed coat's is unless a floor reaches its wide
+    roughness: :func:`annotate`), rescaled so that
     inside light keeps the exact coat's energy ``E_R + E_T`` per elevation
     (:func:`layersim.ingredients.energy_match.match_kept_energy`; the exact lobe of
     :func:`lobe_params` seen from inside)."""
-    coupled = job.layer.anisotropic
-    op = project(replace(job, workspace=None, blocks=("Rb", "Ttb", "Tbt") if coupled else None))
+    op = project(replace(job, workspace=None, blocks=job.layer_plan.blocks))
     lobe = NearSpecularLobe(**lobe_params(job.scene, job.plan.brushed))
     r_in, t_in = lobe.inside_energies(op.grid.mu)
     return without_reflection(match_kept_energy(op, r_in + t_in)[0])

@@ -39,7 +39,8 @@ def interface_lengths(grid: Grid, mono: Scene, layers: list,
     ``(LayerPlan, lengths)``, with each layer plan's ``orders`` set to the longest series of
     its pairs within ``theta_full`` degrees of the normal (:data:`THETA_FULL`, or the scene's
     ``[discretization] theta_full``). Coupled layers (``ms > 0``) are measured at their ``ms``
-    and :data:`layersim.aniso.plan.COUPLED_RELERR`. ``own_reflections`` ``{index: record}``
+    and :data:`layersim.aniso.plan.COUPLED_RELERR`; a layer plan's ``blocks`` limits the
+    pairs to those blocks. ``own_reflections`` ``{index: record}``
     adds the pairs of a reflection from above projected apart, at the record's roughness
     (:mod:`layersim.layers.near_specular_inner`), to that layer's."""
     own_reflections = own_reflections or {}
@@ -52,9 +53,10 @@ def interface_lengths(grid: Grid, mono: Scene, layers: list,
         layer, eta_above = kind_of(layer).equivalent_lobe(layer), mono.ior_above(lp.index)
         if lp.ms:
             lengths, mu_min = aniso_microfacet.series_lengths(grid, layer, eta_above, lp.ms,
-                                                              aplan.COUPLED_RELERR)
+                                                              aplan.COUPLED_RELERR, lp.blocks)
         else:
-            lengths, mu_min = microfacet.series_lengths(grid, layer, eta_above)
+            lengths, mu_min = microfacet.series_lengths(grid, layer, eta_above,
+                                                        blocks=lp.blocks)
         if lp.index in own_reflections:
             own = microfacet.series_lengths(grid, own_reflections[lp.index], eta_above,
                                             blocks=("Rt",))
