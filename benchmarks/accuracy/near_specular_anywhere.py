@@ -205,6 +205,10 @@ def _cases() -> list:
         Case("inner_ggx_0.007", 0, "inner_ggx_under_coat with an inner GGX interface of 0.007",
              (diel(1.4, 0.2), diel(1.8, 0.007, "ggx"), absorbing(0.5),
               {"kind": "diffuse", "albedo": 0.5})),
+        Case("inner_anisotropic", 0, "inner_under_rough with an anisotropic inner interface "
+             "(0.005, 0.02) rotated 30 deg (a mirror from above)",
+             (diel(1.5, 0.2), diel(1.3, [0.005, 0.02], rotation=30.0), absorbing(0.3),
+              {"kind": "diffuse", "albedo": 0.8})),
         Case("bati_0.04_0.005", 0, "layersim design, one lobe of energy 0.04, roughness 0.005",
              tuple(designed(0.04, 0.005))),
     ]

@@ -59,28 +59,26 @@ def wants_inner_mirrors(scene) -> bool:
             and bool(route_layers(scene, True)[0]))
 
 
-def fourier_unaffordable(fourier: Plan | None) -> str | None:
-    """Why the Fourier plan is not used (None: it is): refused, or over
-    :data:`FOURIER_MAX_BYTES`."""
+def fourier_unaffordable(fourier: Plan | None, limit: int = FOURIER_MAX_BYTES,
+                         what: str = "the Fourier plan") -> str | None:
+    """Why the Fourier plan ``fourier`` is not used (None: it is): none (the basis cannot
+    represent the stack), refused, or over ``limit`` bytes (default
+    :data:`FOURIER_MAX_BYTES`); ``what`` names it in the reason."""
     if fourier is None:
         return "the Fourier basis cannot represent it"
     if fourier.refused:
-        return f"the Fourier plan (n = {fourier.n}, md = {fourier.md}) is refused"
-    if fourier.memory_bytes > FOURIER_MAX_BYTES:
-        return (f"the Fourier plan (n = {fourier.n}, md = {fourier.md}) needs "
-                f"{fourier.memory_bytes / 2**30:.2f} GiB, over {FOURIER_MAX_BYTES / 2**30:g} GiB")
+        return f"{what} (n = {fourier.n}, md = {fourier.md}) is refused"
+    if fourier.memory_bytes > limit:
+        return (f"{what} (n = {fourier.n}, md = {fourier.md}) needs "
+                f"{fourier.memory_bytes / 2**30:.2f} GiB, over {limit / 2**30:g} GiB")
     return None
 
 
 def exact_unaffordable(plan: Plan) -> str | None:
     """Why the plan that projects a split inner interface's reflection from above at its own
     roughness is not used (None: it is): refused, or over :data:`EXACT_REFLECTION_MAX_BYTES`."""
-    if plan.refused:
-        return f"n = {plan.n}, md = {plan.md}: {plan.refused}"
-    if plan.memory_bytes > EXACT_REFLECTION_MAX_BYTES:
-        return (f"n = {plan.n}, md = {plan.md} needs {plan.memory_bytes / 2**30:.2f} GiB, over "
-                f"{EXACT_REFLECTION_MAX_BYTES / 2**30:g} GiB")
-    return None
+    return fourier_unaffordable(plan, EXACT_REFLECTION_MAX_BYTES,
+                                "the plan of its own reflection")
 
 
 def paths_plan(scene, why: str) -> Plan:
