@@ -186,6 +186,8 @@ def _cases() -> list:
              "0.01", (diel(1.5, 0.005, "ggx"), cond(GOLD_RGB, 0.01, "ggx"))),
         Case("brushed_coat_rotated", 0, "coat alpha (0.02, 0.3) rotated 30 deg, eta 1.5, over "
              "gold alpha 0.2", (diel(1.5, [0.02, 0.3], rotation=30.0), cond(GOLD, 0.2))),
+        Case("brushed_coat_eta1.3", 0, "anisotropic coat alpha (0.03, 0.3), eta 1.3, over gold "
+             "alpha 0.2", (diel(1.3, [0.03, 0.3]), cond(GOLD, 0.2))),
         Case("smooth_coat_brushed_gold", 0, "smooth coat eta 1.4 over gold alpha (0.01, 0.03) "
              "rotated 45 deg", (diel(1.4, 0.0), cond(GOLD, [0.01, 0.03], rotation=45.0))),
         Case("inner_under_rough", 0, "rough coat eta 1.5 alpha 0.2 over an inner interface "
