@@ -60,7 +60,7 @@ __all__ = ["BRUSHED_FLOORS", "BRUSHED_WIDE_MAX", "BRUSHED_BASE_MIN", "MEASURED_E
 #: gold of 0.2): one floor misses issue 33's accuracy bar (albedo within 1e-3, 97 % of bins
 #: within 3 sigma) everywhere (0.1: 1.6-3.4e-3, 21-53 % at the worst incidence); (0.12, 0.1)
 #: meets it on four of the five (the fifth, narrow 0.001, has 96.7 % of bins at 70 deg;
-#: ``brushed_coats.txt``: 22-181 s on the 2-core VM); (0.15, 0.1) on three;
+#: ``brushed_coats.txt``: 14-106 s on the 2-core VM); (0.15, 0.1) on three;
 #: (0.15, 0.12, 0.1) on all five at 1.5 times the cost. Each floor on its own plan is worse:
 #: the plan's n, md and ms jump with the floor and their error is not smooth in it.
 BRUSHED_FLOORS = (0.12, 0.1)
