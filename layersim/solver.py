@@ -23,9 +23,8 @@ from .ingredients.aniso_microfacet import AnisoProjectionStats
 from .ingredients.microfacet import ProjectionStats
 from .kernels.runtime import device_for
 from .layers import OperatorJob, kind_of
-from .layers.brushed import projected_solves
+from .layers.brushed import projected as brushed_projected
 from .layers.near_specular_inner import projected as inner_projected
-from .operators.combine import linear_combination
 from .operators.operator import IsoOperator, Operator, common_representation
 from .outofcore import memory
 from .outofcore.workspace import Workspace
@@ -298,27 +297,23 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
     stats = AnisoProjectionStats() if plan.representation == "anisotropic" \
         else ProjectionStats()
     used = [lp for lp in plan.layers if lp.action != "left out"]
-    # the scenes as projected, with their weights: the scene, or a brushed top coat raised to
-    # each floor of its extrapolation, all on this plan (layersim.layers.brushed)
-    # (and near-specular inner interfaces raised below their mirror,
-    # layersim.layers.near_specular_inner)
-    solves = [(inner_projected(s, plan), w) for s, w in projected_solves(scene, plan)]
-    monos = [[s.channel(c) for c in range(scene.channels)] for s, _ in solves]
-    caches = [_OperatorCache([[(m.layers[lp.index], m.ior_above(lp.index)) for lp in used]
-                              for m in ms]) for ms in monos]
+    # the scene as projected: a brushed top coat raised to the lowest floor of its
+    # extrapolation (its operator combines the floors: layersim.layers.brushed), near-specular
+    # inner interfaces raised below their reflection from above
+    # (layersim.layers.near_specular_inner)
+    projected = inner_projected(brushed_projected(scene, plan), plan)
+    monos = [projected.channel(c) for c in range(scene.channels)]
+    cache = _OperatorCache([[(m.layers[lp.index], m.ior_above(lp.index)) for lp in used]
+                            for m in monos])
     memory.release()                # the plan's temporaries
-    phases = _Phases(progress, {"projection": sum(c.size for c in caches),
-                                "adding": scene.channels * len(solves)})
+    phases = _Phases(progress, {"projection": cache.size, "adding": scene.channels})
     phases.start("projection")
     notes: list[str] = []           # diagnostics of the solve, for info["notes"]
     project = lambda mono: functools.partial(_layer_operator, plan, plan.grid, mono,
                                              stats=stats, projection=projection,
                                              device=device, notes=notes)
-    solved = [_channel_stacks(plan, used, ms, cache, project, phases, threads, scene.top_ior)
-              for ms, cache in zip(monos, caches)]
-    stacks = solved[0] if len(solved) == 1 else \
-        [linear_combination(ops, [w for _, w in solves]) for ops in zip(*solved)]
-    del solved
+    stacks = _channel_stacks(plan, used, monos, cache, project, phases, threads,
+                             scene.top_ior)
     info = _info(scene, plan, projection, stats, stacks, notes,
                  {"plan": t_plan, "layers": phases.seconds["projection"],
                   "projection": stats.seconds, "adding": phases.seconds["adding"],
@@ -329,7 +324,7 @@ def _solve(scene, like, threads, verbose, projection, device, progress) -> BSDF:
               f"adding {s['adding']:.2f} s)")
     # the operators hold the radiance inside the smooth boundaries (layersim.solved.boundary)
     return BSDF(stacks, plan, info, boundary=plan.boundary,
-                lobes=[_lobes(plan, mono) for mono in monos[0]])
+                lobes=[_lobes(plan, mono) for mono in monos])
 
 
 def _channel_stacks(plan: Plan, used: list, monos: list, cache: _OperatorCache, project,

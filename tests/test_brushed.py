@@ -10,10 +10,9 @@ import layersim
 import layersim.montecarlo as mc
 from layersim.config import configure
 from layersim.layers import brushed
-from layersim import solver
 from layersim.plan import make_plan
-from layersim.plan.budget import repeated_solves
-from layersim.plan.cost import BYTES
+from layersim.plan import cost
+from layersim.plan.budget import extrapolated_coat
 from layersim.solved.lobe import NearSpecularLobe
 
 GOLD = [0.143552, 3.98397]
@@ -105,46 +104,49 @@ def test_the_weights_follow_the_floor_the_narrow_axis_reaches():
                                [(v0 - v2) / (v1 - v2), (v1 - v0) / (v1 - v2)], rtol=1e-14)
 
 
-def test_the_plan_counts_a_solve_per_floor():
-    """Two floors on one plan: twice one solve's time (every part), and its memory with one
-    solve's result held while the other is solved."""
+def test_the_plan_counts_a_projection_per_floor_and_one_adding():
+    """Two floors on one plan: twice one floor's projection time, the adding's once, and its
+    memory with the raised operators held while they are combined."""
     scene = _scene(disc={"n": 64, "md": 16, "ms": 4})
     with _floors(0.1):
         one = make_plan(scene)
     two = make_plan(scene)
     assert (one.n, one.md, one.ms) == (two.n, two.md, two.ms)
-    for part, sec in one.seconds.items():
-        assert two.seconds[part] == pytest.approx(2 * sec, rel=1e-12)
-    assert one.memory_bytes < two.memory_bytes < 2 * one.memory_bytes
+    assert two.seconds["projection"] == pytest.approx(2 * one.seconds["projection"], rel=1e-12)
+    assert two.seconds["adding"] == pytest.approx(one.seconds["adding"], rel=1e-12)
+    assert one.memory_bytes < two.memory_bytes
 
 
-def test_repeated_solves_cost_closed_form():
-    mem, sec, work = repeated_solves(1000, {"total": 3.0}, {"solve": 1.0}, 3, 10)
-    assert sec == {"total": 9.0} and work == {"solve": 3.0}
-    assert mem == max(1000 + 2 * 10, BYTES["solve"] + 5 * 10)
-    assert repeated_solves(1000, {"total": 3.0}, {}, 1, 10) == (1000, {"total": 3.0}, {})
+def test_extrapolated_coat_cost_closed_form():
+    work = {"coupled_coefficients": 1e6, "coupled_entries": 1e6, "solve": 1.0}
+    mem, sec, out = extrapolated_coat(1000, work, 3, 10)
+    assert out == {"coupled_coefficients": 3e6, "coupled_entries": 1e6, "solve": 3.0}
+    assert sec == cost.seconds(out) and mem == 1000 + 4 * 10
+    assert extrapolated_coat(1000, work, 1, 10) == (1000, cost.seconds(work), work)
 
 
 @pytest.mark.slow
-def test_the_solved_bsdf_is_the_weighted_sum_of_the_floors_solves(monkeypatch):
-    """The route's BSDF equals ``w1 B1 + w2 B2`` of the solves at each floor on the same plan:
-    its interpolant and albedo are linear in the coefficients (the exact lobe, which both
-    carry, passes through since the weights sum to one). Bin energies integrate the positive
-    part of the interpolant, so they are linear only where no solve undershoots zero."""
-    combined = _coarse(0.6)
-    w = combined.plan.brushed["weights"]
-    singles = []
-    for f in COARSE_FLOORS:
-        monkeypatch.setattr(solver, "projected_solves",
-                            lambda scene, plan, f=f: [(brushed.projected_scene(scene, f)[0],
-                                                       1.0)])
-        singles.append(_coarse(0.6))
-    wi, wo = _dirs(40, 11), _dirs(40, 12)
-    mix = lambda get: w[0] * get(singles[0]) + w[1] * get(singles[1])
-    for get in (lambda b: b.interpolant(wi, wo), lambda b: b.albedo(wi)[0]):
-        np.testing.assert_allclose(get(combined), mix(get), rtol=1e-12, atol=1e-12)
-    # the floors do differ, so the sum is not one solve's
-    assert abs(combined.interpolant(wi, wo) - singles[1].interpolant(wi, wo)).max() > 1e-4
+def test_the_coat_operator_is_the_weighted_sum_of_the_floors_operators():
+    """The operator the stack adds once is ``w1 A1 + w2 A2`` of the raised coat's operators at
+    each floor (each energy-matched, its own reflection left out), block by block; the floors
+    do differ, so the sum is not one floor's."""
+    from dataclasses import replace
+    from layersim.ingredients.aniso_microfacet import AnisoProjectionStats
+    from layersim.layers import kind_of
+    from layersim.layers.base import OperatorJob
+    with _floors(*COARSE_FLOORS):
+        plan = make_plan(_scene(disc=COARSE))
+        raised = brushed.projected_scene(_scene(disc=COARSE))[0].channel(0)
+    kind = kind_of(raised.layers[0])
+    job = OperatorJob(plan, plan.grid, raised, 0, AnisoProjectionStats())
+    combined = kind.operator(job)
+    b = plan.brushed
+    singles = [kind.operator(replace(job, plan=replace(plan, brushed=dict(
+        b, floors=(f,), weights=(1.0,))))) for f in b["floors"]]
+    for name in ("Rt", "Rb", "Ttb", "Tbt"):
+        expect = sum(w * one.blocks[name] for w, one in zip(b["weights"], singles))
+        assert abs(combined.blocks[name] - expect).max() <= 1e-12 * max(abs(expect).max(), 1.0)
+    assert abs(singles[0].blocks["Ttb"] - singles[1].blocks["Ttb"]).max() > 1e-3
 
 
 @pytest.mark.slow

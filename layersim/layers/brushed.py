@@ -25,13 +25,15 @@ so the route splits the coat (:func:`projected_scene`, :func:`without_reflection
   oblique incidence the blur is wider than that, and the walk shows it (below).
 
 Blurring by a narrow kernel changes a smooth result by a term proportional to the kernel's
-variance to first order, and slope variances add, so every output of the raised solve (all
-linear in its Fourier coefficients) moves with the added variance ``v - v0``, ``v = floor^2``,
-``v0 = alpha_narrow^2``. The route solves the raised stack at each floor of
-:data:`BRUSHED_FLOORS` on one discretisation (the plan of the lowest floor, the finest) and
-combines the solved operators with the weights of Richardson extrapolation to ``v0``
-(:func:`extrapolation_weights`, :func:`projected_solves`): one ordinary Fourier BSDF. The exact
-lobe does not depend on the floor and the weights sum to one, so it is kept as it is.
+variance to first order, and slope variances add, so the raised coat's operator (linear in its
+BSDF) moves with the added variance ``v - v0``, ``v = floor^2``, ``v0 = alpha_narrow^2``, and
+so, to first order, does the stack added with it. The route projects the coat at each floor of
+:data:`BRUSHED_FLOORS` on one discretisation (the plan of the lowest floor, the finest),
+combines the raised operators with the weights of Richardson extrapolation to ``v0``
+(:func:`extrapolation_weights`, :func:`coat_operator`) and adds the stack once: one ordinary
+Fourier BSDF. (Extrapolating the added stacks instead is equally first-order and costs an
+adding per floor; measured, it is no more accurate: ``benchmarks/features/brushed_coats.txt``.)
+The exact lobe does not depend on the floor and the weights sum to one, so it is kept as it is.
 
 The error against the Monte Carlo walk (exact for any roughness) is measured by
 ``benchmarks/features/brushed_coats.py`` and printed by the plan (:data:`MEASURED_ERROR`). A coat
@@ -47,11 +49,12 @@ import numpy as np
 import scipy.sparse as sps
 
 from ..ingredients.energy_match import match_kept_energy
+from ..operators.combine import linear_combination
 from ..solved.lobe import NEAR_SPECULAR_ALPHA, NEAR_SPECULAR_WIDE_MAX, NearSpecularLobe
 
 __all__ = ["BRUSHED_FLOORS", "BRUSHED_WIDE_MAX", "BRUSHED_BASE_MIN", "MEASURED_ERROR",
            "is_brushed", "why_not", "raised", "projected_scene", "extrapolation_weights",
-           "projected_solves", "annotate", "coat_operator", "without_reflection",
+           "projected", "annotate", "coat_operator", "without_reflection",
            "lobe_params"]
 
 #: Narrow roughnesses at which a brushed coat is projected, all on the discretisation of the
@@ -177,14 +180,11 @@ def extrapolation_weights(v0: float, vs) -> np.ndarray:
                      for i, vi in enumerate(vs)])
 
 
-def projected_solves(scene, plan) -> list:
-    """The scenes the Fourier solve of ``scene`` projects on ``plan``, with their weights:
-    ``[(scene, 1.0)]`` without a brushed coat (``plan.brushed`` None), else the coat raised to
-    each of ``plan.brushed["floors"]`` with its :func:`extrapolation_weights`."""
-    if plan.brushed is None:
-        return [(scene, 1.0)]
-    b = plan.brushed
-    return [(projected_scene(scene, f)[0], w) for f, w in zip(b["floors"], b["weights"])]
+def projected(scene, plan):
+    """The scene the Fourier solve of ``scene`` projects on ``plan``: its brushed coat
+    (``plan.brushed``) raised to the lowest floor (:func:`coat_operator` projects it at each),
+    or ``scene`` itself."""
+    return scene if plan.brushed is None else projected_scene(scene)[0]
 
 
 def annotate(survey, scene) -> None:
@@ -226,18 +226,28 @@ def error_line() -> str:
 
 
 def coat_operator(job, project):
-    """The operator of the raised coat as the stack uses it: ``project(job)`` (the kind's
-    projection of the coat as ``job.scene`` raises it, of the blocks its layer plan names)
-    without its own reflection (:func:`without_reflection`; not projected at all where the
-    projection is coupled, as every brushed coat's is unless a floor reaches its wide
-    roughness: :func:`annotate`), rescaled so that
-    inside light keeps the exact coat's energy ``E_R + E_T`` per elevation
-    (:func:`layersim.ingredients.energy_match.match_kept_energy`; the exact lobe of
-    :func:`lobe_params` seen from inside)."""
-    op = project(replace(job, workspace=None, blocks=job.layer_plan.blocks))
-    lobe = NearSpecularLobe(**lobe_params(job.scene, job.plan.brushed))
-    r_in, t_in = lobe.inside_energies(op.grid.mu)
-    return without_reflection(match_kept_energy(op, r_in + t_in)[0])
+    """The operator of the brushed coat as the stack uses it: at each floor of
+    ``plan.brushed``, ``project`` (the kind's projection) of the coat raised to it, of the
+    blocks its layer plan names (not its own reflection where the projection is coupled:
+    :func:`annotate`), rescaled so that inside light keeps the exact coat's energy
+    ``E_R + E_T`` per elevation (:func:`layersim.ingredients.energy_match.match_kept_energy`;
+    the exact lobe of :func:`lobe_params` seen from inside), its own reflection left out
+    (:func:`without_reflection`); the raised operators combined with the extrapolation
+    weights (:func:`layersim.operators.combine.linear_combination`), so that the stack is
+    added once."""
+    b = job.plan.brushed
+    own = replace(job.layer, alpha_u=b["alpha_u"], alpha_v=b["alpha_v"])
+    lobe = NearSpecularLobe(**lobe_params(job.scene, b))
+    kept = None
+    ops = []
+    for floor in b["floors"]:
+        op = project(replace(job, scene=job.scene.with_layer(0, raised(own, floor)),
+                             workspace=None, blocks=job.layer_plan.blocks))
+        if kept is None:
+            kept = np.add(*lobe.inside_energies(op.grid.mu))
+        ops.append(without_reflection(match_kept_energy(op, kept)[0]))
+        del op
+    return linear_combination(ops, b["weights"])
 
 
 def without_reflection(op):

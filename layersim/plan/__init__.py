@@ -49,7 +49,7 @@ from ..scene import Scene, as_scene
 from ..outofcore.memory import memory_limit
 from .budget import (MD_LOWER_PER_INV_ALPHA, estimate_bytes, estimate_seconds, lower_bound,
                      refuse_below_lower_bound, refuse_over_limit, refuse_over_time,
-                     repeated_solves)
+                     extrapolated_coat)
 from .cost import ingredients, stacks_bytes
 from .coupling import choose_ms, needed_ms
 from .layers import scale_media, survey_projected
@@ -177,9 +177,9 @@ def fourier_plan(scene: Scene, refuse: bool = True, inner: str | None = None,
     ings = ingredients(scene, layers, lengths, grid, md)
     memory = estimate_bytes(ings, grid, md, scene.channels, anisotropic)
     seconds, work = estimate_seconds(ings, grid, md, scene.channels, anisotropic)
-    if survey.brushed is not None:      # one solve per floor, on this plan
-        memory, seconds, work = repeated_solves(
-            memory, seconds, work, len(survey.brushed["floors"]),
+    if survey.brushed is not None:      # the coat projected at each floor, added once
+        memory, seconds, work = extrapolated_coat(
+            memory, work, len(survey.brushed["floors"]),
             stacks_bytes(ings, grid, md, scene.channels, anisotropic))
     refused = None
     try:

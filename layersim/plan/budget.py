@@ -143,35 +143,36 @@ def estimate_seconds(ings: list, grid: Grid, md: int, channels: int,
     return cost.seconds(work), work
 
 
-def repeated_solves(memory: int, seconds: dict, work: dict, solves: int,
-                    held: int) -> tuple[int, dict, dict]:
-    """The cost of ``solves`` solves of one plan, one after the other, whose results are kept
-    and combined linearly at the end (the brushed route's extrapolation,
-    :func:`layersim.layers.brushed.projected_solves`).
+def extrapolated_coat(memory: int, work: dict, projections: int,
+                      held: int) -> tuple[int, dict, dict]:
+    """The cost of a solve whose top coat is projected ``projections`` times and the raised
+    operators combined before one adding (the brushed route's extrapolation,
+    :func:`layersim.layers.brushed.coat_operator`).
 
     Parameters
     ----------
     memory : int
         Peak bytes of one solve (:func:`estimate_bytes`).
-    seconds, work : dict
-        One solve's time per part and work units (:func:`estimate_seconds`).
-    solves : int
-        Number of solves (>= 1).
+    work : dict
+        One solve's work units (:func:`estimate_seconds`).
+    projections : int
+        Number of projections of the coat (>= 1).
     held : int
-        Bytes of one solve's result (:func:`layersim.plan.cost.stacks_bytes`).
+        Bytes of one solved operator of the stack (:func:`layersim.plan.cost.stacks_bytes`),
+        the size of one of the coat's.
 
     Returns
     -------
     (int, dict, dict)
-        Peak bytes: the last solve's peak with the earlier results held, or the combination
-        (every result, its output and one partial sum, on the solve's fixed working set),
-        whichever is larger; seconds and work units: ``solves`` times one solve's.
+        Peak bytes: one solve's with the raised operators and their combination held; seconds
+        and work units: the projection's work ``projections`` times (the base's, projected
+        once, counted again: a small, conservative excess), the adding's once.
     """
-    if solves <= 1:
-        return memory, seconds, work
-    peak = max(memory + (solves - 1) * held, cost.BYTES["solve"] + (solves + 2) * held)
-    return (int(peak), {k: solves * v for k, v in seconds.items()},
-            {k: solves * v for k, v in work.items()})
+    if projections <= 1:
+        return memory, cost.seconds(work), work
+    projecting = cost.PARTS["projection"]
+    work = {k: v * (projections if k in projecting else 1) for k, v in work.items()}
+    return int(memory + (projections + 1) * held), cost.seconds(work), work
 
 
 def time_limit() -> float | None:
