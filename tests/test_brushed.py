@@ -152,11 +152,12 @@ def test_the_coat_operator_is_the_weighted_sum_of_the_floors_operators():
 @pytest.mark.slow
 def test_the_default_plan_fits():
     """The issue's coat (0.03, 0.3) over gold (0.2): exact, n = 650, ms = 26, 14 GiB; raised,
-    n = 196, ms = 8, both floors' solves together under 1 GiB and (estimated) 60 s."""
+    n = 196, ms = 8, both floors' projections and the adding under 2 GiB and (estimated)
+    60 s."""
     plan = make_plan(_scene())
     assert plan.brushed is not None and plan.refused is None
     assert plan.n == 196 and plan.ms == 8
-    assert plan.memory_bytes < 2**30 and plan.seconds["total"] < 60
+    assert plan.memory_bytes < 2 * 2**30 and plan.seconds["total"] < 60
 
 
 def test_plan_projects_the_raised_coat_and_keeps_the_wide_axis():

@@ -50,7 +50,7 @@ from ..outofcore.memory import memory_limit
 from .budget import (MD_LOWER_PER_INV_ALPHA, estimate_bytes, estimate_seconds, lower_bound,
                      refuse_below_lower_bound, refuse_over_limit, refuse_over_time,
                      extrapolated_coat)
-from .cost import ingredients, stacks_bytes
+from .cost import ingredients, layer_bytes
 from .coupling import choose_ms, needed_ms
 from .layers import scale_media, survey_projected
 from .model import LayerPlan, Plan
@@ -180,7 +180,7 @@ def fourier_plan(scene: Scene, refuse: bool = True, inner: str | None = None,
     if survey.brushed is not None:      # the coat projected at each floor, added once
         memory, seconds, work = extrapolated_coat(
             memory, work, len(survey.brushed["floors"]),
-            stacks_bytes(ings, grid, md, scene.channels, anisotropic))
+            scene.channels * layer_bytes(ings[0], md, grid.h))
     refused = None
     try:
         refuse_over_limit(memory, grid.n, md, ms, anisotropic)

@@ -158,8 +158,7 @@ def extrapolated_coat(memory: int, work: dict, projections: int,
     projections : int
         Number of projections of the coat (>= 1).
     held : int
-        Bytes of one solved operator of the stack (:func:`layersim.plan.cost.stacks_bytes`),
-        the size of one of the coat's.
+        Bytes of the coat's operator (:func:`layersim.plan.cost.layer_bytes`, every channel).
 
     Returns
     -------

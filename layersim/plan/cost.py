@@ -221,6 +221,14 @@ def operator_bytes(ing: Ingredient, md: int, h: int) -> int:
     return int(BYTES["nonzero"] * ing.blocks * ing.profile.sum() + 8 * ing.blocks * (md * h + 1))
 
 
+def layer_bytes(ing: Ingredient, md: int, h: int) -> int:
+    """Bytes of the stored operator of ``ing``: its estimated nonzeros where it is coupled
+    (:func:`layersim.aniso.plan.operator_entries`), else :func:`operator_bytes`."""
+    if ing.form == "coupled":
+        return int(BYTES["nonzero"] * ing.entries)
+    return operator_bytes(ing, md, h)
+
+
 def interface_transient(ing: Ingredient, md: int) -> int:
     """Peak bytes of projecting an isotropic interface beyond what is already held: the series
     of every pair (``md`` float64 each; the mirrored triangles of the reflection blocks and the
