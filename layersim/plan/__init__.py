@@ -180,7 +180,7 @@ def fourier_plan(scene: Scene, refuse: bool = True, inner: str | None = None,
     if survey.brushed is not None:      # the coat projected at each floor, added once
         memory, seconds, work = extrapolated_coat(
             memory, work, len(survey.brushed["floors"]),
-            scene.channels * layer_bytes(ings[0], md, grid.h))
+            ings[0].variants * layer_bytes(ings[0], md, grid.h))
     refused = None
     try:
         refuse_over_limit(memory, grid.n, md, ms, anisotropic)

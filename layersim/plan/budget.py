@@ -158,7 +158,8 @@ def extrapolated_coat(memory: int, work: dict, projections: int,
     projections : int
         Number of projections of the coat (>= 1).
     held : int
-        Bytes of the coat's operator (:func:`layersim.plan.cost.layer_bytes`, every channel).
+        Bytes of the coat's operators (:func:`layersim.plan.cost.layer_bytes` times its
+        variants over the channels: channels with one coat share its operator).
 
     Returns
     -------
