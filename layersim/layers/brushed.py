@@ -127,14 +127,15 @@ def raised(layer, floor: float):
     return replace(layer, alpha_u=lift(au), alpha_v=lift(av))
 
 
-def projected_scene(scene, floor: float | None = None):
+def projected_scene(scene):
     """The scene the Fourier solve projects, and the hints of a route not taken.
 
     Returns
     -------
     (Scene, bool, list of str)
-        ``scene`` with a brushed top coat raised to ``floor`` (default: the lowest of
-        :data:`BRUSHED_FLOORS`, read when called; its plan is the solve's) in every channel
+        ``scene`` with a brushed top coat raised to the lowest of :data:`BRUSHED_FLOORS`
+        (read when called; its plan is the solve's, :func:`coat_operator` projects the coat
+        at each floor) in every channel
         (itself where the route does not apply), True if it was, and a report line for a
         brushed coat left to the exact projection (why, from :func:`why_not`).
     """
@@ -148,7 +149,7 @@ def projected_scene(scene, floor: float | None = None):
             f"layer 0 (dielectric) is a brushed near-specular coat (alpha=({top.alpha_u:g}, "
             f"{top.alpha_v:g})) but is projected exactly, at a cost that grows like 1 / alpha: "
             f"{why}; use layersim.montecarlo for this stack"]
-    floor = min(BRUSHED_FLOORS) if floor is None else floor
+    floor = min(BRUSHED_FLOORS)
     stacks = tuple((raised(s[0], floor),) + tuple(s[1:]) for s in scene.stacks)
     return replace(scene, stacks=stacks), True, []
 
@@ -239,14 +240,11 @@ def coat_operator(job, project):
     added once."""
     b = job.plan.brushed
     own = replace(job.layer, alpha_u=b["alpha_u"], alpha_v=b["alpha_v"])
-    lobe = NearSpecularLobe(**lobe_params(job.scene, b))
-    kept = None
+    kept = np.add(*NearSpecularLobe(**lobe_params(job.scene, b)).inside_energies(job.grid.mu))
     ops = []
     for floor in b["floors"]:
         op = project(replace(job, scene=job.scene.with_layer(0, raised(own, floor)),
                              workspace=None, blocks=job.layer_plan.blocks))
-        if kept is None:
-            kept = np.add(*lobe.inside_energies(op.grid.mu))
         ops.append(without_reflection(match_kept_energy(op, kept)[0]))
         del op
     return linear_combination(ops, b["weights"])
