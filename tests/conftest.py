@@ -55,3 +55,21 @@ def cl_device():
         return opencl_device()
     except BackendUnavailableError as exc:
         pytest.skip(str(exc))
+
+
+def solved_vs_walk(bsdf, scene, thetas, seed, paths=1_000_000):
+    """``(theta, albedo difference, max(4 se, 1e-3), z-scores of the populated 10 x 12 top
+    bins)`` of ``bsdf`` against walks of ``scene`` (warp-cpu, ``paths`` each, seeds ``seed``,
+    ``seed + 1``, ...) at incidences ``thetas`` (degrees, azimuth 0.35 rad)."""
+    import layersim.montecarlo as mc
+    mu, phi = np.linspace(0, 1, 11), np.linspace(0, 2 * np.pi, 13)
+    out = []
+    for k, theta in enumerate(thetas):
+        t = np.radians(theta)
+        wi = np.array([np.sin(t) * np.cos(0.35), np.sin(t) * np.sin(0.35), np.cos(t)])
+        res = mc.simulate(scene, wi, paths, mu_edges=mu, phi_edges=phi, backend="warp-cpu",
+                          seed=seed + k)
+        d = float(bsdf.albedo(wi)[0]) - res.reflectance
+        z = res.z_scores("top", bsdf.bin_energies(wi, mu, phi)["top"])
+        out.append((theta, d, max(4 * res.reflectance_stderr, 1e-3), z))
+    return out

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import layersim
-import layersim.montecarlo as mc
+from conftest import solved_vs_walk
 from layersim.config import configure
 from layersim.layers import brushed
 from layersim.plan import make_plan
@@ -262,15 +262,8 @@ def test_the_issues_coat_over_gold_agrees_with_the_walk():
     sc = _scene()
     bsdf = layersim.solve(sc)
     assert bsdf.plan.brushed["floors"] == (0.12, 0.1)
-    mu, phi = np.linspace(0, 1, 11), np.linspace(0, 2 * np.pi, 13)
-    for k, theta in enumerate((0.0, 60.0)):
-        t = np.radians(theta)
-        wi = np.array([np.sin(t) * np.cos(0.35), np.sin(t) * np.sin(0.35), np.cos(t)])
-        res = mc.simulate(sc, wi, 1_000_000, mu_edges=mu, phi_edges=phi, backend="warp-cpu",
-                          seed=41 + k)
-        d = float(bsdf.albedo(wi)[0]) - res.reflectance
-        assert abs(d) <= max(4 * res.reflectance_stderr, 1e-3), (theta, d)
-        z = res.z_scores("top", bsdf.bin_energies(wi, mu, phi)["top"])
+    for theta, d, tol, z in solved_vs_walk(bsdf, sc, (0.0, 60.0), 41):
+        assert abs(d) <= tol, (theta, d)
         assert np.mean(z <= 3.0) >= 0.95, (theta, np.mean(z <= 3.0))
 
 

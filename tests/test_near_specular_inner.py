@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import layersim
-import layersim.montecarlo as mc
+from conftest import solved_vs_walk
 from layersim.errors import InfeasibleError
 from layersim.ingredients.microfacet import interface_operator
 from layersim.ingredients.energy_match import energy_kernel
@@ -132,13 +132,6 @@ def test_inner_under_rough_agrees_with_the_walk():
     finds 0.51 of that tolerance and 100 % of bins)."""
     sc = _scene()
     bsdf = layersim.solve(sc)
-    mu, phi = np.linspace(0, 1, 11), np.linspace(0, 2 * np.pi, 13)
-    for k, theta in enumerate((0.0, 60.0)):
-        t = np.radians(theta)
-        wi = np.array([np.sin(t) * np.cos(0.35), np.sin(t) * np.sin(0.35), np.cos(t)])
-        res = mc.simulate(sc, wi, 1_000_000, mu_edges=mu, phi_edges=phi, backend="warp-cpu",
-                          seed=71 + k)
-        d = float(bsdf.albedo(wi)[0]) - res.reflectance
-        assert abs(d) <= max(4 * res.reflectance_stderr, 1e-3), (theta, d)
-        z = res.z_scores("top", bsdf.bin_energies(wi, mu, phi)["top"])
+    for theta, d, tol, z in solved_vs_walk(bsdf, sc, (0.0, 60.0), 71):
+        assert abs(d) <= tol, (theta, d)
         assert np.mean(z <= 3.0) >= 0.97, (theta, np.mean(z <= 3.0))
